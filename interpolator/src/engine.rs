@@ -1,0 +1,380 @@
+//! The per-cycle path stepper: a plain state machine over plain data, no I/O.
+//!
+//! Each [`Engine::tick`] advances the tool along the current block by one period at the
+//! speed the profile allows, crossing into following blocks when one ends mid-period, and
+//! returns the new set-point. The speed profile is acceleration-limited: speed rises by
+//! at most `a·T` per cycle, never exceeds the block's feed, and is always low enough to
+//! reach the block's planned end speed (zero when no next motion is known yet, so a
+//! starved interpolator stops on the path instead of running off its end).
+#![deny(
+    clippy::indexing_slicing,
+    clippy::unwrap_used,
+    clippy::expect_used,
+    clippy::panic
+)]
+
+use shared::path::{self, norm};
+use shared::protocol::{BlockKind, CommandBlock, Feedback, ProtocolError, FLAG_RAPID};
+
+/// Most blocks one cycle may pass through (tiny CAM segments shorter than one step).
+const MAX_BLOCKS_PER_CYCLE: usize = 64;
+
+/// Where the blocks come from: the iceoryx2 subscriber in a run, a slice in tests.
+pub trait BlockSource {
+    fn next_block(&mut self) -> Option<CommandBlock>;
+}
+
+/// Why the engine stopped the machine.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Fault {
+    Protocol(ProtocolError),
+    FollowingError {
+        cycle: u64,
+        axis: usize,
+        ferr_mm: f64,
+        limit_mm: f64,
+    },
+    Feedback(ProtocolError),
+}
+
+impl core::fmt::Display for Fault {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        match self {
+            Fault::Protocol(e) => write!(f, "bad command block: {e}"),
+            Fault::FollowingError { cycle, axis, ferr_mm, limit_mm } => write!(
+                f,
+                "cycle {cycle}: following error on {} is {:.3} mm, above the limit of {limit_mm} mm",
+                ["X", "Y", "Z"].get(*axis).unwrap_or(&"?"),
+                ferr_mm
+            ),
+            Fault::Feedback(e) => write!(f, "bad feedback: {e}"),
+        }
+    }
+}
+
+/// What the machine is doing after a tick.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum TickState {
+    Running,
+    /// No block to run and the program is not over: standing still on the path.
+    Starved,
+    /// Program end reached; the set-point is the final one.
+    Done,
+}
+
+/// One cycle's output.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Tick {
+    pub pos_mm: [f64; 3],
+    pub vel_mm_per_s: [f64; 3],
+    pub acc_mm_per_s2: [f64; 3],
+    /// Path speed the profile commanded for this cycle.
+    pub speed_mm_per_s: f64,
+    pub source_line: u32,
+    pub block_seq: u64,
+    /// The block being run is a rapid (G0) traverse.
+    pub rapid: bool,
+    pub state: TickState,
+}
+
+#[derive(Debug, Clone, Copy)]
+struct Motion {
+    block: CommandBlock,
+    u: f64,
+    u_end: f64,
+    s_mm: f64,
+    end_mm: [f64; 3],
+    feed_mm_per_s: f64,
+}
+
+// The motion variant carries its whole block on purpose: boxing it would allocate.
+#[allow(clippy::large_enum_variant)]
+#[derive(Debug, Clone, Copy)]
+enum Current {
+    None,
+    Motion(Motion),
+    Dwell {
+        cycles_left: u64,
+        line: u32,
+        seq: u64,
+    },
+    End {
+        line: u32,
+        seq: u64,
+    },
+}
+
+/// Machine limits the engine obeys.
+#[derive(Debug, Clone, Copy)]
+pub struct Limits {
+    pub period_ns: u64,
+    pub path_acc_mm_per_s2: f64,
+    pub max_following_error_mm: f64,
+}
+
+pub struct Engine {
+    lim: Limits,
+    t_s: f64,
+    cur: Current,
+    next: Option<CommandBlock>,
+    expected_seq: u64,
+    speed: f64,
+    pos: [f64; 3],
+    vel: [f64; 3],
+    line: u32,
+    seq: u64,
+    rapid: bool,
+    done: bool,
+}
+
+fn dist(a: [f64; 3], b: [f64; 3]) -> f64 {
+    norm([a[0] - b[0], a[1] - b[1], a[2] - b[2]])
+}
+
+/// Backward difference `(a - b) / t`.
+fn rate(a: [f64; 3], b: [f64; 3], t: f64) -> [f64; 3] {
+    [(a[0] - b[0]) / t, (a[1] - b[1]) / t, (a[2] - b[2]) / t]
+}
+
+fn dot(a: [f64; 3], b: [f64; 3]) -> f64 {
+    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+}
+
+impl Engine {
+    /// A stopped machine at `start_mm`.
+    pub fn new(lim: Limits, start_mm: [f64; 3]) -> Self {
+        Engine {
+            lim,
+            t_s: lim.period_ns as f64 * 1e-9,
+            cur: Current::None,
+            next: None,
+            expected_seq: 0,
+            speed: 0.0,
+            pos: start_mm,
+            vel: [0.0; 3],
+            line: 0,
+            seq: 0,
+            rapid: false,
+            done: false,
+        }
+    }
+
+    pub fn position(&self) -> [f64; 3] {
+        self.pos
+    }
+
+    /// True while the engine holds no look-ahead block (it wants one from the source).
+    pub fn wants_block(&self) -> bool {
+        self.next.is_none() && !self.done
+    }
+
+    fn fill(&mut self, src: &mut impl BlockSource) -> Result<(), Fault> {
+        if self.next.is_some() || self.done {
+            return Ok(());
+        }
+        if let Some(b) = src.next_block() {
+            b.validate().map_err(Fault::Protocol)?;
+            if b.seq != self.expected_seq {
+                return Err(Fault::Protocol(ProtocolError::OutOfSequence {
+                    expected: self.expected_seq,
+                    got: b.seq,
+                }));
+            }
+            self.expected_seq += 1;
+            self.next = Some(b);
+        }
+        Ok(())
+    }
+
+    fn start(&mut self, b: CommandBlock) {
+        self.line = b.source_line;
+        self.seq = b.seq;
+        self.cur = match b.kind() {
+            Some(BlockKind::Motion) => {
+                let (u0, u1) = path::domain(&b);
+                Current::Motion(Motion {
+                    block: b,
+                    u: u0,
+                    u_end: u1,
+                    s_mm: 0.0,
+                    end_mm: path::eval(&b, u1).p,
+                    feed_mm_per_s: b.feed_mm_per_min / 60.0,
+                })
+            }
+            Some(BlockKind::Dwell) => Current::Dwell {
+                cycles_left: b.dwell_ns.div_ceil(self.lim.period_ns.max(1)),
+                line: b.source_line,
+                seq: b.seq,
+            },
+            Some(BlockKind::ProgramEnd) | None => Current::End {
+                line: b.source_line,
+                seq: b.seq,
+            },
+        };
+    }
+
+    /// Speed the next motion may be entered with: the planned end speed if the next block
+    /// is a motion already in hand, otherwise zero.
+    fn exit_speed(&self, m: &Motion) -> f64 {
+        match &self.next {
+            Some(n) if n.kind == BlockKind::Motion as u32 => m.block.end_feed_mm_per_min / 60.0,
+            _ => 0.0,
+        }
+    }
+
+    /// Advances one period. Allocation-free, panic-free.
+    pub fn tick(&mut self, src: &mut impl BlockSource) -> Result<Tick, Fault> {
+        let a = self.lim.path_acc_mm_per_s2;
+        let t = self.t_s;
+        let mut budget: Option<f64> = None;
+        let prev_pos = self.pos;
+        let mut state = TickState::Running;
+        for _ in 0..MAX_BLOCKS_PER_CYCLE {
+            self.fill(src)?;
+            if let Current::None = self.cur {
+                match self.next.take() {
+                    Some(b) => {
+                        self.start(b);
+                        self.fill(src)?;
+                    }
+                    None => {
+                        state = if self.done {
+                            TickState::Done
+                        } else {
+                            TickState::Starved
+                        };
+                        self.speed = 0.0;
+                        break;
+                    }
+                }
+            }
+            match self.cur {
+                Current::None => {}
+                Current::End { line, seq } => {
+                    self.line = line;
+                    self.seq = seq;
+                    self.done = true;
+                    self.speed = 0.0;
+                    state = TickState::Done;
+                    break;
+                }
+                Current::Dwell {
+                    cycles_left,
+                    line,
+                    seq,
+                } => {
+                    self.line = line;
+                    self.seq = seq;
+                    if cycles_left == 0 {
+                        self.cur = Current::None;
+                        continue;
+                    }
+                    self.cur = Current::Dwell {
+                        cycles_left: cycles_left - 1,
+                        line,
+                        seq,
+                    };
+                    self.speed = 0.0;
+                    break;
+                }
+                Current::Motion(mut m) => {
+                    self.line = m.block.source_line;
+                    self.seq = m.block.seq;
+                    self.rapid = m.block.flags & FLAG_RAPID != 0;
+                    let v_exit = self.exit_speed(&m);
+                    let s_rem = (m.block.length_mm - m.s_mm).max(dist(self.pos, m.end_mm));
+                    let ds = match budget {
+                        Some(d) => d,
+                        None => {
+                            // Fastest speed from which v_exit is still reachable at the end,
+                            // accounting for the distance covered in this very cycle.
+                            // When the block end is passed within this very cycle
+                            // (s_rem < v_exit·T), the bound is v_exit itself.
+                            let brake = (-a * t
+                                + (a * a * t * t + v_exit * v_exit + 2.0 * a * s_rem).sqrt())
+                            .max(v_exit);
+                            let v = m.feed_mm_per_s.min(self.speed + a * t).min(brake).max(0.0);
+                            self.speed = v;
+                            v * t
+                        }
+                    };
+                    if ds >= s_rem - 1e-9 {
+                        // The block ends inside this period; carry the rest into the next.
+                        self.pos = m.end_mm;
+                        self.cur = Current::None;
+                        if v_exit <= 0.0 {
+                            break;
+                        }
+                        budget = Some(ds - s_rem);
+                        continue;
+                    }
+                    m.u = advance(&m.block, m.u, m.u_end, ds);
+                    m.s_mm += ds;
+                    self.pos = path::eval(&m.block, m.u).p;
+                    self.cur = Current::Motion(m);
+                    break;
+                }
+            }
+        }
+        let vel = rate(self.pos, prev_pos, t);
+        let acc = rate(vel, self.vel, t);
+        self.vel = vel;
+        Ok(Tick {
+            pos_mm: self.pos,
+            vel_mm_per_s: vel,
+            acc_mm_per_s2: acc,
+            speed_mm_per_s: self.speed,
+            source_line: self.line,
+            block_seq: self.seq,
+            rapid: self.rapid,
+            state,
+        })
+    }
+
+    /// Checks the drives' answer; excess following error is a fault, as on a real control.
+    pub fn on_feedback(&self, fb: &Feedback) -> Result<(), Fault> {
+        fb.validate().map_err(Fault::Feedback)?;
+        for (axis, e) in fb.ferr_mm.iter().enumerate() {
+            if e.abs() > self.lim.max_following_error_mm {
+                return Err(Fault::FollowingError {
+                    cycle: fb.cycle,
+                    axis,
+                    ferr_mm: *e,
+                    limit_mm: self.lim.max_following_error_mm,
+                });
+            }
+        }
+        Ok(())
+    }
+}
+
+/// The parameter `ds` mm of path further on from `u`: the second-order Taylor step of
+/// seed 001, `du = ds/|C'| - ds²(C'·C'')/(2|C'|⁴)`, then one Newton correction so the
+/// chord actually covered matches `ds`.
+fn advance(block: &CommandBlock, u: f64, u_end: f64, ds: f64) -> f64 {
+    let e = path::eval(block, u);
+    let sp = norm(e.d1);
+    let du = if sp > 1e-12 {
+        ds / sp - ds * ds * dot(e.d1, e.d2) / (2.0 * sp.powi(4))
+    } else {
+        // A cusp-like start (coincident control points): C' = 0, use the C'' term.
+        let acc = norm(e.d2);
+        if acc > 1e-12 {
+            (2.0 * ds / acc).sqrt()
+        } else {
+            (u_end - u) * 1e-3
+        }
+    };
+    let mut u1 = (u + du.max(0.0)).min(u_end);
+    let e1 = path::eval(block, u1);
+    let sp1 = norm(e1.d1);
+    if sp1 > 1e-12 {
+        let chord = dist(e1.p, e.p);
+        u1 = (u1 + (ds - chord) / sp1).clamp(u, u_end);
+    }
+    u1
+}
+
+#[cfg(test)]
+#[allow(clippy::unwrap_used, clippy::indexing_slicing, clippy::panic)]
+mod tests;

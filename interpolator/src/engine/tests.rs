@@ -1,0 +1,165 @@
+use super::*;
+use shared::protocol::{BlockKind, CommandBlock};
+
+pub(crate) fn line(
+    seq: u64,
+    from: [f64; 3],
+    to: [f64; 3],
+    feed: f64,
+    start: f64,
+    end: f64,
+) -> CommandBlock {
+    let mut b = CommandBlock::empty(BlockKind::Motion, seq, seq as u32 + 1);
+    b.degree = 1;
+    b.n_ctrl = 2;
+    b.knots[..4].copy_from_slice(&[0.0, 0.0, 1.0, 1.0]);
+    b.ctrl[0] = [from[0], from[1], from[2], 1.0];
+    b.ctrl[1] = [to[0], to[1], to[2], 1.0];
+    b.feed_mm_per_min = feed;
+    b.start_feed_mm_per_min = start;
+    b.end_feed_mm_per_min = end;
+    b.length_mm = dist(from, to);
+    b
+}
+
+struct Blocks(Vec<CommandBlock>, usize);
+impl BlockSource for Blocks {
+    fn next_block(&mut self) -> Option<CommandBlock> {
+        let b = self.0.get(self.1).copied();
+        self.1 += b.is_some() as usize;
+        b
+    }
+}
+
+fn limits() -> Limits {
+    Limits {
+        period_ns: 1_000_000,
+        path_acc_mm_per_s2: 2000.0,
+        max_following_error_mm: 1.0,
+    }
+}
+
+fn run(blocks: Vec<CommandBlock>) -> Vec<Tick> {
+    let mut e = Engine::new(limits(), [0.0; 3]);
+    let mut src = Blocks(blocks, 0);
+    let mut out = vec![];
+    for _ in 0..1_000_000 {
+        let t = e.tick(&mut src).unwrap();
+        out.push(t);
+        if t.state != TickState::Running {
+            break;
+        }
+    }
+    out
+}
+
+#[test]
+fn long_line_runs_at_feed_and_stops_exactly() {
+    let end = [300.0, 0.0, 0.0];
+    let ticks = run(vec![
+        line(0, [0.0; 3], end, 3000.0, 0.0, 0.0),
+        CommandBlock::empty(BlockKind::ProgramEnd, 1, 2),
+    ]);
+    let last = ticks.last().unwrap();
+    assert_eq!(last.state, TickState::Done);
+    assert_eq!(last.pos_mm, end);
+    // Cruise: 50 mm/s = 0.05 mm per 1 ms cycle, exactly, away from the ramps.
+    let cruise: Vec<_> = ticks
+        .windows(2)
+        .map(|w| dist(w[0].pos_mm, w[1].pos_mm))
+        .filter(|d| *d > 0.0499)
+        .collect();
+    let avg = cruise.iter().sum::<f64>() / cruise.len() as f64;
+    assert!((avg / 0.05 - 1.0).abs() < 0.01, "average step {avg}");
+    // Acceleration limited: no step changes by more than a·T² = 0.002 mm (+ rounding).
+    for w in ticks.windows(3) {
+        let (d0, d1) = (
+            dist(w[0].pos_mm, w[1].pos_mm),
+            dist(w[1].pos_mm, w[2].pos_mm),
+        );
+        assert!((d1 - d0).abs() <= 0.002 + 1e-9, "step change {}", d1 - d0);
+    }
+}
+
+#[test]
+fn corner_with_zero_junction_speed_stops_on_it() {
+    let ticks = run(vec![
+        line(0, [0.0; 3], [10.0, 0.0, 0.0], 3000.0, 0.0, 0.0),
+        line(1, [10.0, 0.0, 0.0], [10.0, 10.0, 0.0], 3000.0, 0.0, 0.0),
+        CommandBlock::empty(BlockKind::ProgramEnd, 2, 3),
+    ]);
+    assert!(
+        ticks.iter().any(|t| t.pos_mm == [10.0, 0.0, 0.0]),
+        "the corner itself is a set-point"
+    );
+    assert_eq!(ticks.last().unwrap().pos_mm, [10.0, 10.0, 0.0]);
+}
+
+#[test]
+fn tiny_segments_keep_their_feed() {
+    // 0.01 mm segments, five of them per 0.05 mm step, planned to flow at full feed.
+    let n = 2000;
+    let mut blocks: Vec<_> = (0..n)
+        .map(|i| {
+            let (a, b) = (i as f64 * 0.01, (i + 1) as f64 * 0.01);
+            // The planner's backward pass: the speed from which the rest can still stop.
+            let stop = |rest: f64| (2.0 * 2000.0 * rest).sqrt().min(50.0) * 60.0;
+            let (s, e) = (
+                stop(20.0 - a).min(if i == 0 { 0.0 } else { 3000.0 }),
+                stop(20.0 - b),
+            );
+            line(i as u64, [a, 0.0, 0.0], [b, 0.0, 0.0], 3000.0, s, e)
+        })
+        .collect();
+    blocks.push(CommandBlock::empty(BlockKind::ProgramEnd, n as u64, 0));
+    let ticks = run(blocks);
+    let top = ticks.iter().map(|t| t.speed_mm_per_s).fold(0.0, f64::max);
+    assert!(top > 49.9, "top speed {top}");
+    assert!((ticks.last().unwrap().pos_mm[0] - 20.0).abs() < 1e-9);
+}
+
+#[test]
+fn starved_engine_stops_at_block_end() {
+    let ticks = run(vec![line(
+        0,
+        [0.0; 3],
+        [5.0, 0.0, 0.0],
+        3000.0,
+        0.0,
+        3000.0,
+    )]);
+    let last = ticks.last().unwrap();
+    assert_eq!(last.state, TickState::Starved);
+    assert_eq!(last.pos_mm, [5.0, 0.0, 0.0]);
+}
+
+#[test]
+fn out_of_sequence_block_is_a_fault() {
+    let mut e = Engine::new(limits(), [0.0; 3]);
+    let mut src = Blocks(vec![line(3, [0.0; 3], [1.0, 0.0, 0.0], 100.0, 0.0, 0.0)], 0);
+    assert!(matches!(
+        e.tick(&mut src),
+        Err(Fault::Protocol(ProtocolError::OutOfSequence {
+            expected: 0,
+            got: 3
+        }))
+    ));
+}
+
+#[test]
+fn corrupt_block_is_a_fault_not_a_panic() {
+    let mut b = line(0, [0.0; 3], [1.0, 0.0, 0.0], 100.0, 0.0, 0.0);
+    b.knots[1] = f64::NAN;
+    let mut e = Engine::new(limits(), [0.0; 3]);
+    assert!(matches!(
+        e.tick(&mut Blocks(vec![b], 0)),
+        Err(Fault::Protocol(_))
+    ));
+    b.knots[1] = 0.0;
+    b.n_ctrl = 4000;
+    let mut e = Engine::new(limits(), [0.0; 3]);
+    assert!(matches!(
+        e.tick(&mut Blocks(vec![b], 0)),
+        Err(Fault::Protocol(_))
+    ));
+}

@@ -1,0 +1,14 @@
+//! The interpolator: the process that owns the clock (the DSP of a classic controller).
+//!
+//! Each period it advances along the current command block at the planned feed
+//! ([`engine`]), evaluates the exact curve, publishes one set-point to the servo-sim and
+//! measures the cycle ([`timing`]): wake-up lateness, compute time, publish time, and every
+//! deadline miss with its cause and source line. [`rt::cycle::run`] is the loop over
+//! iceoryx2, generic over the service type so it runs across processes (`ipc::Service`)
+//! and on threads of one test (`local::Service`).
+
+pub mod cli;
+pub mod engine;
+pub mod rt;
+pub mod summary;
+pub mod timing;

@@ -1,0 +1,305 @@
+//! The periodic loop: cycle k is released at `t0 + k·period` (absolute sleeps on
+//! CLOCK_MONOTONIC, never accumulated), and in each cycle it runs the fixed sequence
+//! inputs (feedback) → faults → command (engine tick) → outputs (set-point, wake-up,
+//! status) → measurement. Nothing in the loop allocates, locks, logs or formats; the
+//! set-point trace goes to a wait-free ring drained by a writer thread.
+
+use crate::engine::{BlockSource, Engine, Fault, Limits, TickState};
+use crate::rt::sched::{self, SchedMode, SchedReport};
+use crate::summary::{FeedStats, Summary};
+use crate::timing::Timing;
+use iceoryx2::port::subscriber::Subscriber;
+use iceoryx2::prelude::*;
+use shared::clock::{now_ns, sleep_until_ns};
+use shared::ipc::{self, err, IpcError};
+use shared::protocol::{
+    CommandBlock, RunState, Services, Setpoint, Status, PROTOCOL_VERSION, SETPOINT_LAST,
+};
+use shared::trace::TraceWriter;
+use shared::Machine;
+use std::path::PathBuf;
+use std::time::{Duration, Instant};
+
+/// Everything one interpolator run needs.
+#[derive(Debug, Clone)]
+pub struct Config {
+    pub prefix: String,
+    pub out_dir: PathBuf,
+    pub period_ns: u64,
+    pub machine: Machine,
+    pub sched: SchedMode,
+    /// How long to wait for the servo-sim and the first block before giving up.
+    pub start_timeout: Duration,
+}
+
+/// Why a run could not even produce a report.
+#[derive(Debug)]
+pub enum RunError {
+    Ipc(IpcError),
+    Io(std::io::Error),
+    Timeout(&'static str),
+}
+
+impl core::fmt::Display for RunError {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        match self {
+            RunError::Ipc(e) => write!(f, "{e}"),
+            RunError::Io(e) => write!(f, "writing the run directory: {e}"),
+            RunError::Timeout(what) => write!(f, "timed out waiting for {what}"),
+        }
+    }
+}
+impl std::error::Error for RunError {}
+impl From<IpcError> for RunError {
+    fn from(e: IpcError) -> Self {
+        RunError::Ipc(e)
+    }
+}
+impl From<std::io::Error> for RunError {
+    fn from(e: std::io::Error) -> Self {
+        RunError::Io(e)
+    }
+}
+
+/// One line of `setpoints.csv`.
+#[derive(Debug, Clone, Copy)]
+struct SetpointRec {
+    cycle: u64,
+    t_ns: u64,
+    pos: [f64; 3],
+    line: u32,
+}
+
+fn format_setpoint(r: &SetpointRec, out: &mut String) {
+    use core::fmt::Write;
+    let _ = write!(
+        out,
+        "{},{},{},{},{},{}",
+        r.cycle, r.t_ns, r.pos[0], r.pos[1], r.pos[2], r.line
+    );
+}
+
+/// Blocks straight from the subscriber, with one block that may have been taken early.
+struct Source<'a, S: Service> {
+    sub: &'a Subscriber<S, CommandBlock, ()>,
+    first: Option<CommandBlock>,
+}
+
+impl<S: Service> BlockSource for Source<'_, S> {
+    fn next_block(&mut self) -> Option<CommandBlock> {
+        if let Some(b) = self.first.take() {
+            return Some(b);
+        }
+        match self.sub.receive() {
+            Ok(Some(sample)) => Some(*sample.payload()),
+            _ => None,
+        }
+    }
+}
+
+fn wait_for(
+    what: &'static str,
+    timeout: Duration,
+    mut ready: impl FnMut() -> bool,
+) -> Result<(), RunError> {
+    let t = Instant::now();
+    while !ready() {
+        if t.elapsed() > timeout {
+            return Err(RunError::Timeout(what));
+        }
+        std::thread::sleep(Duration::from_micros(500));
+    }
+    Ok(())
+}
+
+/// Runs the interpolator until the program end or a fault, and writes
+/// `setpoints.csv` and `interpolator.json` into the run directory.
+pub fn run<S: Service>(cfg: &Config) -> Result<Summary, RunError> {
+    let svc = Services::new(&cfg.prefix);
+    let node = ipc::node::<S>("interpolator")?;
+    let blocks = ipc::blocks(&node, &svc)?;
+    let block_sub = blocks
+        .subscriber_builder()
+        .create()
+        .map_err(|e| err("block subscriber", e))?;
+    let setpoints = ipc::setpoints(&node, &svc)?;
+    let sp_pub = setpoints
+        .publisher_builder()
+        .create()
+        .map_err(|e| err("set-point publisher", e))?;
+    let sp_event = ipc::wakeup(&node, &svc.setpoints())?;
+    let sp_notify = sp_event
+        .notifier_builder()
+        .create()
+        .map_err(|e| err("set-point notifier", e))?;
+    let feedback = ipc::feedback(&node, &svc)?;
+    let fb_sub = feedback
+        .subscriber_builder()
+        .create()
+        .map_err(|e| err("feedback subscriber", e))?;
+    let status = ipc::status(&node, &svc)?;
+    let st_pub = status
+        .publisher_builder()
+        .create()
+        .map_err(|e| err("status publisher", e))?;
+
+    // Every port exists before the loop: iceoryx2 connects new ports lazily inside send()
+    // and receive(), which must not happen for the first time in a hard cycle.
+    wait_for(
+        "the servo-sim to subscribe to set-points",
+        cfg.start_timeout,
+        || setpoints.dynamic_config().number_of_subscribers() >= 1,
+    )?;
+    let mut first = None;
+    wait_for("the first command block", cfg.start_timeout, || {
+        first = block_sub.receive().ok().flatten().map(|s| *s.payload());
+        first.is_some()
+    })?;
+
+    let lim = Limits {
+        period_ns: cfg.period_ns,
+        path_acc_mm_per_s2: cfg.machine.path_acc_mm_per_s2,
+        max_following_error_mm: cfg.machine.max_following_error_mm,
+    };
+    let mut engine = Engine::new(lim, [0.0; 3]);
+    let mut src = Source {
+        sub: &block_sub,
+        first,
+    };
+    let mut trace = TraceWriter::create(
+        &cfg.out_dir.join("setpoints.csv"),
+        "cycle,t_ns,x_mm,y_mm,z_mm,line",
+        1 << 16,
+        format_setpoint,
+    )?;
+    let mut timing = Timing::new(cfg.period_ns, 4096);
+    let mut feed = FeedStats::default();
+    let sched_report: SchedReport = sched::setup(cfg.sched, 80);
+    for w in &sched_report.warnings {
+        tracing::warn!("{w}");
+    }
+
+    let mut fault: Option<Fault> = None;
+    let mut last_fb_cycle: Option<u64> = None;
+    let mut max_ferr_mm = 0.0f64;
+    let t0 = now_ns() + cfg.period_ns;
+    let mut cycle: u64 = 0;
+    loop {
+        let release = t0 + cycle * cfg.period_ns;
+        sleep_until_ns(release);
+        let wake = now_ns();
+
+        // inputs → faults
+        while let Ok(Some(fb)) = fb_sub.receive() {
+            if let Err(f) = engine.on_feedback(&fb) {
+                fault.get_or_insert(f);
+            }
+            last_fb_cycle = Some(fb.cycle);
+            max_ferr_mm = fb.ferr_mm.iter().fold(max_ferr_mm, |m, e| m.max(e.abs()));
+        }
+        // command
+        let tick = match fault {
+            None => engine.tick(&mut src),
+            Some(f) => Err(f),
+        };
+        let computed = now_ns();
+        let (sp, state) = match tick {
+            Ok(t) => {
+                feed.add(&t, cfg.period_ns);
+                let last = t.state == TickState::Done;
+                let sp = Setpoint {
+                    protocol: PROTOCOL_VERSION,
+                    flags: if last { SETPOINT_LAST } else { 0 },
+                    cycle,
+                    t_ns: cycle * cfg.period_ns,
+                    block_seq: t.block_seq,
+                    source_line: t.source_line,
+                    _reserved: 0,
+                    pos_mm: t.pos_mm,
+                    vel_mm_per_s: t.vel_mm_per_s,
+                    acc_mm_per_s2: t.acc_mm_per_s2,
+                };
+                let state = match t.state {
+                    TickState::Running => RunState::Running,
+                    TickState::Starved => RunState::Starved,
+                    TickState::Done => RunState::Done,
+                };
+                (sp, state)
+            }
+            Err(f) => {
+                // Stop where we are: hold the last commanded position.
+                fault.get_or_insert(f);
+                let sp = Setpoint {
+                    protocol: PROTOCOL_VERSION,
+                    flags: SETPOINT_LAST,
+                    cycle,
+                    t_ns: cycle * cfg.period_ns,
+                    pos_mm: engine.position(),
+                    ..Setpoint::default()
+                };
+                (sp, RunState::Fault)
+            }
+        };
+        // outputs
+        if let Ok(s) = sp_pub.loan_uninit() {
+            let _ = s.write_payload(sp).send();
+        }
+        let _ = sp_notify.notify();
+        let _ = st_pub.send_copy(Status {
+            protocol: PROTOCOL_VERSION,
+            state: state as u32,
+            cycle,
+            block_seq: sp.block_seq,
+            source_line: sp.source_line,
+            _reserved: 0,
+            misses: timing.misses,
+        });
+        let finished = now_ns();
+        // measurement
+        timing.record(
+            cycle,
+            sp.source_line,
+            wake.saturating_sub(release),
+            computed - wake,
+            finished - computed,
+        );
+        trace.push(SetpointRec {
+            cycle,
+            t_ns: sp.t_ns,
+            pos: sp.pos_mm,
+            line: sp.source_line,
+        });
+        if sp.flags & SETPOINT_LAST != 0 {
+            break;
+        }
+        cycle += 1;
+    }
+
+    // Let the drives answer the last set-point, so the report covers every cycle.
+    let _ = wait_for("final feedback", Duration::from_secs(2), || {
+        while let Ok(Some(fb)) = fb_sub.receive() {
+            last_fb_cycle = Some(fb.cycle);
+            max_ferr_mm = fb.ferr_mm.iter().fold(max_ferr_mm, |m, e| m.max(e.abs()));
+        }
+        last_fb_cycle == Some(cycle)
+    });
+    // Stay until the interpreter has seen the final status and left (it keeps the blocks'
+    // memory alive until then), so neither side sees the other vanish mid-handshake.
+    let _ = wait_for("the interpreter to leave", Duration::from_secs(2), || {
+        blocks.dynamic_config().number_of_publishers() == 0
+    });
+    let dropped = trace.dropped();
+    trace.finish()?;
+    let summary = Summary::new(
+        cfg,
+        cycle + 1,
+        &timing,
+        &feed,
+        fault.map(|f| f.to_string()),
+        sched_report,
+        dropped,
+        max_ferr_mm,
+    );
+    summary.write(&cfg.out_dir.join("interpolator.json"))?;
+    Ok(summary)
+}

@@ -1,0 +1,4 @@
+//! The real-time side: scheduling set-up and the periodic loop over iceoryx2.
+
+pub mod cycle;
+pub mod sched;

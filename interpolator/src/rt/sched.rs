@@ -1,0 +1,66 @@
+//! Real-time set-up of the cycle thread: SCHED_FIFO, locked memory, tight timer slack.
+//! Each step is tried; what the system refuses is reported, never fatal (without root,
+//! SCHED_FIFO is refused with EPERM on most desktops and CI machines).
+
+use serde::Serialize;
+
+/// What the process actually got.
+#[derive(Debug, Clone, Serialize, serde::Deserialize, PartialEq)]
+pub struct SchedReport {
+    /// "fifo" or "other".
+    pub policy: String,
+    pub priority: i32,
+    pub memory_locked: bool,
+    pub warnings: Vec<String>,
+}
+
+/// Which scheduling to ask for.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum, Default)]
+pub enum SchedMode {
+    /// SCHED_FIFO if allowed, else SCHED_OTHER with a warning.
+    #[default]
+    Auto,
+    /// Plain SCHED_OTHER (timer slack still tightened).
+    Other,
+}
+
+fn errno_text() -> String {
+    std::io::Error::last_os_error().to_string()
+}
+
+pub fn setup(mode: SchedMode, priority: i32) -> SchedReport {
+    let mut rep = SchedReport {
+        policy: "other".into(),
+        priority: 0,
+        memory_locked: false,
+        warnings: vec![],
+    };
+    // SAFETY: plain syscalls with valid arguments.
+    unsafe {
+        if libc::mlockall(libc::MCL_CURRENT | libc::MCL_FUTURE) == 0 {
+            rep.memory_locked = true;
+        } else {
+            rep.warnings.push(format!(
+                "mlockall refused ({}); page faults may delay cycles",
+                errno_text()
+            ));
+        }
+        // 1 ns slack: without it SCHED_OTHER sleeps overshoot by ~50 µs.
+        libc::prctl(libc::PR_SET_TIMERSLACK, 1 as libc::c_ulong, 0, 0, 0);
+        if mode == SchedMode::Auto {
+            let param = libc::sched_param {
+                sched_priority: priority,
+            };
+            if libc::sched_setscheduler(0, libc::SCHED_FIFO, &param) == 0 {
+                rep.policy = "fifo".into();
+                rep.priority = priority;
+            } else {
+                rep.warnings.push(format!(
+                    "SCHED_FIFO refused ({}); running SCHED_OTHER, expect more deadline misses",
+                    errno_text()
+                ));
+            }
+        }
+    }
+    rep
+}

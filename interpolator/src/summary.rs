@@ -1,0 +1,133 @@
+//! What the interpolator reports at the end of a run (`interpolator.json`), which the
+//! launcher folds into the run's `report.json`.
+
+use crate::engine::Tick;
+use crate::rt::cycle::Config;
+use crate::rt::sched::SchedReport;
+use crate::timing::{Miss, Percentiles, Timing};
+use serde::{Deserialize, Serialize};
+
+/// Path figures accumulated from the set-points, cycle by cycle.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct FeedStats {
+    last: Option<[f64; 3]>,
+    pub path_length_mm: f64,
+    pub feed_length_mm: f64,
+    pub feed_moving_ns: u64,
+    pub peak_speed_mm_per_s: f64,
+}
+
+impl FeedStats {
+    #[inline]
+    pub fn add(&mut self, t: &Tick, period_ns: u64) {
+        if let Some(p) = self.last {
+            let d =
+                shared::path::norm([t.pos_mm[0] - p[0], t.pos_mm[1] - p[1], t.pos_mm[2] - p[2]]);
+            self.path_length_mm += d;
+            if d > 0.0 && !t.rapid {
+                self.feed_length_mm += d;
+                self.feed_moving_ns += period_ns;
+                self.peak_speed_mm_per_s =
+                    self.peak_speed_mm_per_s.max(d / (period_ns as f64 * 1e-9));
+            }
+        }
+        self.last = Some(t.pos_mm);
+    }
+}
+
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
+pub struct MissEntry {
+    pub cycle: u64,
+    pub line: u32,
+    pub cause: String,
+    pub wake_late_ns: u64,
+    pub compute_ns: u64,
+    pub publish_ns: u64,
+    pub overrun_ns: u64,
+}
+
+impl From<&Miss> for MissEntry {
+    fn from(m: &Miss) -> Self {
+        MissEntry {
+            cycle: m.cycle,
+            line: m.source_line,
+            cause: serde_json::to_value(m.cause)
+                .ok()
+                .and_then(|v| v.as_str().map(str::to_owned))
+                .unwrap_or_default(),
+            wake_late_ns: m.wake_late_ns,
+            compute_ns: m.compute_ns,
+            publish_ns: m.publish_ns,
+            overrun_ns: m.overrun_ns,
+        }
+    }
+}
+
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
+pub struct Summary {
+    pub outcome: String,
+    pub fault: Option<String>,
+    pub pid: u32,
+    pub period_ns: u64,
+    pub cycles: u64,
+    pub misses: u64,
+    pub wake_late_ns: Percentiles,
+    pub compute_ns: Percentiles,
+    pub publish_ns: Percentiles,
+    /// Every miss up to the first 4096, in cycle order.
+    pub miss_list: Vec<MissEntry>,
+    pub path_length_mm: f64,
+    pub time_s: f64,
+    /// Feed moves only: cutting length over the time spent moving at feed.
+    pub avg_feed_mm_per_min: f64,
+    pub peak_feed_mm_per_min: f64,
+    /// The largest following error the interpolator saw in feedback.
+    pub max_following_error_um: f64,
+    pub sched: SchedReport,
+    /// Set-point trace records lost because the writer fell a whole ring behind.
+    pub trace_dropped: u64,
+}
+
+impl Summary {
+    #[allow(clippy::too_many_arguments)]
+    pub fn new(
+        cfg: &Config,
+        cycles: u64,
+        timing: &Timing,
+        feed: &FeedStats,
+        fault: Option<String>,
+        sched: SchedReport,
+        trace_dropped: u64,
+        max_ferr_mm: f64,
+    ) -> Self {
+        let avg = if feed.feed_moving_ns > 0 {
+            feed.feed_length_mm / (feed.feed_moving_ns as f64 * 1e-9) * 60.0
+        } else {
+            0.0
+        };
+        Summary {
+            outcome: if fault.is_some() { "fault" } else { "done" }.into(),
+            fault,
+            pid: std::process::id(),
+            period_ns: cfg.period_ns,
+            cycles,
+            misses: timing.misses,
+            wake_late_ns: timing.wake_late.percentiles(),
+            compute_ns: timing.compute.percentiles(),
+            publish_ns: timing.publish.percentiles(),
+            miss_list: timing.miss_log.iter().map(MissEntry::from).collect(),
+            path_length_mm: feed.path_length_mm,
+            time_s: (cycles * cfg.period_ns) as f64 * 1e-9,
+            avg_feed_mm_per_min: avg,
+            peak_feed_mm_per_min: feed.peak_speed_mm_per_s * 60.0,
+            max_following_error_um: max_ferr_mm * 1000.0,
+            sched,
+            trace_dropped,
+        }
+    }
+
+    pub fn write(&self, path: &std::path::Path) -> std::io::Result<()> {
+        let text = serde_json::to_string_pretty(self).map_err(std::io::Error::other)?;
+        std::fs::write(path, text)
+    }
+}

@@ -1,0 +1,105 @@
+use super::*;
+use crate::program::interpret;
+
+fn planned(text: &str) -> Vec<CommandBlock> {
+    let machine = Machine::default();
+    let mut b = build(&interpret(text).unwrap().moves, &machine);
+    plan(&mut b, &machine, 1_000_000);
+    b
+}
+
+#[test]
+fn full_circle_is_exact_and_closed() {
+    let b = planned("G0 X10\nG3 X10 Y0 I-10 J0 F3000\n");
+    let arc = &b[1];
+    assert_eq!(arc.degree, 2);
+    assert_eq!(arc.n_ctrl, 9);
+    for i in 0..=4000 {
+        let (u0, u1) = path::domain(arc);
+        let p = path::eval(arc, u0 + (u1 - u0) * i as f64 / 4000.0).p;
+        assert!((p[0].hypot(p[1]) - 10.0).abs() < 1e-12);
+    }
+    assert!(
+        (arc.length_mm - 20.0 * PI).abs() < 1e-9,
+        "{}",
+        arc.length_mm
+    );
+}
+
+#[test]
+fn helix_rises_with_the_angle() {
+    let b = planned("G0 X10\nG17 G3 X-10 Y0 Z6 I-10 J0 F1000\n");
+    let h = &b[1];
+    assert_eq!(h.helix.axis, 2);
+    let (u0, u1) = path::domain(h);
+    for i in 0..=100 {
+        let e = path::eval(h, u0 + (u1 - u0) * i as f64 / 100.0);
+        let angle = e.p[1].atan2(e.p[0]).rem_euclid(2.0 * PI);
+        let angle = if i == 100 { PI } else { angle };
+        assert!(
+            (e.p[2] - 6.0 * angle / PI).abs() < 1e-9,
+            "z {} at {angle}",
+            e.p[2]
+        );
+        // Derivative of z matches a finite difference.
+        if i > 0 && i < 100 {
+            let du = 1e-6;
+            let (m, p) = (
+                path::eval(h, e_u(u0, u1, i) - du),
+                path::eval(h, e_u(u0, u1, i) + du),
+            );
+            assert!(((p.p[2] - m.p[2]) / (2.0 * du) - e.d1[2]).abs() < 1e-5);
+        }
+    }
+    // Length of a helix: sqrt((r·θ)² + h²).
+    let want = ((10.0 * PI).powi(2) + 36.0f64).sqrt();
+    assert!(
+        (h.length_mm - want).abs() < 1e-6,
+        "{} vs {want}",
+        h.length_mm
+    );
+}
+
+fn e_u(u0: f64, u1: f64, i: usize) -> f64 {
+    u0 + (u1 - u0) * i as f64 / 100.0
+}
+
+#[test]
+fn multi_turn_circle_splits_into_blocks() {
+    let b = planned("G0 X5\nG2 X5 Y0 I-5 J0 P10 F500\n");
+    let arcs: Vec<_> = b
+        .iter()
+        .filter(|b| b.kind == BlockKind::Motion as u32 && b.degree == 2)
+        .collect();
+    assert!(arcs.len() >= 3);
+    assert!(arcs.iter().all(|a| a.n_ctrl as usize <= MAX_CTRL));
+    let total: f64 = arcs.iter().map(|a| a.length_mm).sum();
+    assert!((total - 10.0 * 10.0 * PI).abs() < 1e-8);
+}
+
+#[test]
+fn plan_stops_at_corners_and_flows_through_tangent_joins() {
+    let b = planned("G1 X10 F3000\nY10\nG3 X0 Y20 I-10 J0\nM2\n");
+    assert_eq!(b[0].start_feed_mm_per_min, 0.0);
+    assert_eq!(b[0].end_feed_mm_per_min, 0.0, "90° corner: exact stop");
+    assert!(
+        b[1].end_feed_mm_per_min > 0.0,
+        "the line runs tangentially into the arc"
+    );
+    assert_eq!(b[2].end_feed_mm_per_min, 0.0, "program end");
+    for x in &b[..3] {
+        assert!(x.validate().is_ok());
+    }
+}
+
+#[test]
+fn curvature_limits_the_feed() {
+    // r = 1 mm at 6000 mm/min (100 mm/s) needs 10 000 mm/s² centripetal: capped to
+    // sqrt(2000 · 1) = 44.7 mm/s.
+    let b = planned("G0 X1\nG3 X1 Y0 I-1 J0 F6000\n");
+    assert!(
+        (b[1].feed_mm_per_min / 60.0 - 2000f64.sqrt()).abs() < 0.01,
+        "{}",
+        b[1].feed_mm_per_min
+    );
+}

@@ -1,0 +1,148 @@
+//! The `cnc` command line.
+
+use crate::launch;
+use crate::process::{self, Source};
+use clap::{Parser, Subcommand};
+use std::path::PathBuf;
+use std::process::ExitCode;
+
+#[derive(Parser)]
+#[command(
+    name = "cnc",
+    version,
+    about = "A NURBS CNC motion stack: interpreter -> interpolator -> servo-sim over shared memory",
+    long_about = "A NURBS CNC motion stack in three processes joined by iceoryx2 shared memory:\n\
+the interpreter reads and plans an NC program, the interpolator steps along the exact\n\
+curves every period and publishes set-points, the servo-sim plays the drives and answers\n\
+with feedback. `cnc run` starts all three and leaves a run directory with the report,\n\
+the set-point and feedback traces and the command log.\n\n\
+Logging: RUST_LOG=info (or debug) for more detail on stderr."
+)]
+pub struct Cli {
+    #[command(subcommand)]
+    pub command: Command,
+}
+
+#[derive(Subcommand)]
+pub enum Command {
+    /// Run a program (or the built-in demo) through the three-process stack.
+    Run(launch::RunArgs),
+    /// Check a program without running it: exit 0 if fine, else one `FILE:LINE:COL: message`
+    /// line per problem on stderr and exit 1.
+    Check {
+        /// The NC program (RS274/NGC with LinuxCNC G5.2 NURBS).
+        program: PathBuf,
+        /// Machine file (TOML) whose limits apply.
+        #[arg(long)]
+        machine: Option<PathBuf>,
+    },
+    /// Print the built-in machine file (TOML), a starting point for your own.
+    Machine,
+    /// Internal: run one process of the stack (started by `cnc run`).
+    #[command(hide = true, subcommand)]
+    Role(Role),
+}
+
+#[derive(Subcommand)]
+pub enum Role {
+    Interpreter {
+        #[command(flatten)]
+        common: servo_sim::cli::Args,
+        #[arg(long)]
+        program: Option<PathBuf>,
+        #[arg(long)]
+        program_name: Option<String>,
+    },
+    Interpolator(interpolator::cli::Args),
+    ServoSim(servo_sim::cli::Args),
+}
+
+fn init_tracing() {
+    tracing_subscriber::fmt()
+        .with_env_filter(
+            tracing_subscriber::EnvFilter::try_from_default_env().unwrap_or_else(|_| "warn".into()),
+        )
+        .with_writer(std::io::stderr)
+        .init();
+}
+
+fn fail(msg: impl std::fmt::Display) -> ExitCode {
+    eprintln!("cnc: {msg}");
+    ExitCode::FAILURE
+}
+
+/// Runs the interpreter process from its role arguments.
+pub fn run_interpreter(
+    common: &servo_sim::cli::Args,
+    program: Option<PathBuf>,
+    program_name: Option<String>,
+) -> ExitCode {
+    let machine = match shared::machine::load(common.machine.as_deref()) {
+        Ok(m) => m,
+        Err(e) => return fail(e),
+    };
+    let cfg = process::Config {
+        prefix: common.prefix.clone(),
+        out_dir: common.out.clone(),
+        period_ns: common.period_us * 1000,
+        machine,
+        program,
+        program_name,
+    };
+    match process::run::<iceoryx2::prelude::ipc::Service>(&cfg) {
+        Ok(s) if s.fault.is_none() => ExitCode::SUCCESS,
+        Ok(s) => fail(s.fault.unwrap_or_default()),
+        Err(e) => fail(e),
+    }
+}
+
+pub fn main() -> ExitCode {
+    let cli = Cli::parse();
+    init_tracing();
+    match cli.command {
+        Command::Run(args) => launch::run(&args),
+        Command::Check { program, machine } => {
+            let machine = match shared::machine::load(machine.as_deref()) {
+                Ok(m) => m,
+                Err(e) => return fail(e),
+            };
+            let src = match Source::load(Some(&program)) {
+                Ok(s) => s,
+                Err(e) => return fail(e),
+            };
+            match process::compile(&src.text, &machine, 1_000_000) {
+                Ok((_, blocks)) => {
+                    println!("{}: ok, {} blocks", src.name, blocks.len());
+                    ExitCode::SUCCESS
+                }
+                Err(diags) => {
+                    eprint!("{}", process::format_diagnostics(&src.name, &diags));
+                    ExitCode::FAILURE
+                }
+            }
+        }
+        Command::Machine => {
+            print!("{}", shared::Machine::default_toml());
+            ExitCode::SUCCESS
+        }
+        Command::Role(Role::Interpreter {
+            common,
+            program,
+            program_name,
+        }) => run_interpreter(&common, program, program_name),
+        Command::Role(Role::Interpolator(args)) => match interpolator::cli::run(&args) {
+            Ok(()) => ExitCode::SUCCESS,
+            Err(e) => fail(e),
+        },
+        Command::Role(Role::ServoSim(args)) => {
+            let machine = match shared::machine::load(args.machine.as_deref()) {
+                Ok(m) => m,
+                Err(e) => return fail(e),
+            };
+            match servo_sim::cli::run(&args, machine) {
+                Ok(()) => ExitCode::SUCCESS,
+                Err(e) => fail(e),
+            }
+        }
+    }
+}

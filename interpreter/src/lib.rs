@@ -1,0 +1,21 @@
+//! The interpreter (the industrial PC of a classic controller) and the `cnc` command.
+//!
+//! * [`parse`] reads a line of RS274/NGC into words; [`program`] runs the modal state
+//!   machine over the lines and produces moves (lines, arcs, NURBS, dwells, the end),
+//!   collecting every error with its line and column;
+//! * [`blocks`] turns moves into command blocks (everything as exact NURBS, split to block
+//!   capacity) and plans their feeds with look-ahead over the whole program;
+//! * [`publish`] streams the blocks to the interpolator with back-pressure while [`log`]
+//!   records each one as sent;
+//! * [`process`] is the interpreter process; [`launch`] starts all three processes for
+//!   `cnc run` and folds their summaries into the run's [`report`].
+
+pub mod blocks;
+pub mod cli;
+pub mod launch;
+pub mod log;
+pub mod parse;
+pub mod process;
+pub mod program;
+pub mod publish;
+pub mod report;

@@ -1,0 +1,119 @@
+use super::*;
+
+fn moves(text: &str) -> Vec<Move> {
+    interpret(text).unwrap_or_else(|e| panic!("{e:?}")).moves
+}
+
+fn errors(text: &str) -> Vec<(u32, u32, String)> {
+    interpret(text)
+        .unwrap_err()
+        .into_iter()
+        .map(|d| (d.line, d.col, d.message))
+        .collect()
+}
+
+#[test]
+fn lines_modal_words_and_units() {
+    let m = moves("G21 G90 F600\nG1 X10\nY5\nG91 X1\nG20 G90 X1\nM2\nG1 X99\n");
+    assert_eq!(m.len(), 5);
+    assert_eq!(
+        m[0],
+        Move::Line {
+            line: 2,
+            from: [0.0; 3],
+            to: [10.0, 0.0, 0.0],
+            rapid: false,
+            feed: 600.0
+        }
+    );
+    assert!(matches!(
+        m[2],
+        Move::Line {
+            to: [11.0, 5.0, 0.0],
+            ..
+        }
+    ));
+    assert!(matches!(
+        m[3],
+        Move::Line {
+            to: [25.4, 5.0, 0.0],
+            ..
+        }
+    ));
+    assert_eq!(m[4], Move::End { line: 6 });
+}
+
+#[test]
+fn full_circle_and_r_form() {
+    let m = moves("G0 X10\nG3 X10 Y0 I-10 J0 F3000\nG2 X0 Y10 R10\n");
+    match &m[1] {
+        Move::Arc {
+            center,
+            ccw: true,
+            turns: 1,
+            ..
+        } => assert_eq!(*center, [0.0; 3]),
+        other => panic!("{other:?}"),
+    }
+    match &m[2] {
+        // Clockwise quarter from (10,0) to (0,10) with R10: centre at (10,10).
+        Move::Arc {
+            center, ccw: false, ..
+        } => {
+            assert!(
+                (center[0] - 10.0).abs() < 1e-12 && (center[1] - 10.0).abs() < 1e-12,
+                "{center:?}"
+            )
+        }
+        other => panic!("{other:?}"),
+    }
+}
+
+#[test]
+fn g5_2_nurbs_as_linuxcnc_builds_it() {
+    let m = moves("F100\nG5.2 P1 L3\nX0 Y1 P1\nX2 Y2 P1\nX2 Y0 P1\nX0 Y0 P2\nG5.3\n");
+    match &m[0] {
+        Move::Nurbs {
+            line: 2,
+            degree: 2,
+            knots,
+            ctrl,
+            ..
+        } => {
+            assert_eq!(knots, &vec![0.0, 0.0, 0.0, 1.0, 2.0, 3.0, 3.0, 3.0]);
+            assert_eq!(ctrl.len(), 5);
+            assert_eq!(ctrl[4], [0.0, 0.0, 0.0, 2.0]);
+        }
+        other => panic!("{other:?}"),
+    }
+}
+
+#[test]
+fn every_problem_is_reported_with_its_column() {
+    let e = errors("G1 X10\nG2 X5 Y5\nG1 X1 X2 F10\nG5.3\nG7 X1\nF100 G1 Q1 Y$\n");
+    assert_eq!(e[0].0, 1);
+    assert_eq!(e[0].1, 1);
+    assert!(e[0].2.contains("feed"), "{}", e[0].2);
+    assert_eq!((e[1].0, e[1].1), (2, 1));
+    assert_eq!((e[2].0, e[2].1), (3, 7));
+    assert_eq!((e[3].0, e[3].1), (4, 1));
+    assert_eq!((e[4].0, e[4].1), (5, 1));
+    assert_eq!((e[5].0, e[5].1), (6, 13));
+    assert_eq!(e.len(), 6);
+}
+
+#[test]
+fn nurbs_needs_order_many_points_and_weights() {
+    let e = errors("F100\nG5.2 L4\nX1 Y1 P1\nX2 Y0 P1\nG5.3\n");
+    assert!(e[0].2.contains("order 4"), "{e:?}");
+    let e = errors("F100\nG5.2\nX1 Y1\nG5.3\n");
+    assert!(e[0].2.contains("weight"), "{e:?}");
+    let e = errors("F100\nG5.2\nX1 Y1 P0\nG5.3\n");
+    assert!(e[0].2.contains("> 0"), "{e:?}");
+}
+
+#[test]
+fn arc_radius_mismatch_is_an_error() {
+    let e = errors("F100\nG0 X10\nG3 X0 Y10.5 I-10 J0\n");
+    assert!(e[0].2.contains("differs"), "{e:?}");
+}

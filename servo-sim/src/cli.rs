@@ -1,0 +1,37 @@
+//! Command-line arguments of the servo-sim process (also a role of `cnc`).
+
+use crate::run::{self, Config};
+use std::path::PathBuf;
+use std::time::Duration;
+
+#[derive(Debug, Clone, clap::Args)]
+pub struct Args {
+    /// Service-name prefix of the stack to join.
+    #[arg(long)]
+    pub prefix: String,
+    /// Run directory to write feedback.csv and servo.json into.
+    #[arg(long)]
+    pub out: PathBuf,
+    /// Interpolation period in µs (the time one set-point stands for).
+    #[arg(long, default_value_t = 1000, value_parser = clap::value_parser!(u64).range(100..=10_000))]
+    pub period_us: u64,
+    /// Machine file (TOML); the built-in default machine when absent.
+    #[arg(long)]
+    pub machine: Option<PathBuf>,
+}
+
+pub fn run(args: &Args, machine: shared::Machine) -> anyhow::Result<()> {
+    let cfg = Config {
+        prefix: args.prefix.clone(),
+        out_dir: args.out.clone(),
+        period_ns: args.period_us * 1000,
+        machine,
+        start_timeout: Duration::from_secs(30),
+        idle_timeout: Duration::from_secs(5),
+    };
+    let summary = run::run::<iceoryx2::prelude::ipc::Service>(&cfg)?;
+    match summary.fault {
+        Some(f) => anyhow::bail!("fault: {f}"),
+        None => Ok(()),
+    }
+}

@@ -1,0 +1,210 @@
+//! The servo-sim process loop, in lock-step with the set-points: it sleeps on the
+//! set-point wake-up event, steps the three axes once per set-point in cycle order, and
+//! answers each with feedback. The output depends only on the set-points, never on when
+//! they arrive.
+
+use crate::axis::Axis;
+use iceoryx2::prelude::*;
+use serde::{Deserialize, Serialize};
+use shared::ipc::{self, err, IpcError};
+use shared::protocol::{
+    Feedback, Services, Setpoint, DRIVE_OK, DRIVE_SATURATED, PROTOCOL_VERSION, SETPOINT_LAST,
+};
+use shared::trace::TraceWriter;
+use shared::Machine;
+use std::path::PathBuf;
+use std::time::{Duration, Instant};
+
+#[derive(Debug, Clone)]
+pub struct Config {
+    pub prefix: String,
+    pub out_dir: PathBuf,
+    pub period_ns: u64,
+    pub machine: Machine,
+    /// How long to wait for the first set-point.
+    pub start_timeout: Duration,
+    /// Silence after which the interpolator is taken for dead (drives hold position).
+    pub idle_timeout: Duration,
+}
+
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
+pub struct Summary {
+    pub outcome: String,
+    pub fault: Option<String>,
+    pub pid: u32,
+    pub setpoints: u64,
+    /// Set-points that never arrived (gaps in the cycle numbers).
+    pub lost_setpoints: u64,
+    pub max_following_error_um: f64,
+    pub max_following_error_axis_um: [f64; 3],
+    pub saturated_cycles: u64,
+    pub trace_dropped: u64,
+}
+
+#[derive(Debug, Clone, Copy)]
+struct FeedbackRec {
+    cycle: u64,
+    t_ns: u64,
+    pos: [f64; 3],
+    ferr_um: [f64; 3],
+}
+
+fn format_feedback(r: &FeedbackRec, out: &mut String) {
+    use core::fmt::Write;
+    let _ = write!(
+        out,
+        "{},{},{},{},{},{},{},{}",
+        r.cycle, r.t_ns, r.pos[0], r.pos[1], r.pos[2], r.ferr_um[0], r.ferr_um[1], r.ferr_um[2]
+    );
+}
+
+/// The three axes and their bookkeeping; no I/O.
+pub struct Drives {
+    axes: [Axis; 3],
+    machine: Machine,
+    dt_s: f64,
+    expected_cycle: u64,
+    pub lost: u64,
+    pub saturated_cycles: u64,
+    pub max_ferr_mm: [f64; 3],
+}
+
+impl Drives {
+    pub fn new(machine: Machine, period_ns: u64) -> Self {
+        Drives {
+            axes: [Axis::at(0.0); 3],
+            machine,
+            dt_s: period_ns as f64 * 1e-9,
+            expected_cycle: 0,
+            lost: 0,
+            saturated_cycles: 0,
+            max_ferr_mm: [0.0; 3],
+        }
+    }
+
+    /// Steps every axis through one set-point and returns the feedback for it.
+    pub fn step(&mut self, sp: &Setpoint) -> Feedback {
+        if sp.cycle > self.expected_cycle {
+            self.lost += sp.cycle - self.expected_cycle;
+        }
+        self.expected_cycle = sp.cycle + 1;
+        let p = &self.machine.servo;
+        let mut fb = Feedback {
+            protocol: PROTOCOL_VERSION,
+            drive_state: DRIVE_OK,
+            cycle: sp.cycle,
+            ..Feedback::default()
+        };
+        for (i, ax) in self.axes.iter_mut().enumerate() {
+            ax.step(
+                p,
+                self.dt_s,
+                sp.pos_mm[i],
+                sp.vel_mm_per_s[i],
+                sp.acc_mm_per_s2[i],
+            );
+            let x = ax.measured_mm(p);
+            fb.pos_mm[i] = x;
+            fb.ferr_mm[i] = sp.pos_mm[i] - x;
+            self.max_ferr_mm[i] = self.max_ferr_mm[i].max(fb.ferr_mm[i].abs());
+            if ax.saturated {
+                fb.drive_state = DRIVE_SATURATED;
+            }
+        }
+        if fb.drive_state == DRIVE_SATURATED {
+            self.saturated_cycles += 1;
+        }
+        fb
+    }
+}
+
+/// Runs the servo-sim until the last set-point, and writes `feedback.csv` and
+/// `servo.json` into the run directory.
+pub fn run<S: Service>(cfg: &Config) -> Result<Summary, IpcError> {
+    let io = |e: std::io::Error| IpcError(format!("writing the run directory: {e}"));
+    let svc = Services::new(&cfg.prefix);
+    let node = ipc::node::<S>("servo-sim")?;
+    let feedback = ipc::feedback(&node, &svc)?;
+    let fb_pub = feedback
+        .publisher_builder()
+        .create()
+        .map_err(|e| err("feedback publisher", e))?;
+    let sp_event = ipc::wakeup(&node, &svc.setpoints())?;
+    let listener = sp_event
+        .listener_builder()
+        .create()
+        .map_err(|e| err("set-point listener", e))?;
+    let setpoints = ipc::setpoints(&node, &svc)?;
+    let sp_sub = setpoints
+        .subscriber_builder()
+        .create()
+        .map_err(|e| err("set-point subscriber", e))?;
+
+    let mut trace = TraceWriter::create(
+        &cfg.out_dir.join("feedback.csv"),
+        "cycle,t_ns,x_mm,y_mm,z_mm,ferr_x_um,ferr_y_um,ferr_z_um",
+        1 << 16,
+        format_feedback,
+    )
+    .map_err(io)?;
+    let mut drives = Drives::new(cfg.machine.clone(), cfg.period_ns);
+    let mut fault: Option<String> = None;
+    let mut count = 0u64;
+    let mut last_seen = Instant::now();
+    let mut done = false;
+    while !done {
+        let _ = listener.timed_wait(|_| {}, Duration::from_millis(50));
+        while let Ok(Some(sample)) = sp_sub.receive() {
+            let sp = *sample.payload();
+            last_seen = Instant::now();
+            if let Err(e) = sp.validate() {
+                // A set-point we cannot trust: hold position, report, stop.
+                fault = Some(format!("bad set-point: {e}"));
+                done = true;
+                break;
+            }
+            let fb = drives.step(&sp);
+            count += 1;
+            let _ = fb_pub.send_copy(fb);
+            trace.push(FeedbackRec {
+                cycle: fb.cycle,
+                t_ns: sp.t_ns,
+                pos: fb.pos_mm,
+                ferr_um: fb.ferr_mm.map(|e| e * 1e3),
+            });
+            if sp.flags & SETPOINT_LAST != 0 {
+                done = true;
+                break;
+            }
+        }
+        let limit = if count == 0 {
+            cfg.start_timeout
+        } else {
+            cfg.idle_timeout
+        };
+        if !done && last_seen.elapsed() > limit {
+            fault = Some(format!(
+                "no set-point for {:.1} s after {count} set-points: the interpolator is dead or stalled; drives hold position",
+                limit.as_secs_f64()
+            ));
+            done = true;
+        }
+    }
+    let trace_dropped = trace.dropped();
+    trace.finish().map_err(io)?;
+    let max_axis = drives.max_ferr_mm.map(|e| e * 1e3);
+    let summary = Summary {
+        outcome: if fault.is_some() { "fault" } else { "done" }.into(),
+        fault,
+        pid: std::process::id(),
+        setpoints: count,
+        lost_setpoints: drives.lost,
+        max_following_error_um: max_axis.iter().fold(0.0, |a: f64, b| a.max(*b)),
+        max_following_error_axis_um: max_axis,
+        saturated_cycles: drives.saturated_cycles,
+        trace_dropped,
+    };
+    let text = serde_json::to_string_pretty(&summary).map_err(|e| IpcError(e.to_string()))?;
+    std::fs::write(cfg.out_dir.join("servo.json"), text).map_err(io)?;
+    Ok(summary)
+}

@@ -1,0 +1,116 @@
+//! The services of one stack with the QoS every process opens them with. Keeping them in
+//! one place means the three processes can never disagree on a buffer size or a type.
+//!
+//! Flow control: the block service has no safe overflow, so a block is never overwritten;
+//! the interpreter counts a send that reached no subscriber as not sent and retries it
+//! (back-pressure: a full queue waits, nothing is dropped). The cycle services (set-points,
+//! feedback) keep safe overflow on so the real-time loop never blocks on a slow peer; the
+//! receiver detects a gap in cycle numbers instead.
+
+use crate::protocol::{
+    CommandBlock, Feedback, Services, Setpoint, Status, BLOCK_QUEUE, CYCLE_QUEUE,
+};
+use iceoryx2::node::Node;
+use iceoryx2::prelude::*;
+use iceoryx2::service::port_factory::{event, publish_subscribe};
+
+/// An iceoryx2 failure, as text (their error types are many and not `Clone`).
+#[derive(Debug, Clone, PartialEq)]
+pub struct IpcError(pub String);
+
+impl core::fmt::Display for IpcError {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        write!(f, "shared memory: {}", self.0)
+    }
+}
+impl std::error::Error for IpcError {}
+
+pub fn err(what: &str, e: impl core::fmt::Debug) -> IpcError {
+    IpcError(format!("{what}: {e:?}"))
+}
+
+/// A node of the stack; `role` names it in iceoryx2's introspection.
+pub fn node<S: Service>(role: &str) -> Result<Node<S>, IpcError> {
+    // iceoryx2 warns on every start that no config file exists (we need none); only its
+    // errors are worth the operator's attention unless IOX2_LOG_LEVEL asks for more.
+    set_log_level_from_env_or(LogLevel::Error);
+    let name = NodeName::new(role).map_err(|e| err("node name", e))?;
+    NodeBuilder::new()
+        .name(&name)
+        .signal_handling_mode(SignalHandlingMode::Disabled)
+        .create::<S>()
+        .map_err(|e| err("creating node", e))
+}
+
+fn name(s: &str) -> Result<ServiceName, IpcError> {
+    ServiceName::new(s).map_err(|e| err("service name", e))
+}
+
+pub type PubSub<S, T> = publish_subscribe::PortFactory<S, T, ()>;
+
+pub fn blocks<S: Service>(
+    node: &Node<S>,
+    svc: &Services,
+) -> Result<PubSub<S, CommandBlock>, IpcError> {
+    node.service_builder(&name(&svc.blocks())?)
+        .publish_subscribe::<CommandBlock>()
+        .max_publishers(1)
+        .max_subscribers(2)
+        .subscriber_max_buffer_size(BLOCK_QUEUE)
+        .enable_safe_overflow(false)
+        .open_or_create()
+        .map_err(|e| err("block service", e))
+}
+
+pub fn setpoints<S: Service>(
+    node: &Node<S>,
+    svc: &Services,
+) -> Result<PubSub<S, Setpoint>, IpcError> {
+    node.service_builder(&name(&svc.setpoints())?)
+        .publish_subscribe::<Setpoint>()
+        .max_publishers(1)
+        .max_subscribers(4)
+        .subscriber_max_buffer_size(CYCLE_QUEUE)
+        .enable_safe_overflow(true)
+        .open_or_create()
+        .map_err(|e| err("set-point service", e))
+}
+
+pub fn feedback<S: Service>(
+    node: &Node<S>,
+    svc: &Services,
+) -> Result<PubSub<S, Feedback>, IpcError> {
+    node.service_builder(&name(&svc.feedback())?)
+        .publish_subscribe::<Feedback>()
+        .max_publishers(1)
+        .max_subscribers(4)
+        .subscriber_max_buffer_size(CYCLE_QUEUE)
+        .enable_safe_overflow(true)
+        .open_or_create()
+        .map_err(|e| err("feedback service", e))
+}
+
+pub fn status<S: Service>(node: &Node<S>, svc: &Services) -> Result<PubSub<S, Status>, IpcError> {
+    node.service_builder(&name(&svc.status())?)
+        .publish_subscribe::<Status>()
+        .max_publishers(1)
+        .max_subscribers(4)
+        .history_size(1)
+        .subscriber_max_buffer_size(4)
+        .enable_safe_overflow(true)
+        .open_or_create()
+        .map_err(|e| err("status service", e))
+}
+
+/// The wake-up event that goes with a pub-sub service (same name, event pattern).
+pub fn wakeup<S: Service>(
+    node: &Node<S>,
+    service_name: &str,
+) -> Result<event::PortFactory<S>, IpcError> {
+    node.service_builder(&name(service_name)?)
+        .event()
+        .max_notifiers(2)
+        .max_listeners(2)
+        .open_or_create()
+        .map_err(|e| err("event service", e))
+}

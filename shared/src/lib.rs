@@ -1,0 +1,22 @@
+//! The contract all three processes share, and the math they must agree on.
+//!
+//! * [`protocol`]: the payloads that cross between processes (command blocks, set-points,
+//!   feedback, status), their validation on receipt, and the service names of a run.
+//! * [`nurbs`]: fixed-capacity rational B-spline curves: validation, evaluation of point
+//!   and first two derivatives, knot insertion and exact splitting.
+//! * [`path`]: the geometry of a motion block (NURBS plus the axial part of a helix).
+//! * [`machine`]: the machine file (limits and the servo model).
+//!
+//! Vocabulary: a *block* is one command (a motion along one curve, a dwell, the program
+//! end); a *span* is one knot interval of a curve; a *cycle* is one interpolation period,
+//! producing one *set-point*; a *miss* is a cycle that finished after its deadline.
+
+pub mod clock;
+pub mod ipc;
+pub mod machine;
+pub mod nurbs;
+pub mod path;
+pub mod protocol;
+pub mod trace;
+
+pub use machine::Machine;

@@ -1,0 +1,161 @@
+//! Checks against independent references: the Cox–de Boor recursion evaluated from scratch,
+//! central finite differences, and the closed form of the circle.
+
+use super::*;
+use proptest::prelude::*;
+
+/// Cox–de Boor recursion, the textbook definition (half-open spans, last span closed).
+fn basis(i: usize, p: usize, knots: &[f64], u: f64) -> f64 {
+    if p == 0 {
+        let last = knots[knots.len() - 1];
+        let in_span = knots[i] <= u && u < knots[i + 1];
+        let at_end = u == last && knots[i] < knots[i + 1] && knots[i + 1] == last;
+        return if in_span || at_end { 1.0 } else { 0.0 };
+    }
+    let mut v = 0.0;
+    let d1 = knots[i + p] - knots[i];
+    if d1 > 0.0 {
+        v += (u - knots[i]) / d1 * basis(i, p - 1, knots, u);
+    }
+    let d2 = knots[i + p + 1] - knots[i + 1];
+    if d2 > 0.0 {
+        v += (knots[i + p + 1] - u) / d2 * basis(i + 1, p - 1, knots, u);
+    }
+    v
+}
+
+fn reference_point(p: usize, knots: &[f64], ctrl: &[[f64; 4]], u: f64) -> [f64; 3] {
+    let mut a = [0.0; 3];
+    let mut w = 0.0;
+    for (i, c) in ctrl.iter().enumerate() {
+        let nw = basis(i, p, knots, u) * c[3];
+        w += nw;
+        for k in 0..3 {
+            a[k] += nw * c[k];
+        }
+    }
+    a.map(|x| x / w)
+}
+
+fn dist(a: [f64; 3], b: [f64; 3]) -> f64 {
+    ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2) + (a[2] - b[2]).powi(2)).sqrt()
+}
+
+prop_compose! {
+    fn random_curve()(p in 1usize..=MAX_DEGREE, extra in 0usize..12)
+        (ctrl in proptest::collection::vec(
+            (-100.0f64..100.0, -100.0f64..100.0, -100.0f64..100.0, 0.2f64..5.0), p + 1 + extra),
+         gaps in proptest::collection::vec(0.05f64..2.0, extra + 1), p in Just(p))
+        -> SplitCurve
+    {
+        let n = ctrl.len();
+        let mut knots = vec![0.0; p + 1];
+        let mut t = 0.0;
+        for g in &gaps[..n - p - 1] { t += g; knots.push(t); }
+        t += gaps[n - p - 1];
+        knots.extend(std::iter::repeat_n(t, p + 1));
+        SplitCurve { degree: p, knots, ctrl: ctrl.into_iter().map(|(x, y, z, w)| [x, y, z, w]).collect() }
+    }
+}
+
+proptest! {
+    #[test]
+    fn eval_matches_cox_de_boor(c in random_curve(), t in 0.0f64..=1.0) {
+        prop_assert!(validate(c.degree, &c.knots, &c.ctrl, usize::MAX).is_ok());
+        let (lo, hi) = (c.knots[0], *c.knots.last().unwrap());
+        let u = lo + t * (hi - lo);
+        let got = eval(c.degree, &c.knots, &c.ctrl, u).p;
+        let want = reference_point(c.degree, &c.knots, &c.ctrl, u);
+        prop_assert!(dist(got, want) < 1e-9 * 100.0, "{got:?} vs {want:?}");
+    }
+
+    #[test]
+    fn derivatives_match_finite_differences(c in random_curve(), t in 0.05f64..0.95) {
+        let (lo, hi) = (c.knots[0], *c.knots.last().unwrap());
+        let u = lo + t * (hi - lo);
+        // Stay inside one span: differences across a knot see the lower continuity.
+        let s = find_span(c.degree, &c.knots, c.ctrl.len(), u);
+        let h = 1e-5 * (hi - lo);
+        prop_assume!(u - h > c.knots[s] && u + h < c.knots[s + 1]);
+        let e = eval(c.degree, &c.knots, &c.ctrl, u);
+        let (m, pl) = (eval(c.degree, &c.knots, &c.ctrl, u - h), eval(c.degree, &c.knots, &c.ctrl, u + h));
+        let scale1 = e.d1.iter().chain(m.d1.iter()).fold(1.0f64, |a, b| a.max(b.abs()));
+        let scale2 = e.d2.iter().chain(m.d2.iter()).fold(1.0f64, |a, b| a.max(b.abs()));
+        for k in 0..3 {
+            let fd1 = (pl.p[k] - m.p[k]) / (2.0 * h);
+            let fd2 = (pl.d1[k] - m.d1[k]) / (2.0 * h);
+            prop_assert!((fd1 - e.d1[k]).abs() < 1e-4 * scale1, "d1[{k}] {fd1} vs {}", e.d1[k]);
+            prop_assert!((fd2 - e.d2[k]).abs() < 1e-4 * scale2, "d2[{k}] {fd2} vs {}", e.d2[k]);
+        }
+    }
+
+    #[test]
+    fn knot_insertion_and_split_keep_the_curve(c in random_curve(), t in 0.0f64..=1.0) {
+        let (lo, hi) = (c.knots[0], *c.knots.last().unwrap());
+        let u = lo + t * (hi - lo);
+        let want = eval(c.degree, &c.knots, &c.ctrl, u).p;
+        let ins = insert_knot(&c, lo + 0.37 * (hi - lo));
+        prop_assert!(dist(eval(ins.degree, &ins.knots, &ins.ctrl, u).p, want) < 1e-9 * 100.0);
+        let pieces = split_to_capacity(c.clone(), 2 * (c.degree + 1) + 1);
+        for w in pieces.windows(2) {
+            prop_assert_eq!(*w[0].knots.last().unwrap(), w[1].knots[0]);
+        }
+        let piece = pieces.iter().find(|pc| u <= *pc.knots.last().unwrap()).unwrap();
+        prop_assert!(piece.ctrl.len() <= 2 * (c.degree + 1) + 1);
+        prop_assert!(validate(piece.degree, &piece.knots, &piece.ctrl, usize::MAX).is_ok());
+        let got = eval(piece.degree, &piece.knots, &piece.ctrl, u).p;
+        prop_assert!(dist(got, want) < 1e-8 * 100.0, "{got:?} vs {want:?}");
+    }
+}
+
+#[test]
+fn quarter_circle_is_exact() {
+    let h = core::f64::consts::FRAC_1_SQRT_2;
+    let ctrl = [
+        [10.0, 0.0, 0.0, 1.0],
+        [10.0, 10.0, 0.0, h],
+        [0.0, 10.0, 0.0, 1.0],
+    ];
+    let knots = [0.0, 0.0, 0.0, 1.0, 1.0, 1.0];
+    for i in 0..=1000 {
+        let e = eval(2, &knots, &ctrl, i as f64 / 1000.0);
+        let r = (e.p[0].powi(2) + e.p[1].powi(2)).sqrt();
+        assert!((r - 10.0).abs() < 1e-12, "r = {r}");
+    }
+    let len = arc_length(&knots, 8, |u| {
+        let d = eval(2, &knots, &ctrl, u).d1;
+        (d[0] * d[0] + d[1] * d[1]).sqrt()
+    });
+    assert!(
+        (len - 5.0 * core::f64::consts::PI).abs() < 1e-9,
+        "length {len}"
+    );
+}
+
+#[test]
+fn validation_names_the_problem() {
+    let ctrl = [
+        [0.0, 0.0, 0.0, 1.0],
+        [1.0, 0.0, 0.0, 1.0],
+        [2.0, 0.0, 0.0, -1.0],
+    ];
+    assert_eq!(
+        validate(2, &[0.0, 0.0, 0.0, 1.0, 1.0, 1.0], &ctrl, 32),
+        Err(CurveError::WeightNotPositive { index: 2 })
+    );
+    assert_eq!(
+        validate(2, &[0.0, 0.0, 0.0, 1.0, 1.0], &ctrl, 32),
+        Err(CurveError::KnotCount {
+            n_knots: 5,
+            expected: 6
+        })
+    );
+    assert_eq!(
+        validate(1, &[0.0, 0.0, 2.0, 1.0, 1.0], &ctrl, 32),
+        Err(CurveError::KnotsDecrease { index: 3 })
+    );
+    assert_eq!(
+        validate(0, &[], &ctrl, 32),
+        Err(CurveError::DegreeOutOfRange { degree: 0 })
+    );
+}

@@ -1,0 +1,407 @@
+//! The contract between the three processes: payload types and service names.
+//!
+//! Every payload is a fixed-size `#[repr(C)]` value written in place into iceoryx2 shared
+//! memory. Enumerations travel as `u32` codes, never as Rust enums, so a corrupt or foreign
+//! value is a validation error on receipt instead of undefined behaviour. Each payload
+//! carries [`PROTOCOL_VERSION`] and a sequence or cycle number.
+
+use crate::nurbs::{self, CurveError, MAX_CTRL, MAX_KNOTS};
+use iceoryx2::prelude::ZeroCopySend;
+
+/// Bumped whenever a payload's layout or meaning changes.
+pub const PROTOCOL_VERSION: u32 = 1;
+
+/// What a command block asks for.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[repr(u32)]
+pub enum BlockKind {
+    /// Move along the block's curve (lines, arcs and NURBS are all NURBS here).
+    Motion = 1,
+    /// Stand still for `dwell_ns`.
+    Dwell = 2,
+    /// The program is over: stop at the end of the previous motion.
+    ProgramEnd = 3,
+}
+
+impl BlockKind {
+    pub fn from_code(code: u32) -> Option<Self> {
+        match code {
+            1 => Some(Self::Motion),
+            2 => Some(Self::Dwell),
+            3 => Some(Self::ProgramEnd),
+            _ => None,
+        }
+    }
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Motion => "motion",
+            Self::Dwell => "dwell",
+            Self::ProgramEnd => "end",
+        }
+    }
+}
+
+/// `CommandBlock::flags`: the motion is a rapid (G0) traverse.
+pub const FLAG_RAPID: u32 = 1;
+
+/// Axis code meaning "no helical axis".
+pub const NO_AXIS: u32 = 3;
+
+/// The linear part of a helical arc. The block's NURBS is the exact circular arc in the
+/// plane normal to `axis` (its `axis` coordinate constant at `start_mm`); the `axis`
+/// coordinate then moves in proportion to the angle travelled: `start_mm + mm_per_rad *
+/// phi(u)`. The arc's rational quadratic segments each span `seg_rad`, segment `j` on
+/// knot span `[j, j+1]`, so `phi` is recovered exactly from the evaluated point.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend)]
+pub struct Helix {
+    /// Axis normal to the arc plane: 0 X, 1 Y, 2 Z, or [`NO_AXIS`] for a plain curve.
+    pub axis: u32,
+    /// +1 counter-clockwise about the positive `axis` (G3), -1 clockwise (G2), as `i32`.
+    pub dir: i32,
+    pub center_mm: [f64; 3],
+    pub start_mm: f64,
+    pub mm_per_rad: f64,
+    pub seg_rad: f64,
+}
+
+impl Helix {
+    pub const NONE: Helix = Helix {
+        axis: NO_AXIS,
+        dir: 1,
+        center_mm: [0.0; 3],
+        start_mm: 0.0,
+        mm_per_rad: 0.0,
+        seg_rad: 0.0,
+    };
+}
+
+/// One command from the interpreter to the interpolator.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, ZeroCopySend)]
+#[type_name("cnc::CommandBlockV1")]
+pub struct CommandBlock {
+    pub protocol: u32,
+    /// A [`BlockKind`] code.
+    pub kind: u32,
+    /// 0, 1, 2, ... in sending order, without gaps.
+    pub seq: u64,
+    /// Line of the NC program this block comes from (1-based; 0 = generated).
+    pub source_line: u32,
+    /// `FLAG_*` bits.
+    pub flags: u32,
+    pub degree: u32,
+    pub n_ctrl: u32,
+    /// The highest feed allowed in this block: programmed feed (or rapid rate) reduced by
+    /// the curvature limits the planner applied.
+    pub feed_mm_per_min: f64,
+    /// Planned feed at the start and at the end of the block (look-ahead result).
+    pub start_feed_mm_per_min: f64,
+    pub end_feed_mm_per_min: f64,
+    /// Path length of the block's curve.
+    pub length_mm: f64,
+    pub dwell_ns: u64,
+    pub helix: Helix,
+    pub knots: [f64; MAX_KNOTS],
+    /// `[x, y, z, w]` in mm, weight `w > 0`.
+    pub ctrl: [[f64; 4]; MAX_CTRL],
+}
+
+impl CommandBlock {
+    /// A block of `kind` with every other field zero or empty.
+    pub fn empty(kind: BlockKind, seq: u64, source_line: u32) -> Self {
+        CommandBlock {
+            protocol: PROTOCOL_VERSION,
+            kind: kind as u32,
+            seq,
+            source_line,
+            flags: 0,
+            degree: 0,
+            n_ctrl: 0,
+            feed_mm_per_min: 0.0,
+            start_feed_mm_per_min: 0.0,
+            end_feed_mm_per_min: 0.0,
+            length_mm: 0.0,
+            dwell_ns: 0,
+            helix: Helix::NONE,
+            knots: [0.0; MAX_KNOTS],
+            ctrl: [[0.0; 4]; MAX_CTRL],
+        }
+    }
+
+    /// The used knots (meaningful once validated).
+    pub fn knots(&self) -> &[f64] {
+        let n = (self.n_ctrl as usize + self.degree as usize + 1).min(MAX_KNOTS);
+        &self.knots[..n]
+    }
+
+    /// The used control points (meaningful once validated).
+    pub fn ctrl(&self) -> &[[f64; 4]] {
+        &self.ctrl[..(self.n_ctrl as usize).min(MAX_CTRL)]
+    }
+
+    pub fn kind(&self) -> Option<BlockKind> {
+        BlockKind::from_code(self.kind)
+    }
+
+    /// Checks everything a receiver relies on. Never panics, whatever the bytes.
+    pub fn validate(&self) -> Result<BlockKind, ProtocolError> {
+        if self.protocol != PROTOCOL_VERSION {
+            return Err(ProtocolError::Version { got: self.protocol });
+        }
+        let kind = self.kind().ok_or(ProtocolError::UnknownKind {
+            seq: self.seq,
+            code: self.kind,
+        })?;
+        match kind {
+            BlockKind::Motion => {
+                let (degree, n) = (self.degree as usize, self.n_ctrl as usize);
+                if n > MAX_CTRL || degree > nurbs::MAX_DEGREE {
+                    let err = if n > MAX_CTRL {
+                        CurveError::TooManyControlPoints {
+                            n_ctrl: self.n_ctrl,
+                            max: MAX_CTRL as u32,
+                        }
+                    } else {
+                        CurveError::DegreeOutOfRange {
+                            degree: self.degree,
+                        }
+                    };
+                    return Err(ProtocolError::Curve { seq: self.seq, err });
+                }
+                nurbs::validate(degree, self.knots(), self.ctrl(), MAX_CTRL)
+                    .map_err(|err| ProtocolError::Curve { seq: self.seq, err })?;
+                let feeds = [
+                    self.feed_mm_per_min,
+                    self.start_feed_mm_per_min,
+                    self.end_feed_mm_per_min,
+                ];
+                if feeds.iter().any(|f| !f.is_finite() || *f < 0.0) || self.feed_mm_per_min <= 0.0 {
+                    return Err(ProtocolError::BadField {
+                        seq: self.seq,
+                        field: "feed",
+                    });
+                }
+                if !self.length_mm.is_finite() || self.length_mm < 0.0 {
+                    return Err(ProtocolError::BadField {
+                        seq: self.seq,
+                        field: "length_mm",
+                    });
+                }
+                let h = &self.helix;
+                if h.axis != NO_AXIS {
+                    let finite = h
+                        .center_mm
+                        .iter()
+                        .chain([h.start_mm, h.mm_per_rad, h.seg_rad].iter())
+                        .all(|v| v.is_finite());
+                    if h.axis > NO_AXIS
+                        || !finite
+                        || h.seg_rad <= 0.0
+                        || (h.dir != 1 && h.dir != -1)
+                    {
+                        return Err(ProtocolError::BadField {
+                            seq: self.seq,
+                            field: "helix",
+                        });
+                    }
+                }
+            }
+            BlockKind::Dwell | BlockKind::ProgramEnd => {}
+        }
+        Ok(kind)
+    }
+}
+
+/// `Setpoint::flags`: this is the last set-point of the program (the machine is at rest).
+pub const SETPOINT_LAST: u32 = 1;
+
+/// One interpolated position per cycle, interpolator to servo-sim.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
+#[type_name("cnc::SetpointV1")]
+pub struct Setpoint {
+    pub protocol: u32,
+    pub flags: u32,
+    pub cycle: u64,
+    /// `cycle * period_ns`: time is an integer, never accumulated.
+    pub t_ns: u64,
+    pub block_seq: u64,
+    pub source_line: u32,
+    pub _reserved: u32,
+    pub pos_mm: [f64; 3],
+    /// Velocity and acceleration feed-forward.
+    pub vel_mm_per_s: [f64; 3],
+    pub acc_mm_per_s2: [f64; 3],
+}
+
+impl Setpoint {
+    pub fn validate(&self) -> Result<(), ProtocolError> {
+        if self.protocol != PROTOCOL_VERSION {
+            return Err(ProtocolError::Version { got: self.protocol });
+        }
+        let all = self
+            .pos_mm
+            .iter()
+            .chain(&self.vel_mm_per_s)
+            .chain(&self.acc_mm_per_s2);
+        if all.clone().any(|v| !v.is_finite()) {
+            return Err(ProtocolError::BadField {
+                seq: self.cycle,
+                field: "set-point",
+            });
+        }
+        Ok(())
+    }
+}
+
+/// Drive states in [`Feedback::drive_state`].
+pub const DRIVE_OK: u32 = 0;
+/// The drive hit its torque limit in this cycle.
+pub const DRIVE_SATURATED: u32 = 1;
+
+/// What the drives report back for one set-point, servo-sim to interpolator.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
+#[type_name("cnc::FeedbackV1")]
+pub struct Feedback {
+    pub protocol: u32,
+    pub drive_state: u32,
+    /// The cycle of the set-point this answers.
+    pub cycle: u64,
+    pub pos_mm: [f64; 3],
+    /// Commanded minus actual (measured) position.
+    pub ferr_mm: [f64; 3],
+}
+
+impl Feedback {
+    pub fn validate(&self) -> Result<(), ProtocolError> {
+        if self.protocol != PROTOCOL_VERSION {
+            return Err(ProtocolError::Version { got: self.protocol });
+        }
+        if self
+            .pos_mm
+            .iter()
+            .chain(&self.ferr_mm)
+            .any(|v| !v.is_finite())
+        {
+            return Err(ProtocolError::BadField {
+                seq: self.cycle,
+                field: "feedback",
+            });
+        }
+        Ok(())
+    }
+}
+
+/// Interpolator states in [`Status::state`].
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[repr(u32)]
+pub enum RunState {
+    Idle = 0,
+    Running = 1,
+    /// Out of blocks: stopped on the path, waiting for more.
+    Starved = 2,
+    Done = 3,
+    Fault = 4,
+}
+
+/// Interpolator to interpreter: where the execution is.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
+#[type_name("cnc::StatusV1")]
+pub struct Status {
+    pub protocol: u32,
+    /// A [`RunState`] code.
+    pub state: u32,
+    pub cycle: u64,
+    /// Sequence number of the block being executed.
+    pub block_seq: u64,
+    pub source_line: u32,
+    pub _reserved: u32,
+    pub misses: u64,
+}
+
+/// What a receiver found wrong with a payload.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum ProtocolError {
+    Version {
+        got: u32,
+    },
+    UnknownKind {
+        seq: u64,
+        code: u32,
+    },
+    Curve {
+        seq: u64,
+        err: CurveError,
+    },
+    BadField {
+        seq: u64,
+        field: &'static str,
+    },
+    /// Blocks must arrive as 0, 1, 2, ...
+    OutOfSequence {
+        expected: u64,
+        got: u64,
+    },
+}
+
+impl core::fmt::Display for ProtocolError {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        match *self {
+            ProtocolError::Version { got } => {
+                write!(
+                    f,
+                    "protocol version {got} received, this build speaks {PROTOCOL_VERSION}"
+                )
+            }
+            ProtocolError::UnknownKind { seq, code } => {
+                write!(f, "block {seq}: unknown block kind {code}")
+            }
+            ProtocolError::Curve { seq, err } => write!(f, "block {seq}: {err}"),
+            ProtocolError::BadField { seq, field } => {
+                write!(f, "block/cycle {seq}: invalid {field}")
+            }
+            ProtocolError::OutOfSequence { expected, got } => {
+                write!(
+                    f,
+                    "block {got} received where block {expected} was expected"
+                )
+            }
+        }
+    }
+}
+
+/// The services of one stack. Every run uses its own `prefix`, so two stacks (or parallel
+/// tests) never share a service.
+#[derive(Debug, Clone)]
+pub struct Services {
+    pub prefix: String,
+}
+
+impl Services {
+    pub fn new(prefix: impl Into<String>) -> Self {
+        Services {
+            prefix: prefix.into(),
+        }
+    }
+    pub fn blocks(&self) -> String {
+        format!("cnc/{}/blocks", self.prefix)
+    }
+    pub fn setpoints(&self) -> String {
+        format!("cnc/{}/setpoints", self.prefix)
+    }
+    pub fn feedback(&self) -> String {
+        format!("cnc/{}/feedback", self.prefix)
+    }
+    pub fn status(&self) -> String {
+        format!("cnc/{}/status", self.prefix)
+    }
+}
+
+/// Queue depth of the block service: how far the interpreter may run ahead.
+pub const BLOCK_QUEUE: usize = 64;
+/// Buffer of the set-point and feedback services. Lock-step consumers must never fall this
+/// far behind; a gap in cycle numbers is detected and reported.
+pub const CYCLE_QUEUE: usize = 1024;
