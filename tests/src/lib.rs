@@ -1,1 +1,85 @@
+//! Helpers for the end-to-end tests: finding (or building) the `cnc` executable, fresh
+//! run directories, and reading what a run leaves behind.
 
+use std::path::{Path, PathBuf};
+use std::process::Command;
+use std::sync::OnceLock;
+
+/// The `cnc` executable of this build, built first if needed. `CARGO_BIN_EXE_cnc` exists
+/// only for tests of the package that owns the binary, so this asks Cargo (a no-op when
+/// it is up to date) and takes the file from the target directory of this test binary.
+pub fn cnc_exe() -> PathBuf {
+    static EXE: OnceLock<PathBuf> = OnceLock::new();
+    EXE.get_or_init(|| {
+        let me = std::env::current_exe().expect("test executable path");
+        // target/<profile>/deps/<test> -> target/<profile>
+        let profile_dir = me
+            .parent()
+            .and_then(Path::parent)
+            .expect("target profile dir")
+            .to_path_buf();
+        let release = profile_dir.file_name().is_some_and(|n| n == "release");
+        let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
+        let mut cmd = Command::new(cargo);
+        cmd.args(["build", "--quiet", "-p", "interpreter", "--bin", "cnc"]);
+        if release {
+            cmd.arg("--release");
+        }
+        let status = cmd
+            .current_dir(env!("CARGO_MANIFEST_DIR"))
+            .status()
+            .expect("running cargo build");
+        assert!(status.success(), "cargo build --bin cnc failed");
+        let exe = profile_dir.join("cnc");
+        assert!(exe.exists(), "{} not found after building", exe.display());
+        exe
+    })
+    .clone()
+}
+
+/// A fresh, empty directory for one test.
+pub fn temp_dir(tag: &str) -> PathBuf {
+    static COUNTER: std::sync::atomic::AtomicU32 = std::sync::atomic::AtomicU32::new(0);
+    let n = COUNTER.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+    let dir = std::env::temp_dir().join(format!("cnc-test-{tag}-{}-{n}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).expect("creating a temp dir");
+    dir
+}
+
+/// `report.json` of a run directory.
+pub fn report(dir: &Path) -> serde_json::Value {
+    let text = std::fs::read_to_string(dir.join("report.json")).expect("report.json");
+    serde_json::from_str(&text).expect("report.json is JSON")
+}
+
+/// A CSV file as its header and rows of numbers.
+pub fn csv(path: &Path) -> (String, Vec<Vec<f64>>) {
+    let text = std::fs::read_to_string(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+    let mut lines = text.lines();
+    let header = lines.next().unwrap_or_default().to_string();
+    let rows = lines
+        .map(|l| {
+            l.split(',')
+                .map(|v| v.parse::<f64>().expect("a number"))
+                .collect()
+        })
+        .collect();
+    (header, rows)
+}
+
+/// Largest distance of the set-points of a circle from it, and the largest sagitta of the
+/// chords between consecutive set-points, both in mm. `rows` are `setpoints.csv` rows.
+pub fn circle_errors(rows: &[&Vec<f64>], center: [f64; 2], r: f64) -> (f64, f64) {
+    let mut radial = 0.0f64;
+    let mut sagitta = 0.0f64;
+    for (i, row) in rows.iter().enumerate() {
+        let (x, y) = (row[2] - center[0], row[3] - center[1]);
+        radial = radial.max(((x * x + y * y).sqrt() - r).abs());
+        if let Some(next) = rows.get(i + 1) {
+            let s = ((next[2] - row[2]).powi(2) + (next[3] - row[3]).powi(2)).sqrt();
+            sagitta = sagitta.max(r - (r * r - s * s / 4.0).max(0.0).sqrt());
+        }
+    }
+    (radial, sagitta)
+}

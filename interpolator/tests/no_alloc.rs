@@ -1,0 +1,149 @@
+//! The cycle's own work never allocates: engine tick, timing record, feed statistics and
+//! the trace push, over many cycles and block changes, counted by a global allocator that
+//! counts only on the measuring thread (the trace writer thread formats and allocates
+//! freely, off the cycle).
+
+use interpolator::engine::{BlockSource, Engine, Limits, TickState};
+use interpolator::summary::FeedStats;
+use interpolator::timing::Timing;
+use shared::protocol::{BlockKind, CommandBlock};
+use shared::trace::TraceWriter;
+use std::alloc::{GlobalAlloc, Layout, System};
+use std::cell::Cell;
+use std::sync::atomic::{AtomicU64, Ordering};
+
+struct Counting;
+static ALLOCS: AtomicU64 = AtomicU64::new(0);
+thread_local! {
+    static ARMED: Cell<bool> = const { Cell::new(false) };
+}
+
+fn count() {
+    if ARMED.with(|a| a.get()) {
+        ALLOCS.fetch_add(1, Ordering::Relaxed);
+    }
+}
+
+unsafe impl GlobalAlloc for Counting {
+    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
+        count();
+        unsafe { System.alloc(layout) }
+    }
+    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
+        count();
+        unsafe { System.dealloc(ptr, layout) }
+    }
+    unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
+        count();
+        unsafe { System.realloc(ptr, layout, new_size) }
+    }
+}
+
+#[global_allocator]
+static GLOBAL: Counting = Counting;
+
+/// A rational cubic, re-sent with rising sequence numbers (it ends where it starts), then
+/// the program end.
+struct Loop {
+    block: CommandBlock,
+    next_seq: u64,
+    count: u64,
+}
+
+impl BlockSource for Loop {
+    fn next_block(&mut self) -> Option<CommandBlock> {
+        let seq = self.next_seq;
+        if seq > self.count {
+            return None;
+        }
+        self.next_seq += 1;
+        if seq == self.count {
+            return Some(CommandBlock::empty(BlockKind::ProgramEnd, seq, 99));
+        }
+        let mut b = self.block;
+        b.seq = seq;
+        Some(b)
+    }
+}
+
+fn closed_curve() -> CommandBlock {
+    let pts = [
+        [0.0, 0.0],
+        [10.0, 5.0],
+        [20.0, -5.0],
+        [30.0, 10.0],
+        [20.0, 25.0],
+        [-5.0, 10.0],
+        [0.0, 0.0],
+    ];
+    let mut b = CommandBlock::empty(BlockKind::Motion, 0, 7);
+    b.degree = 3;
+    b.n_ctrl = pts.len() as u32;
+    let knots = [0.0, 0.0, 0.0, 0.0, 1.0, 2.0, 3.0, 4.0, 4.0, 4.0, 4.0];
+    b.knots[..knots.len()].copy_from_slice(&knots);
+    for (i, p) in pts.iter().enumerate() {
+        b.ctrl[i] = [p[0], p[1], 0.0, if i % 2 == 0 { 1.0 } else { 0.7 }];
+    }
+    b.feed_mm_per_min = 3000.0;
+    b.start_feed_mm_per_min = 600.0;
+    b.end_feed_mm_per_min = 600.0;
+    b.length_mm = shared::path::length(&b);
+    b
+}
+
+#[derive(Clone, Copy)]
+struct Rec(u64, [f64; 3]);
+
+#[test]
+fn cycle_work_does_not_allocate() {
+    let lim = Limits {
+        period_ns: 1_000_000,
+        path_acc_mm_per_s2: 2000.0,
+        max_following_error_mm: 1.0,
+    };
+    let mut engine = Engine::new(lim, [0.0; 3]);
+    let mut src = Loop {
+        block: closed_curve(),
+        next_seq: 0,
+        count: 40,
+    };
+    let mut timing = Timing::new(1_000_000, 16);
+    let mut feed = FeedStats::default();
+    let path = std::env::temp_dir().join(format!("cnc-noalloc-{}.csv", std::process::id()));
+    let mut trace = TraceWriter::create(&path, "cycle,x", 1 << 12, |r: &Rec, s: &mut String| {
+        s.push_str(&format!("{},{}", r.0, r.1[0]));
+    })
+    .unwrap();
+    ARMED.with(|a| a.set(true));
+    let mut cycles = 0u64;
+    loop {
+        let t = engine.tick(&mut src).unwrap();
+        feed.add(&t, 1_000_000);
+        // Every 1000th cycle is a "miss", so the miss log is exercised too.
+        let compute = if cycles.is_multiple_of(1000) {
+            2_000_000
+        } else {
+            5_000
+        };
+        timing.record(cycles, t.source_line, 10_000, compute, 1_000);
+        trace.push(Rec(cycles, t.pos_mm));
+        cycles += 1;
+        if t.state == TickState::Done {
+            break;
+        }
+        if cycles.is_multiple_of(1024) {
+            // Let the writer keep up, without counting what sleeping may allocate.
+            ARMED.with(|a| a.set(false));
+            std::thread::sleep(std::time::Duration::from_millis(6));
+            ARMED.with(|a| a.set(true));
+        }
+    }
+    ARMED.with(|a| a.set(false));
+    let allocs = ALLOCS.load(Ordering::Relaxed);
+    assert_eq!(trace.dropped(), 0);
+    trace.finish().unwrap();
+    let _ = std::fs::remove_file(&path);
+    assert!(cycles > 10_000, "only {cycles} cycles");
+    assert!(timing.misses > 5);
+    assert_eq!(allocs, 0, "{allocs} allocations in {cycles} cycles");
+}

@@ -1,0 +1,137 @@
+//! The real three processes, started by `cnc run`, end to end.
+
+use std::process::Command;
+use tests::{circle_errors, cnc_exe, csv, report, temp_dir};
+
+#[test]
+fn demo_runs_in_three_processes_and_leaves_a_run_directory() {
+    let dir = temp_dir("demo");
+    let out = Command::new(cnc_exe())
+        .args(["run", "--out"])
+        .arg(&dir)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "cnc run failed:\n{}\n{}",
+        String::from_utf8_lossy(&out.stdout),
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let rep = report(&dir);
+    assert_eq!(rep["outcome"], "done", "{rep:#}");
+    assert!(rep["fault"].is_null());
+    assert_eq!(rep["program"], "demo.ngc");
+    assert_eq!(rep["period_ns"], 1_000_000);
+    for key in ["wake_late_ns", "compute_ns"] {
+        for p in ["p50", "p99", "max"] {
+            assert!(rep[key][p].is_u64(), "{key}.{p}");
+        }
+    }
+    let procs = rep["processes"].as_array().unwrap();
+    let roles: Vec<_> = procs.iter().map(|p| p["role"].as_str().unwrap()).collect();
+    assert_eq!(roles, ["servo-sim", "interpolator", "interpreter"]);
+    let mut pids: Vec<_> = procs.iter().map(|p| p["pid"].as_u64().unwrap()).collect();
+    pids.push(std::process::id() as u64);
+    pids.sort();
+    pids.dedup();
+    assert_eq!(pids.len(), 4, "three separate processes besides this test");
+
+    let (h, sp) = csv(&dir.join("setpoints.csv"));
+    assert_eq!(h, "cycle,t_ns,x_mm,y_mm,z_mm,line");
+    let (h, fb) = csv(&dir.join("feedback.csv"));
+    assert_eq!(h, "cycle,t_ns,x_mm,y_mm,z_mm,ferr_x_um,ferr_y_um,ferr_z_um");
+    let cycles = rep["cycles"].as_u64().unwrap() as usize;
+    assert_eq!(sp.len(), cycles);
+    assert_eq!(fb.len(), cycles, "the drives answered every set-point");
+    for (k, row) in sp.iter().enumerate() {
+        assert_eq!(row[0] as usize, k);
+        assert_eq!(row[1] as u64, k as u64 * 1_000_000, "t_ns = cycle x period");
+    }
+    // The program's path length: the demo ends where it started, at rest.
+    let last = sp.last().unwrap();
+    assert_eq!(&last[2..5], &[0.0, 0.0, 5.0]);
+    assert!(rep["path_length_mm"].as_f64().unwrap() > 400.0);
+    assert!(std::fs::metadata(dir.join("commands.log")).unwrap().len() > 16);
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn full_circle_is_exact_to_a_nanometre_with_chords_within_tolerance() {
+    let dir = temp_dir("circle");
+    let prog = dir.join("circle.ngc");
+    std::fs::write(
+        &prog,
+        "G21 G17 G90\nG0 X10 Y0\nG3 X10 Y0 I-10 J0 F3000\nM2\n",
+    )
+    .unwrap();
+    let out = Command::new(cnc_exe())
+        .arg("run")
+        .arg(&prog)
+        .arg("--out")
+        .arg(dir.join("run"))
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let rep = report(&dir.join("run"));
+    assert_eq!(rep["outcome"], "done");
+    let (_, sp) = csv(&dir.join("run/setpoints.csv"));
+    let on_arc: Vec<_> = sp.iter().filter(|r| r[5] == 3.0).collect();
+    assert!(
+        on_arc.len() > 1000,
+        "{} set-points on the circle",
+        on_arc.len()
+    );
+    let (radial, sagitta) = circle_errors(&on_arc, [0.0, 0.0], 10.0);
+    assert!(radial < 1e-6, "set-point off the circle by {radial} mm");
+    assert!(sagitta < 0.001, "chord deviates {sagitta} mm from the arc");
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn check_reports_every_problem_with_file_line_and_column() {
+    let dir = temp_dir("check");
+    let prog = dir.join("bad.ngc");
+    std::fs::write(&prog, "G21\nG1 X10\nG2 X5 Y5 F100\nG1 X1 X2\nG5.3\n").unwrap();
+    let out = Command::new(cnc_exe())
+        .arg("check")
+        .arg(&prog)
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(1));
+    let err = String::from_utf8_lossy(&out.stderr);
+    let lines: Vec<_> = err.lines().collect();
+    let name = prog.display().to_string();
+    assert_eq!(lines.len(), 4, "{err}");
+    assert!(lines[0].starts_with(&format!("{name}:2:1: ")), "{err}");
+    assert!(lines[1].starts_with(&format!("{name}:3:1: ")), "{err}");
+    assert!(lines[2].starts_with(&format!("{name}:4:7: ")), "{err}");
+    assert!(lines[3].starts_with(&format!("{name}:5:1: ")), "{err}");
+
+    let good = dir.join("good.ngc");
+    std::fs::write(&good, "G1 X1 F100\nM2\n").unwrap();
+    let out = Command::new(cnc_exe())
+        .arg("check")
+        .arg(&good)
+        .output()
+        .unwrap();
+    assert!(out.status.success());
+
+    // `cnc run` refuses a bad program before starting anything.
+    let out = Command::new(cnc_exe())
+        .arg("run")
+        .arg(&prog)
+        .arg("--out")
+        .arg(dir.join("run"))
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(1));
+    assert!(
+        !dir.join("run").exists(),
+        "no run directory for a rejected program"
+    );
+    let _ = std::fs::remove_dir_all(&dir);
+}
