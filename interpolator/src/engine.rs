@@ -159,6 +159,11 @@ impl Engine {
         }
     }
 
+    /// Blocks taken from the source so far.
+    pub fn blocks_received(&self) -> u64 {
+        self.expected_seq
+    }
+
     pub fn position(&self) -> [f64; 3] {
         self.pos
     }

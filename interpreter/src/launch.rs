@@ -9,7 +9,26 @@ use crate::process::{self, Source};
 use crate::report::{self, Process};
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, ExitCode, Stdio};
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
+
+/// Set by SIGINT/SIGTERM: the operator wants the run stopped.
+static INTERRUPTED: AtomicBool = AtomicBool::new(false);
+
+extern "C" fn on_interrupt(_signal: libc::c_int) {
+    INTERRUPTED.store(true, Ordering::SeqCst);
+}
+
+/// Catch Ctrl-C and SIGTERM so the launcher outlives its children and still writes the
+/// report. A handler (unlike "ignore") is reset by exec, so the children keep the default.
+fn catch_interrupts() {
+    let handler = on_interrupt as extern "C" fn(libc::c_int);
+    // SAFETY: the handler only stores to an atomic, which is async-signal-safe.
+    unsafe {
+        libc::signal(libc::SIGINT, handler as libc::sighandler_t);
+        libc::signal(libc::SIGTERM, handler as libc::sighandler_t);
+    }
+}
 
 #[derive(Debug, Clone, clap::Args)]
 pub struct RunArgs {
@@ -140,6 +159,7 @@ fn run_inner(args: &RunArgs) -> Result<bool, String> {
         "--machine".into(),
         machine_copy.display().to_string(),
     ];
+    catch_interrupts();
     let mut roles: Vec<Role> = Vec::new();
     let mut start = |name: &'static str, extra: Vec<String>| -> Result<(), String> {
         let mut a = common.clone();
@@ -220,6 +240,12 @@ fn supervise(roles: &mut [Role]) -> Option<String> {
         }
         if roles.iter().all(|r| r.exit.is_some()) {
             return fault;
+        }
+        if INTERRUPTED.load(Ordering::SeqCst) {
+            stop_all(roles);
+            return Some(
+                "interrupted by the operator (SIGINT/SIGTERM); all processes stopped".into(),
+            );
         }
         // A failure stops the rest; after a clean exit the others get a grace period to
         // finish their part of the shutdown handshake.

@@ -5,15 +5,14 @@
 //!   collecting every error with its line and column;
 //! * [`blocks`] turns moves into command blocks (everything as exact NURBS, split to block
 //!   capacity) and plans their feeds with look-ahead over the whole program;
-//! * [`publish`] streams the blocks to the interpolator with back-pressure while [`log`]
-//!   records each one as sent;
+//! * [`publish`] streams the blocks to the interpolator with back-pressure and records
+//!   each one as sent in the command log ([`shared::cmdlog`]);
 //! * [`process`] is the interpreter process; [`launch`] starts all three processes for
 //!   `cnc run` and folds their summaries into the run's [`report`].
 
 pub mod blocks;
 pub mod cli;
 pub mod launch;
-pub mod log;
 pub mod parse;
 pub mod process;
 pub mod program;

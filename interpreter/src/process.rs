@@ -1,12 +1,12 @@
 //! The interpreter process: read and check the program, build and plan the blocks, log
 //! and publish them, report.
 
-use crate::log::CommandLog;
 use crate::parse::Diagnostic;
 use crate::publish::{publish, Finish};
 use crate::report::InterpreterSummary;
 use crate::{blocks, program};
 use iceoryx2::prelude::Service;
+use shared::cmdlog::CommandLog;
 use shared::protocol::CommandBlock;
 use shared::Machine;
 use std::path::{Path, PathBuf};

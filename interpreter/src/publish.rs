@@ -3,8 +3,8 @@
 //! yet attached) means wait and retry, never drop. Each block is appended to the command
 //! log as it is sent.
 
-use crate::log::CommandLog;
 use iceoryx2::prelude::*;
+use shared::cmdlog::CommandLog;
 use shared::ipc::{self, err, IpcError};
 use shared::protocol::{CommandBlock, RunState, Services};
 use std::time::{Duration, Instant};
@@ -35,11 +35,14 @@ pub fn publish<S: Service>(
         .subscriber_builder()
         .create()
         .map_err(|e| err("status subscriber", e))?;
-    let mut last_state = RunState::Idle as u32;
-    let poll_status = |last: &mut u32| {
+    let mut last_state = RunState::Idle;
+    let poll_status = |last: &mut RunState| -> Result<(), IpcError> {
         while let Ok(Some(s)) = status_sub.receive() {
-            *last = s.state;
+            *last = s
+                .validate()
+                .map_err(|e| IpcError(format!("bad status from the interpolator: {e}")))?;
         }
+        Ok(())
     };
     let started = Instant::now();
     let mut connected = false;
@@ -56,8 +59,8 @@ pub fn publish<S: Service>(
                 connected = true;
                 break;
             }
-            poll_status(&mut last_state);
-            if last_state == RunState::Fault as u32 {
+            poll_status(&mut last_state)?;
+            if last_state == RunState::Fault {
                 return Ok(Finish::Fault);
             }
             if !connected && started.elapsed() > start_timeout {
@@ -78,11 +81,11 @@ pub fn publish<S: Service>(
     }
     // Keep the publisher (and the blocks in its memory) alive until they are executed.
     loop {
-        poll_status(&mut last_state);
-        if last_state == RunState::Done as u32 {
+        poll_status(&mut last_state)?;
+        if last_state == RunState::Done {
             return Ok(Finish::Done);
         }
-        if last_state == RunState::Fault as u32 {
+        if last_state == RunState::Fault {
             return Ok(Finish::Fault);
         }
         if service.dynamic_config().number_of_subscribers() == 0 {

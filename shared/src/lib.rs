@@ -6,12 +6,16 @@
 //!   and first two derivatives, knot insertion and exact splitting.
 //! * [`path`]: the geometry of a motion block (NURBS plus the axial part of a helix).
 //! * [`machine`]: the machine file (limits and the servo model).
+//! * [`cmdlog`]: the command log (`commands.log`), every block exactly as sent.
+//! * [`ipc`]: the services of a run and their QoS; [`trace`]: off-cycle CSV recording;
+//!   [`clock`]: monotonic integer time.
 //!
 //! Vocabulary: a *block* is one command (a motion along one curve, a dwell, the program
 //! end); a *span* is one knot interval of a curve; a *cycle* is one interpolation period,
 //! producing one *set-point*; a *miss* is a cycle that finished after its deadline.
 
 pub mod clock;
+pub mod cmdlog;
 pub mod ipc;
 pub mod machine;
 pub mod nurbs;

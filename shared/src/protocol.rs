@@ -306,6 +306,20 @@ pub enum RunState {
     Fault = 4,
 }
 
+impl RunState {
+    pub fn from_code(code: u32) -> Option<Self> {
+        [
+            Self::Idle,
+            Self::Running,
+            Self::Starved,
+            Self::Done,
+            Self::Fault,
+        ]
+        .into_iter()
+        .find(|s| *s as u32 == code)
+    }
+}
+
 /// Interpolator to interpreter: where the execution is.
 #[repr(C)]
 #[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
@@ -320,6 +334,21 @@ pub struct Status {
     pub source_line: u32,
     pub _reserved: u32,
     pub misses: u64,
+    /// Blocks taken from the queue so far; `blocks_received - block_seq - 1` of them are
+    /// waiting in the interpolator's look-ahead (the queue fill on its side).
+    pub blocks_received: u64,
+}
+
+impl Status {
+    pub fn validate(&self) -> Result<RunState, ProtocolError> {
+        if self.protocol != PROTOCOL_VERSION {
+            return Err(ProtocolError::Version { got: self.protocol });
+        }
+        RunState::from_code(self.state).ok_or(ProtocolError::BadField {
+            seq: self.cycle,
+            field: "status state",
+        })
+    }
 }
 
 /// What a receiver found wrong with a payload.

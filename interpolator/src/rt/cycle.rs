@@ -253,6 +253,7 @@ pub fn run<S: Service>(cfg: &Config) -> Result<Summary, RunError> {
             source_line: sp.source_line,
             _reserved: 0,
             misses: timing.misses,
+            blocks_received: engine.blocks_received(),
         });
         let finished = now_ns();
         // measurement

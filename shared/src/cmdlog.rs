@@ -4,7 +4,7 @@
 //! * header: magic `b"CNCCMDv0"`, `u32` protocol version, `u32` block size in bytes;
 //! * then one record per block: the block's bytes, exactly as written into shared memory.
 
-use shared::protocol::{CommandBlock, PROTOCOL_VERSION};
+use crate::protocol::{CommandBlock, PROTOCOL_VERSION};
 use std::fs::File;
 use std::io::{BufWriter, Read, Write};
 use std::path::Path;
@@ -81,7 +81,7 @@ pub fn read(path: &Path) -> Result<Vec<CommandBlock>, String> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use shared::protocol::{BlockKind, Helix};
+    use crate::protocol::{BlockKind, Helix};
 
     #[test]
     fn no_padding() {
@@ -96,8 +96,8 @@ mod tests {
             + 8 * 4
             + 8
             + core::mem::size_of::<Helix>()
-            + 8 * shared::nurbs::MAX_KNOTS
-            + 32 * shared::nurbs::MAX_CTRL;
+            + 8 * crate::nurbs::MAX_KNOTS
+            + 32 * crate::nurbs::MAX_CTRL;
         assert_eq!(fields, BLOCK_SIZE);
         assert_eq!(core::mem::size_of::<Helix>(), 4 + 4 + 24 + 8 * 3);
     }
