@@ -3,6 +3,7 @@
 
 use crate::rt::cycle::{self, Config};
 use crate::rt::sched::SchedMode;
+use shared::clock::ClockMode;
 use std::path::PathBuf;
 use std::time::Duration;
 
@@ -23,6 +24,9 @@ pub struct Args {
     /// Scheduling: `auto` tries SCHED_FIFO and falls back with a warning.
     #[arg(long, value_enum, default_value_t = SchedMode::Auto)]
     pub sched: SchedMode,
+    /// `real` (wall time) or `sim` (as fast as the drives answer, same set-points).
+    #[arg(long, default_value_t = ClockMode::Real)]
+    pub clock: ClockMode,
 }
 
 /// Runs the interpolator process; the error names what went wrong.
@@ -33,6 +37,7 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
         period_ns: args.period_us * 1000,
         machine: shared::machine::load(args.machine.as_deref()).map_err(anyhow::Error::msg)?,
         sched: args.sched,
+        clock: args.clock,
         start_timeout: Duration::from_secs(20),
     };
     let summary = cycle::run::<iceoryx2::prelude::ipc::Service>(&cfg)?;

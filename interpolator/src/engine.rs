@@ -35,6 +35,10 @@ pub enum Fault {
         limit_mm: f64,
     },
     Feedback(ProtocolError),
+    /// Simulated clock: the drives did not answer this cycle's set-point.
+    PeerSilent {
+        cycle: u64,
+    },
 }
 
 impl core::fmt::Display for Fault {
@@ -48,6 +52,9 @@ impl core::fmt::Display for Fault {
                 ferr_mm
             ),
             Fault::Feedback(e) => write!(f, "bad feedback: {e}"),
+            Fault::PeerSilent { cycle } => {
+                write!(f, "cycle {cycle}: the servo-sim did not answer the set-point (dead or stalled)")
+            }
         }
     }
 }
@@ -124,6 +131,7 @@ pub struct Engine {
     line: u32,
     seq: u64,
     rapid: bool,
+    end_received: bool,
     done: bool,
 }
 
@@ -155,6 +163,7 @@ impl Engine {
             line: 0,
             seq: 0,
             rapid: false,
+            end_received: false,
             done: false,
         }
     }
@@ -168,13 +177,15 @@ impl Engine {
         self.pos
     }
 
-    /// True while the engine holds no look-ahead block (it wants one from the source).
+    /// True while the engine holds no look-ahead block and the program end has not been
+    /// received yet (it will ask the source for one).
     pub fn wants_block(&self) -> bool {
-        self.next.is_none() && !self.done
+        self.next.is_none() && !self.done && !self.end_received
     }
 
     fn fill(&mut self, src: &mut impl BlockSource) -> Result<(), Fault> {
-        if self.next.is_some() || self.done {
+        // Nothing follows the program end: never ask the source past it.
+        if self.next.is_some() || self.done || self.end_received {
             return Ok(());
         }
         if let Some(b) = src.next_block() {
@@ -186,6 +197,7 @@ impl Engine {
                 }));
             }
             self.expected_seq += 1;
+            self.end_received = b.kind == BlockKind::ProgramEnd as u32;
             self.next = Some(b);
         }
         Ok(())

@@ -69,11 +69,14 @@ pub struct Summary {
     pub fault: Option<String>,
     pub pid: u32,
     pub period_ns: u64,
+    /// "real" or "sim".
+    pub clock: String,
     pub cycles: u64,
-    pub misses: u64,
-    pub wake_late_ns: Percentiles,
-    pub compute_ns: Percentiles,
-    pub publish_ns: Percentiles,
+    /// Timing figures are `None` (null) under the simulated clock: not measured.
+    pub misses: Option<u64>,
+    pub wake_late_ns: Option<Percentiles>,
+    pub compute_ns: Option<Percentiles>,
+    pub publish_ns: Option<Percentiles>,
     /// Every miss up to the first 4096, in cycle order.
     pub miss_list: Vec<MissEntry>,
     pub path_length_mm: f64,
@@ -93,7 +96,7 @@ impl Summary {
     pub fn new(
         cfg: &Config,
         cycles: u64,
-        timing: &Timing,
+        timing: Option<&Timing>,
         feed: &FeedStats,
         fault: Option<String>,
         sched: SchedReport,
@@ -110,12 +113,15 @@ impl Summary {
             fault,
             pid: std::process::id(),
             period_ns: cfg.period_ns,
+            clock: cfg.clock.name().into(),
             cycles,
-            misses: timing.misses,
-            wake_late_ns: timing.wake_late.percentiles(),
-            compute_ns: timing.compute.percentiles(),
-            publish_ns: timing.publish.percentiles(),
-            miss_list: timing.miss_log.iter().map(MissEntry::from).collect(),
+            misses: timing.map(|t| t.misses),
+            wake_late_ns: timing.map(|t| t.wake_late.percentiles()),
+            compute_ns: timing.map(|t| t.compute.percentiles()),
+            publish_ns: timing.map(|t| t.publish.percentiles()),
+            miss_list: timing
+                .map(|t| t.miss_log.iter().map(MissEntry::from).collect())
+                .unwrap_or_default(),
             path_length_mm: feed.path_length_mm,
             time_s: (cycles * cfg.period_ns) as f64 * 1e-9,
             avg_feed_mm_per_min: avg,

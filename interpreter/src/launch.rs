@@ -7,6 +7,7 @@
 
 use crate::process::{self, Source};
 use crate::report::{self, Process};
+use shared::clock::ClockMode;
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, ExitCode, Stdio};
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -43,6 +44,10 @@ pub struct RunArgs {
     /// Machine file (TOML); see `cnc machine` for the built-in default.
     #[arg(long)]
     pub machine: Option<PathBuf>,
+    /// `real`: cycles on wall time, timing measured. `sim`: the same set-points as fast as
+    /// the processes go (machining-time estimates, tests); timing not measured.
+    #[arg(long, default_value_t = ClockMode::Real)]
+    pub clock: ClockMode,
     /// Scheduling of the interpolator: `auto` tries SCHED_FIFO and falls back with a warning.
     #[arg(long, value_enum, default_value_t = interpolator::rt::sched::SchedMode::Auto)]
     pub sched: interpolator::rt::sched::SchedMode,
@@ -158,6 +163,8 @@ fn run_inner(args: &RunArgs) -> Result<bool, String> {
         args.period_us.to_string(),
         "--machine".into(),
         machine_copy.display().to_string(),
+        "--clock".into(),
+        args.clock.to_string(),
     ];
     catch_interrupts();
     let mut roles: Vec<Role> = Vec::new();
@@ -203,7 +210,14 @@ fn run_inner(args: &RunArgs) -> Result<bool, String> {
             exit: exit_text(r.exit),
         })
         .collect();
-    let rep = report::assemble(&dir, &src.name, period_ns, processes, launcher_fault);
+    let rep = report::assemble(
+        &dir,
+        &src.name,
+        args.clock,
+        period_ns,
+        processes,
+        launcher_fault,
+    );
     rep.write(&dir.join("report.json"))
         .map_err(|e| format!("writing report.json: {e}"))?;
     print!("{}", rep.summary_text(&dir));

@@ -2,8 +2,10 @@
 //! what each process wrote (`interpreter.json`, `interpolator.json`, `servo.json`).
 
 use interpolator::summary::Summary as InterpSummary;
+use interpolator::timing::Percentiles;
 use serde::{Deserialize, Serialize};
 use servo_sim::run::Summary as ServoSummary;
+use shared::clock::ClockMode;
 use std::path::Path;
 
 /// What the interpreter process reports.
@@ -30,13 +32,14 @@ pub struct Report {
     pub outcome: String,
     pub fault: Option<String>,
     pub program: String,
+    /// "real" or "sim". Under "sim" the timing figures below are null: not measured.
     pub clock: String,
     pub period_ns: u64,
     pub cycles: u64,
-    pub misses: u64,
-    pub wake_late_ns: interpolator::timing::Percentiles,
-    pub compute_ns: interpolator::timing::Percentiles,
-    pub publish_ns: interpolator::timing::Percentiles,
+    pub misses: Option<u64>,
+    pub wake_late_ns: Option<Percentiles>,
+    pub compute_ns: Option<Percentiles>,
+    pub publish_ns: Option<Percentiles>,
     pub path_length_mm: f64,
     pub time_s: f64,
     pub avg_feed_mm_per_min: f64,
@@ -59,6 +62,7 @@ fn read<T: for<'de> Deserialize<'de>>(path: &Path) -> Option<T> {
 pub fn assemble(
     dir: &Path,
     program: &str,
+    clock: ClockMode,
     period_ns: u64,
     processes: Vec<Process>,
     launcher_fault: Option<String>,
@@ -88,13 +92,13 @@ pub fn assemble(
         outcome: if fault.is_some() { "fault" } else { "done" }.into(),
         fault,
         program: program.to_string(),
-        clock: "real".into(),
+        clock: clock.name().into(),
         period_ns,
         cycles: i.map_or(0, |s| s.cycles),
-        misses: i.map_or(0, |s| s.misses),
-        wake_late_ns: i.map(|s| s.wake_late_ns).unwrap_or_default(),
-        compute_ns: i.map(|s| s.compute_ns).unwrap_or_default(),
-        publish_ns: i.map(|s| s.publish_ns).unwrap_or_default(),
+        misses: i.and_then(|s| s.misses),
+        wake_late_ns: i.and_then(|s| s.wake_late_ns),
+        compute_ns: i.and_then(|s| s.compute_ns),
+        publish_ns: i.and_then(|s| s.publish_ns),
         path_length_mm: i.map_or(0.0, |s| s.path_length_mm),
         time_s: i.map_or(0.0, |s| s.time_s),
         avg_feed_mm_per_min: i.map_or(0.0, |s| s.avg_feed_mm_per_min),
@@ -121,23 +125,29 @@ impl Report {
 
     /// The short summary `cnc run` prints.
     pub fn summary_text(&self, dir: &Path) -> String {
+        let timing = match (self.misses, self.wake_late_ns, self.compute_ns) {
+            (Some(m), Some(w), Some(c)) => format!(
+                "{m} misses, wake-up late p50 {} µs p99 {} µs max {} µs, compute p99 {} µs",
+                w.p50 / 1000,
+                w.p99 / 1000,
+                w.max / 1000,
+                c.p99 / 1000
+            ),
+            _ => format!("not measured ({} clock)", self.clock),
+        };
         let mut s = format!(
-            "{}: {}\n  program      {}\n  period       {} µs, {} cycles, {:.3} s machining\n  path         {:.3} mm, average feed {:.1} mm/min, peak {:.1} mm/min\n  servo        max following error {:.2} µm\n  timing       {} misses, wake-up late p50 {} µs p99 {} µs max {} µs, compute p99 {} µs\n  run dir      {}\n",
+            "{}: {}\n  program      {}\n  period       {} µs, {} cycles, {:.3} s machining ({} clock)\n  path         {:.3} mm, average feed {:.1} mm/min, peak {:.1} mm/min\n  servo        max following error {:.2} µm\n  timing       {timing}\n  run dir      {}\n",
             self.outcome,
             self.fault.as_deref().unwrap_or("program completed"),
             self.program,
             self.period_ns / 1000,
             self.cycles,
             self.time_s,
+            self.clock,
             self.path_length_mm,
             self.avg_feed_mm_per_min,
             self.peak_feed_mm_per_min,
             self.max_following_error_um,
-            self.misses,
-            self.wake_late_ns.p50 / 1000,
-            self.wake_late_ns.p99 / 1000,
-            self.wake_late_ns.max / 1000,
-            self.compute_ns.p99 / 1000,
             dir.display()
         );
         if let Some(sched) = &self.sched {

@@ -1,6 +1,7 @@
 //! Command-line arguments of the servo-sim process (also a role of `cnc`).
 
 use crate::run::{self, Config};
+use shared::clock::ClockMode;
 use std::path::PathBuf;
 use std::time::Duration;
 
@@ -18,6 +19,9 @@ pub struct Args {
     /// Machine file (TOML); the built-in default machine when absent.
     #[arg(long)]
     pub machine: Option<PathBuf>,
+    /// `real` or `sim`: under the simulated clock the drives answer as fast as they can.
+    #[arg(long, default_value_t = ClockMode::Real)]
+    pub clock: ClockMode,
 }
 
 pub fn run(args: &Args, machine: shared::Machine) -> anyhow::Result<()> {
@@ -26,6 +30,7 @@ pub fn run(args: &Args, machine: shared::Machine) -> anyhow::Result<()> {
         out_dir: args.out.clone(),
         period_ns: args.period_us * 1000,
         machine,
+        clock: args.clock,
         start_timeout: Duration::from_secs(30),
         idle_timeout: Duration::from_secs(5),
     };

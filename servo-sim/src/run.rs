@@ -6,6 +6,7 @@
 use crate::axis::Axis;
 use iceoryx2::prelude::*;
 use serde::{Deserialize, Serialize};
+use shared::clock::{spin_then_block, ClockMode};
 use shared::ipc::{self, err, IpcError};
 use shared::protocol::{
     Feedback, Services, Setpoint, DRIVE_OK, DRIVE_SATURATED, PROTOCOL_VERSION, SETPOINT_LAST,
@@ -21,6 +22,7 @@ pub struct Config {
     pub out_dir: PathBuf,
     pub period_ns: u64,
     pub machine: Machine,
+    pub clock: ClockMode,
     /// How long to wait for the first set-point.
     pub start_timeout: Duration,
     /// Silence after which the interpolator is taken for dead (drives hold position).
@@ -135,6 +137,12 @@ pub fn run<S: Service>(cfg: &Config) -> Result<Summary, IpcError> {
         .create()
         .map_err(|e| err("set-point listener", e))?;
     let setpoints = ipc::setpoints(&node, &svc)?;
+    let fb_event = ipc::wakeup(&node, &svc.feedback())?;
+    let fb_notify = fb_event
+        .notifier_builder()
+        .create()
+        .map_err(|e| err("feedback notifier", e))?;
+    let sim = cfg.clock == ClockMode::Sim;
     let sp_sub = setpoints
         .subscriber_builder()
         .create()
@@ -153,7 +161,19 @@ pub fn run<S: Service>(cfg: &Config) -> Result<Summary, IpcError> {
     let mut last_seen = Instant::now();
     let mut done = false;
     while !done {
-        let _ = listener.timed_wait(|_| {}, Duration::from_millis(50));
+        if sim {
+            // The interpolator waits for this answer: spin briefly, then sleep on the event.
+            spin_then_block(
+                200_000,
+                50_000_000,
+                || sp_sub.has_samples().unwrap_or(false),
+                |d| {
+                    let _ = listener.timed_wait(|_| {}, d);
+                },
+            );
+        } else {
+            let _ = listener.timed_wait(|_| {}, Duration::from_millis(50));
+        }
         while let Ok(Some(sample)) = sp_sub.receive() {
             let sp = *sample.payload();
             last_seen = Instant::now();
@@ -166,6 +186,9 @@ pub fn run<S: Service>(cfg: &Config) -> Result<Summary, IpcError> {
             let fb = drives.step(&sp);
             count += 1;
             let _ = fb_pub.send_copy(fb);
+            if sim {
+                let _ = fb_notify.notify();
+            }
             trace.push(FeedbackRec {
                 cycle: fb.cycle,
                 t_ns: sp.t_ns,

@@ -34,3 +34,69 @@ pub fn sleep_until_ns(t_ns: u64) {
         }
     }
 }
+
+/// Which clock drives the interpolator.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum ClockMode {
+    /// Wall time: cycle k starts at `t0 + k·period` (absolute sleeps); timing is measured.
+    #[default]
+    Real,
+    /// Simulated time: cycle k is still stamped `k·period`, but the next cycle starts as
+    /// soon as the drives have answered the previous one. Same set-points, faster than
+    /// real time; timing is not measured (it would mean nothing).
+    Sim,
+}
+
+impl ClockMode {
+    pub fn name(self) -> &'static str {
+        match self {
+            ClockMode::Real => "real",
+            ClockMode::Sim => "sim",
+        }
+    }
+}
+
+impl core::str::FromStr for ClockMode {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        match s {
+            "real" => Ok(ClockMode::Real),
+            "sim" => Ok(ClockMode::Sim),
+            other => Err(format!("unknown clock `{other}`: use `real` or `sim`")),
+        }
+    }
+}
+
+impl core::fmt::Display for ClockMode {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+/// Waits for `ready()` by spinning for up to `spin_ns` (a peer on the other core answers
+/// within microseconds), then by calling `block(remaining)` until `timeout_ns` has passed.
+/// Returns whether `ready()` became true.
+pub fn spin_then_block(
+    spin_ns: u64,
+    timeout_ns: u64,
+    mut ready: impl FnMut() -> bool,
+    mut block: impl FnMut(core::time::Duration),
+) -> bool {
+    let start = now_ns();
+    loop {
+        if ready() {
+            return true;
+        }
+        let waited = now_ns() - start;
+        if waited >= timeout_ns {
+            return false;
+        }
+        if waited < spin_ns {
+            core::hint::spin_loop();
+        } else {
+            block(core::time::Duration::from_nanos(
+                (timeout_ns - waited).min(1_000_000),
+            ));
+        }
+    }
+}

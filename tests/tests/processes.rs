@@ -52,6 +52,60 @@ fn demo_runs_in_three_processes_and_leaves_a_run_directory() {
     assert_eq!(&last[2..5], &[0.0, 0.0, 5.0]);
     assert!(rep["path_length_mm"].as_f64().unwrap() > 400.0);
     assert!(std::fs::metadata(dir.join("commands.log")).unwrap().len() > 16);
+
+    // The simulated clock gives the very same set-points and feedback, byte for byte.
+    let sim = dir.join("sim");
+    let out = Command::new(cnc_exe())
+        .args(["run", "--clock", "sim", "--out"])
+        .arg(&sim)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let rep_sim = report(&sim);
+    assert_eq!(rep_sim["clock"], "sim");
+    assert!(
+        rep_sim["misses"].is_null() && rep_sim["wake_late_ns"].is_null(),
+        "timing is not measured"
+    );
+    assert_eq!(rep_sim["time_s"], rep["time_s"]);
+    for f in ["setpoints.csv", "feedback.csv"] {
+        assert!(
+            std::fs::read(dir.join(f)).unwrap() == std::fs::read(sim.join(f)).unwrap(),
+            "{f} differs"
+        );
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn nurbs_program_is_bit_identical_under_both_clocks() {
+    let prog =
+        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("peers/linuxcnc/g5_nurbs-xy.ngc");
+    let dir = temp_dir("nurbs-clocks");
+    for clock in ["real", "sim"] {
+        let out = Command::new(cnc_exe())
+            .args(["run", "--clock", clock, "--out"])
+            .arg(dir.join(clock))
+            .arg(&prog)
+            .output()
+            .unwrap();
+        assert!(
+            out.status.success(),
+            "{clock}: {}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+    }
+    for f in ["setpoints.csv", "feedback.csv"] {
+        let (a, b) = (
+            std::fs::read(dir.join("real").join(f)).unwrap(),
+            std::fs::read(dir.join("sim").join(f)).unwrap(),
+        );
+        assert!(a.len() > 1000 && a == b, "{f} differs between the clocks");
+    }
     let _ = std::fs::remove_dir_all(&dir);
 }
 

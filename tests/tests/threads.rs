@@ -3,6 +3,7 @@
 
 use iceoryx2::prelude::local;
 use interpolator::rt::sched::SchedMode;
+use shared::clock::ClockMode;
 use shared::Machine;
 use std::path::Path;
 use std::time::Duration;
@@ -25,6 +26,7 @@ fn run_stack(
         out_dir: dir.to_path_buf(),
         period_ns,
         machine: Machine::default(),
+        clock: ClockMode::Real,
         start_timeout: Duration::from_secs(20),
         idle_timeout: Duration::from_secs(5),
     };
@@ -34,6 +36,7 @@ fn run_stack(
         period_ns,
         machine: Machine::default(),
         sched: SchedMode::Other,
+        clock: ClockMode::Real,
         start_timeout: Duration::from_secs(20),
     };
     let interp_cfg = interpreter::process::Config {

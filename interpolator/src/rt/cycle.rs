@@ -3,6 +3,11 @@
 //! inputs (feedback) → faults → command (engine tick) → outputs (set-point, wake-up,
 //! status) → measurement. Nothing in the loop allocates, locks, logs or formats; the
 //! set-point trace goes to a wait-free ring drained by a writer thread.
+//!
+//! Under the simulated clock ([`ClockMode::Sim`]) the loop does not sleep: cycle k+1
+//! starts as soon as the drives' feedback for cycle k is in, and a block that is late
+//! from the interpreter is waited for rather than run short of. Cycle k is still stamped
+//! `k·period`, so the set-points are the same as under the real clock.
 
 use crate::engine::{BlockSource, Engine, Fault, Limits, TickState};
 use crate::rt::sched::{self, SchedMode, SchedReport};
@@ -10,10 +15,10 @@ use crate::summary::{FeedStats, Summary};
 use crate::timing::Timing;
 use iceoryx2::port::subscriber::Subscriber;
 use iceoryx2::prelude::*;
-use shared::clock::{now_ns, sleep_until_ns};
+use shared::clock::{now_ns, sleep_until_ns, spin_then_block, ClockMode};
 use shared::ipc::{self, err, IpcError};
 use shared::protocol::{
-    CommandBlock, RunState, Services, Setpoint, Status, PROTOCOL_VERSION, SETPOINT_LAST,
+    CommandBlock, Feedback, RunState, Services, Setpoint, Status, PROTOCOL_VERSION, SETPOINT_LAST,
 };
 use shared::trace::TraceWriter;
 use shared::Machine;
@@ -28,9 +33,15 @@ pub struct Config {
     pub period_ns: u64,
     pub machine: Machine,
     pub sched: SchedMode,
+    pub clock: ClockMode,
     /// How long to wait for the servo-sim and the first block before giving up.
     pub start_timeout: Duration,
 }
+
+/// Under the simulated clock: how long to spin for an answer before sleeping on the
+/// wake-up event, and how long a peer may stay silent before it is taken for dead.
+const SIM_SPIN_NS: u64 = 200_000;
+const SIM_TIMEOUT_NS: u64 = 5_000_000_000;
 
 /// Why a run could not even produce a report.
 #[derive(Debug)]
@@ -80,9 +91,12 @@ fn format_setpoint(r: &SetpointRec, out: &mut String) {
 }
 
 /// Blocks straight from the subscriber, with one block that may have been taken early.
+/// Under the simulated clock a block that is not there yet is waited for (time stands
+/// still), so the interpreter's pace never changes the path.
 struct Source<'a, S: Service> {
     sub: &'a Subscriber<S, CommandBlock, ()>,
     first: Option<CommandBlock>,
+    wait: bool,
 }
 
 impl<S: Service> BlockSource for Source<'_, S> {
@@ -90,10 +104,22 @@ impl<S: Service> BlockSource for Source<'_, S> {
         if let Some(b) = self.first.take() {
             return Some(b);
         }
-        match self.sub.receive() {
-            Ok(Some(sample)) => Some(*sample.payload()),
-            _ => None,
+        let mut got = None;
+        let mut take = || {
+            got = match self.sub.receive() {
+                Ok(Some(sample)) => Some(*sample.payload()),
+                _ => None,
+            };
+            got.is_some()
+        };
+        if self.wait {
+            spin_then_block(SIM_SPIN_NS, SIM_TIMEOUT_NS, take, |_| {
+                std::thread::sleep(Duration::from_micros(50))
+            });
+        } else {
+            take();
         }
+        got
     }
 }
 
@@ -112,9 +138,42 @@ fn wait_for(
     Ok(())
 }
 
+/// The drives' answers as they come in.
+#[derive(Default)]
+struct Answers {
+    last_cycle: Option<u64>,
+    max_ferr_mm: f64,
+}
+
+impl Answers {
+    /// Takes every feedback sample waiting; the first bad one becomes the fault.
+    fn drain<S: Service>(
+        &mut self,
+        sub: &Subscriber<S, Feedback, ()>,
+        engine: &Engine,
+        fault: &mut Option<Fault>,
+    ) {
+        while let Ok(Some(fb)) = sub.receive() {
+            if let Err(f) = engine.on_feedback(&fb) {
+                fault.get_or_insert(f);
+            }
+            self.last_cycle = Some(fb.cycle);
+            self.max_ferr_mm = fb
+                .ferr_mm
+                .iter()
+                .fold(self.max_ferr_mm, |m, e| m.max(e.abs()));
+        }
+    }
+
+    fn has(&self, cycle: u64) -> bool {
+        self.last_cycle.is_some_and(|c| c >= cycle)
+    }
+}
+
 /// Runs the interpolator until the program end or a fault, and writes
 /// `setpoints.csv` and `interpolator.json` into the run directory.
 pub fn run<S: Service>(cfg: &Config) -> Result<Summary, RunError> {
+    let sim = cfg.clock == ClockMode::Sim;
     let svc = Services::new(&cfg.prefix);
     let node = ipc::node::<S>("interpolator")?;
     let blocks = ipc::blocks(&node, &svc)?;
@@ -137,6 +196,11 @@ pub fn run<S: Service>(cfg: &Config) -> Result<Summary, RunError> {
         .subscriber_builder()
         .create()
         .map_err(|e| err("feedback subscriber", e))?;
+    let fb_event = ipc::wakeup(&node, &svc.feedback())?;
+    let fb_listener = fb_event
+        .listener_builder()
+        .create()
+        .map_err(|e| err("feedback listener", e))?;
     let status = ipc::status(&node, &svc)?;
     let st_pub = status
         .publisher_builder()
@@ -165,6 +229,7 @@ pub fn run<S: Service>(cfg: &Config) -> Result<Summary, RunError> {
     let mut src = Source {
         sub: &block_sub,
         first,
+        wait: sim,
     };
     let mut trace = TraceWriter::create(
         &cfg.out_dir.join("setpoints.csv"),
@@ -174,29 +239,43 @@ pub fn run<S: Service>(cfg: &Config) -> Result<Summary, RunError> {
     )?;
     let mut timing = Timing::new(cfg.period_ns, 4096);
     let mut feed = FeedStats::default();
-    let sched_report: SchedReport = sched::setup(cfg.sched, 80);
+    // Spinning at SCHED_FIFO invites RT throttling: the simulated clock runs plain.
+    let sched_mode = if sim { SchedMode::Other } else { cfg.sched };
+    let sched_report: SchedReport = sched::setup(sched_mode, 80);
     for w in &sched_report.warnings {
         tracing::warn!("{w}");
     }
 
     let mut fault: Option<Fault> = None;
-    let mut last_fb_cycle: Option<u64> = None;
-    let mut max_ferr_mm = 0.0f64;
+    let mut answers = Answers::default();
     let t0 = now_ns() + cfg.period_ns;
     let mut cycle: u64 = 0;
     loop {
         let release = t0 + cycle * cfg.period_ns;
-        sleep_until_ns(release);
+        if sim {
+            if cycle > 0 {
+                let answered = spin_then_block(
+                    SIM_SPIN_NS,
+                    SIM_TIMEOUT_NS,
+                    || {
+                        answers.drain(&fb_sub, &engine, &mut fault);
+                        answers.has(cycle - 1)
+                    },
+                    |d| {
+                        let _ = fb_listener.timed_wait(|_| {}, d);
+                    },
+                );
+                if !answered {
+                    fault.get_or_insert(Fault::PeerSilent { cycle: cycle - 1 });
+                }
+            }
+        } else {
+            sleep_until_ns(release);
+        }
         let wake = now_ns();
 
         // inputs → faults
-        while let Ok(Some(fb)) = fb_sub.receive() {
-            if let Err(f) = engine.on_feedback(&fb) {
-                fault.get_or_insert(f);
-            }
-            last_fb_cycle = Some(fb.cycle);
-            max_ferr_mm = fb.ferr_mm.iter().fold(max_ferr_mm, |m, e| m.max(e.abs()));
-        }
+        answers.drain(&fb_sub, &engine, &mut fault);
         // command
         let tick = match fault {
             None => engine.tick(&mut src),
@@ -256,14 +335,16 @@ pub fn run<S: Service>(cfg: &Config) -> Result<Summary, RunError> {
             blocks_received: engine.blocks_received(),
         });
         let finished = now_ns();
-        // measurement
-        timing.record(
-            cycle,
-            sp.source_line,
-            wake.saturating_sub(release),
-            computed - wake,
-            finished - computed,
-        );
+        // measurement (meaningless under the simulated clock, so not taken)
+        if !sim {
+            timing.record(
+                cycle,
+                sp.source_line,
+                wake.saturating_sub(release),
+                computed - wake,
+                finished - computed,
+            );
+        }
         trace.push(SetpointRec {
             cycle,
             t_ns: sp.t_ns,
@@ -278,11 +359,8 @@ pub fn run<S: Service>(cfg: &Config) -> Result<Summary, RunError> {
 
     // Let the drives answer the last set-point, so the report covers every cycle.
     let _ = wait_for("final feedback", Duration::from_secs(2), || {
-        while let Ok(Some(fb)) = fb_sub.receive() {
-            last_fb_cycle = Some(fb.cycle);
-            max_ferr_mm = fb.ferr_mm.iter().fold(max_ferr_mm, |m, e| m.max(e.abs()));
-        }
-        last_fb_cycle == Some(cycle)
+        answers.drain(&fb_sub, &engine, &mut fault);
+        answers.has(cycle)
     });
     // Stay until the interpreter has seen the final status and left (it keeps the blocks'
     // memory alive until then), so neither side sees the other vanish mid-handshake.
@@ -294,12 +372,12 @@ pub fn run<S: Service>(cfg: &Config) -> Result<Summary, RunError> {
     let summary = Summary::new(
         cfg,
         cycle + 1,
-        &timing,
+        (!sim).then_some(&timing),
         &feed,
         fault.map(|f| f.to_string()),
         sched_report,
         dropped,
-        max_ferr_mm,
+        answers.max_ferr_mm,
     );
     summary.write(&cfg.out_dir.join("interpolator.json"))?;
     Ok(summary)
