@@ -91,8 +91,20 @@ struct NurbsOpen {
     ctrl: Vec<[f64; 4]>,
 }
 
+/// An open G6.2 NURBS: control points with their knots, then the closing knots.
+struct G62Open {
+    line: u32,
+    col: u32,
+    order: usize,
+    ctrl: Vec<[f64; 4]>,
+    knots: Vec<f64>,
+    /// Knot-only lines seen so far; `order` of them close the curve.
+    closing: usize,
+}
+
 struct State {
     pos: [f64; 3],
+    g62: Option<G62Open>,
     motion: Motion,
     plane: Plane,
     inch: bool,
@@ -135,6 +147,7 @@ impl LineWords<'_> {
 pub fn interpret(text: &str) -> Result<Program, Vec<Diagnostic>> {
     let mut st = State {
         pos: [0.0; 3],
+        g62: None,
         motion: Motion::None,
         plane: Plane::XY,
         inch: false,
@@ -177,6 +190,16 @@ pub fn interpret(text: &str) -> Result<Program, Vec<Diagnostic>> {
         for (p, v) in &parsed.assignments {
             params.set(p, *v);
         }
+    }
+    if let Some(n) = &st.g62 {
+        errors.push(Diagnostic {
+            line: n.line,
+            col: n.col,
+            message: format!(
+                "G6.2 NURBS is never closed: {} knot-only `G6.2 K…` lines of {} follow its control points",
+                n.closing, n.order
+            ),
+        });
     }
     if let Some(n) = &st.nurbs {
         errors.push(Diagnostic {
@@ -225,6 +248,7 @@ fn execute(st: &mut State, lw: &LineWords, moves: &mut Vec<Move>) -> Result<(), 
     let mut motion_word: Option<(&Word, Motion)> = None;
     let mut nurbs_open: Option<&Word> = None;
     let mut nurbs_close: Option<&Word> = None;
+    let mut g62_word: Option<&Word> = None;
     let mut dwell: Option<&Word> = None;
     let mut groups: Vec<(u8, &Word)> = Vec::new();
     for w in lw.words.iter().filter(|w| w.letter == 'G') {
@@ -242,6 +266,7 @@ fn execute(st: &mut State, lw: &LineWords, moves: &mut Vec<Move>) -> Result<(), 
             490 => 8,
             540..=590 => 12,
             610 | 611 | 640 => 13,
+            960 | 970 => 14,
             _ => return Err(lw.err(w.col, format!("G{} is not supported", w.value))),
         };
         if let Some((_, other)) = groups.iter().find(|(g, _)| *g == group && group != 0) {
@@ -261,7 +286,7 @@ fn execute(st: &mut State, lw: &LineWords, moves: &mut Vec<Move>) -> Result<(), 
             30 => motion_word = Some((w, Motion::Arc { ccw: true })),
             52 => nurbs_open = Some(w),
             53 => nurbs_close = Some(w),
-            62 => return Err(lw.err(w.col, "G6.2 NURBS is not supported yet (use G5.2/G5.3)")),
+            62 => g62_word = Some(w),
             800 => motion_word = Some((w, Motion::None)),
             40 => dwell = Some(w),
             170 => st.plane = Plane::XY,
@@ -290,11 +315,16 @@ fn execute(st: &mut State, lw: &LineWords, moves: &mut Vec<Move>) -> Result<(), 
     for w in lw.words.iter().filter(|w| w.letter == 'M') {
         match gcode(w) {
             Some(20) | Some(300) => end = true,
-            Some(0 | 10 | 30 | 40 | 50 | 60 | 70 | 80 | 90) => {} // stops, spindle, tool, coolant: carried later
+            // stops, spindle, tool change, coolant: accepted, carried in a later version
+            Some(0 | 10 | 30 | 40 | 50 | 60 | 70 | 80 | 90) => {}
             _ => return Err(lw.err(w.col, format!("M{} is not supported", w.value))),
         }
     }
 
+    // G6.2: control points with their knots, then `order` knot-only lines close it.
+    if st.g62.is_some() || g62_word.is_some() {
+        return g62_line(st, lw, g62_word, motion_word.map(|m| m.0), unit, moves, end);
+    }
     // Inside an open G5.2 block every line is a control point (or the G5.3 that closes it).
     if st.nurbs.is_some() || nurbs_open.is_some() {
         return nurbs_line(
@@ -652,6 +682,135 @@ fn nurbs_line(
             feed: st.feed,
         });
         st.motion = Motion::None;
+    }
+    Ok(())
+}
+
+fn g62_line(
+    st: &mut State,
+    lw: &LineWords,
+    open: Option<&Word>,
+    motion: Option<&Word>,
+    unit: f64,
+    moves: &mut Vec<Move>,
+    end: bool,
+) -> Result<(), Diagnostic> {
+    let (a, b) = st.plane.axes();
+    let first_col = lw.words.first().map_or(1, |w| w.col);
+    if let Some(m) = motion {
+        return Err(lw.err(
+            m.col,
+            format!(
+                "G{} inside a G6.2 NURBS: give its closing knots first",
+                m.value
+            ),
+        ));
+    }
+    if end {
+        return Err(lw.err(
+            first_col,
+            "program end inside a G6.2 NURBS: give its closing knots first",
+        ));
+    }
+    let point = lw.get(AXES[a]).is_some() || lw.get(AXES[b]).is_some();
+    if let Some(w) = lw.get(AXES[st.plane.normal()]) {
+        return Err(lw.err(
+            w.col,
+            format!(
+                "{} is not a word of the NURBS plane {:?}",
+                w.letter, st.plane
+            ),
+        ));
+    }
+    if st.g62.is_none() {
+        let Some(g) = open else { return Ok(()) };
+        need_feed(st, lw, g.col)?;
+        let order = match lw.get('P') {
+            Some(p) if p.value.fract() == 0.0 && (2.0..=10.0).contains(&p.value) => {
+                p.value as usize
+            }
+            Some(p) => return Err(lw.err(p.col, "G6.2 order P must be an integer from 2 to 10")),
+            None => return Err(lw.err(g.col, "the first G6.2 block needs the order P")),
+        };
+        match lw.get('Q') {
+            Some(q) if [1.0, 2.0, 3.0].contains(&q.value) => {} // LinuxCNC's method; we run the exact curve
+            Some(q) => return Err(lw.err(q.col, "G6.2 method Q must be 1, 2 or 3")),
+            None => {
+                return Err(lw.err(g.col, "the first G6.2 block needs the method Q (1, 2 or 3)"))
+            }
+        }
+        if !point {
+            return Err(lw.err(g.col, "the first G6.2 block needs its first control point"));
+        }
+        st.g62 = Some(G62Open {
+            line: lw.line,
+            col: g.col,
+            order,
+            ctrl: vec![],
+            knots: vec![],
+            closing: 0,
+        });
+    }
+    let knot = lw.get('K');
+    if point {
+        let (Some(_), Some(_)) = (lw.get(AXES[a]), lw.get(AXES[b])) else {
+            return Err(lw.err(
+                first_col,
+                format!("G6.2 control point needs both {} and {}", AXES[a], AXES[b]),
+            ));
+        };
+        let k = knot.ok_or_else(|| lw.err(first_col, "G6.2 control point needs its knot K"))?;
+        let weight = lw.get('R').map_or(1.0, |r| r.value);
+        if weight <= 0.0 {
+            return Err(lw.err(
+                lw.get('R').map_or(first_col, |r| r.col),
+                "G6.2 weight R must be > 0",
+            ));
+        }
+        let mut pt = st.pos;
+        for ax in [a, b] {
+            let v = lw.value(AXES[ax]).unwrap_or(0.0) * unit;
+            pt[ax] = if st.absolute { v } else { st.pos[ax] + v };
+        }
+        let Some(n) = st.g62.as_mut() else {
+            return Ok(());
+        };
+        if n.closing > 0 {
+            return Err(lw.err(first_col, "G6.2 control point after the closing knots"));
+        }
+        if n.ctrl.is_empty() {
+            let gap = ((pt[a] - st.pos[a]).powi(2) + (pt[b] - st.pos[b]).powi(2)).sqrt();
+            if gap > 1e-6 {
+                return Err(lw.err(
+                    first_col,
+                    format!("the first G6.2 control point must be the current position (it is {gap:.4} mm away)"),
+                ));
+            }
+        }
+        n.ctrl.push([pt[0], pt[1], pt[2], weight]);
+        n.knots.push(k.value);
+        st.pos = pt;
+    } else if let Some(k) = knot {
+        let Some(n) = st.g62.as_mut() else {
+            return Ok(());
+        };
+        n.knots.push(k.value);
+        n.closing += 1;
+        if n.closing == n.order {
+            let n = st.g62.take().unwrap_or_else(|| unreachable!());
+            let degree = n.order - 1;
+            if let Err(e) = shared::nurbs::validate(degree, &n.knots, &n.ctrl, usize::MAX) {
+                return Err(lw.err(k.col, format!("G6.2 NURBS opened on line {}: {e}", n.line)));
+            }
+            moves.push(Move::Nurbs {
+                line: n.line,
+                degree,
+                knots: n.knots,
+                ctrl: n.ctrl,
+                feed: st.feed,
+            });
+            st.motion = Motion::None;
+        }
     }
     Ok(())
 }

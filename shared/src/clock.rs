@@ -73,7 +73,7 @@ impl core::fmt::Display for ClockMode {
     }
 }
 
-/// Waits for `ready()` by spinning for up to `spin_ns` (a peer on the other core answers
+/// Waits for `ready()` by polling (yielding the core in between) for up to `spin_ns` (a peer on the other core answers
 /// within microseconds), then by calling `block(remaining)` until `timeout_ns` has passed.
 /// Returns whether `ready()` became true.
 pub fn spin_then_block(
@@ -92,7 +92,8 @@ pub fn spin_then_block(
             return false;
         }
         if waited < spin_ns {
-            core::hint::spin_loop();
+            // Yield rather than burn: on a busy machine the peer may need this very core.
+            std::thread::yield_now();
         } else {
             block(core::time::Duration::from_nanos(
                 (timeout_ns - waited).min(1_000_000),

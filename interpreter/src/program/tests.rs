@@ -117,3 +117,44 @@ fn arc_radius_mismatch_is_an_error() {
     let e = errors("F100\nG0 X10\nG3 X0 Y10.5 I-10 J0\n");
     assert!(e[0].2.contains("differs"), "{e:?}");
 }
+
+#[test]
+fn g6_2_nurbs_as_the_linuxcnc_programs_write_it() {
+    let m = moves(
+        "G0 X1 Y2\nF290\nG6.2 X1 Y2 R1 K0 P3 Q1\nX4 Y6 R2 K0\nX8 Y2 R1 K0\nX9 Y0 R1 K1\nG6.2 K2\nG6.2 K2\nG6.2 K2\nG1 X0\n",
+    );
+    match &m[1] {
+        Move::Nurbs {
+            line: 3,
+            degree: 2,
+            knots,
+            ctrl,
+            feed,
+        } => {
+            assert_eq!(knots, &vec![0.0, 0.0, 0.0, 1.0, 2.0, 2.0, 2.0]);
+            assert_eq!(ctrl[1], [4.0, 6.0, 0.0, 2.0]);
+            assert_eq!(*feed, 290.0);
+        }
+        other => panic!("{other:?}"),
+    }
+    assert!(matches!(
+        m[2],
+        Move::Line {
+            from: [9.0, 0.0, 0.0],
+            ..
+        }
+    ));
+}
+
+#[test]
+fn g6_2_errors_name_the_rule() {
+    // 13 knots for 12 control points of order 5 (seed 004's table): never closed.
+    let e = errors("F100\nG6.2 X0 Y0 R1 K0 P3 Q1\nX1 Y1 R1 K0\nX2 Y0 R1 K0\nG6.2 K1\nG6.2 K1\n");
+    assert!(e[0].2.contains("never closed"), "{e:?}");
+    let e = errors("F100\nG6.2 X5 Y0 R1 K0 P2 Q1\nX1 Y1 R1 K1\nG6.2 K1\nG6.2 K1\n");
+    assert!(e[0].2.contains("current position"), "{e:?}");
+    let e = errors("F100\nG6.2 X0 Y0 R1 K0 P2 Q1\nX1 Y1 R1 K2\nX2 Y0 R1 K1\nG6.2 K2\nG6.2 K2\n");
+    assert!(e[0].2.contains("smaller than knot"), "{e:?}");
+    let e = errors("F100\nG6.2 X0 Y0 R1 K0 P2\n");
+    assert!(e[0].2.contains("method Q"), "{e:?}");
+}
