@@ -18,6 +18,14 @@ pub struct FeedStats {
 }
 
 impl FeedStats {
+    /// Figures of a path that starts at `start_mm`.
+    pub fn starting_at(start_mm: [f64; 3]) -> Self {
+        FeedStats {
+            last: Some(start_mm),
+            ..FeedStats::default()
+        }
+    }
+
     #[inline]
     pub fn add(&mut self, t: &Tick, period_ns: u64) {
         if let Some(p) = self.last {

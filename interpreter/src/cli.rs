@@ -35,6 +35,16 @@ pub enum Command {
         /// Machine file (TOML) whose limits apply.
         #[arg(long)]
         machine: Option<PathBuf>,
+        /// Also print the machining time: the program stepped cycle by cycle through the
+        /// interpolator's engine, exactly as a run would (same as `time_s` of a run).
+        #[arg(long)]
+        estimate: bool,
+        /// With --estimate: print the estimate as JSON, with the time per source line.
+        #[arg(long, requires = "estimate")]
+        json: bool,
+        /// Interpolation period in µs the estimate assumes.
+        #[arg(long, default_value_t = 1000, value_parser = clap::value_parser!(u64).range(100..=10_000))]
+        period_us: u64,
     },
     /// Print the built-in machine file (TOML), a starting point for your own.
     Machine,
@@ -101,7 +111,13 @@ pub fn main() -> ExitCode {
     init_tracing();
     match cli.command {
         Command::Run(args) => launch::run(&args),
-        Command::Check { program, machine } => {
+        Command::Check {
+            program,
+            machine,
+            estimate,
+            json,
+            period_us,
+        } => {
             let machine = match shared::machine::load(machine.as_deref()) {
                 Ok(m) => m,
                 Err(e) => return fail(e),
@@ -110,7 +126,29 @@ pub fn main() -> ExitCode {
                 Ok(s) => s,
                 Err(e) => return fail(e),
             };
-            match process::compile(&src.text, &machine, 1_000_000) {
+            let period_ns = period_us * 1000;
+            match process::compile(&src.text, &machine, period_ns) {
+                Ok((_, blocks)) if estimate => {
+                    match crate::estimate::estimate(&blocks, &machine, period_ns) {
+                        Ok(est) if json => {
+                            println!("{}", serde_json::to_string_pretty(&est).unwrap_or_default());
+                            ExitCode::SUCCESS
+                        }
+                        Ok(est) => {
+                            println!(
+                            "{}: ok, {} blocks; machining time {:.3} s ({} cycles of {} µs), path {:.3} mm",
+                            src.name,
+                            blocks.len(),
+                            est.time_s,
+                            est.cycles,
+                            period_us,
+                            est.path_length_mm
+                        );
+                            ExitCode::SUCCESS
+                        }
+                        Err(e) => fail(format!("{}: estimate: {e}", src.name)),
+                    }
+                }
                 Ok((_, blocks)) => {
                     println!("{}: ok, {} blocks", src.name, blocks.len());
                     ExitCode::SUCCESS

@@ -7,11 +7,14 @@
 //!   capacity) and plans their feeds with look-ahead over the whole program;
 //! * [`publish`] streams the blocks to the interpolator with back-pressure and records
 //!   each one as sent in the command log ([`shared::cmdlog`]);
+//! * [`estimate`] steps the planned blocks through the interpolator's engine in-process
+//!   for a machining-time estimate (`cnc check --estimate`);
 //! * [`process`] is the interpreter process; [`launch`] starts all three processes for
 //!   `cnc run` and folds their summaries into the run's [`report`].
 
 pub mod blocks;
 pub mod cli;
+pub mod estimate;
 pub mod launch;
 pub mod parse;
 pub mod process;

@@ -78,6 +78,23 @@ fn demo_runs_in_three_processes_and_leaves_a_run_directory() {
             "{f} differs"
         );
     }
+    // And `cnc check --estimate` predicts that machining time to the cycle.
+    let out = Command::new(cnc_exe())
+        .args(["check", "--estimate", "--json"])
+        .arg(dir.join("program.ngc"))
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let est: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(est["cycles"], rep["cycles"]);
+    assert_eq!(est["time_s"], rep["time_s"]);
+    let moves = est["moves"].as_array().unwrap();
+    let per_line: u64 = moves.iter().map(|m| m["cycles"].as_u64().unwrap()).sum();
+    assert_eq!(per_line, rep["cycles"].as_u64().unwrap());
     let _ = std::fs::remove_dir_all(&dir);
 }
 

@@ -238,7 +238,7 @@ pub fn run<S: Service>(cfg: &Config) -> Result<Summary, RunError> {
         format_setpoint,
     )?;
     let mut timing = Timing::new(cfg.period_ns, 4096);
-    let mut feed = FeedStats::default();
+    let mut feed = FeedStats::starting_at(engine.position());
     // Spinning at SCHED_FIFO invites RT throttling: the simulated clock runs plain.
     let sched_mode = if sim { SchedMode::Other } else { cfg.sched };
     let sched_report: SchedReport = sched::setup(sched_mode, 80);

@@ -1,0 +1,104 @@
+//! Machining-time estimate: the planned blocks stepped through the interpolator's own
+//! engine, in this process, cycle by cycle. The engine is the very code the interpolator
+//! runs and its output does not depend on the clock, so the estimate is exactly the
+//! `time_s` a `--clock sim` (or real) run of the same program and machine reports.
+
+use interpolator::engine::{BlockSource, Engine, Limits, TickState};
+use serde::Serialize;
+use shared::protocol::{CommandBlock, FLAG_RAPID};
+use shared::Machine;
+
+/// Time spent on one source line.
+#[derive(Debug, Clone, Serialize, PartialEq)]
+pub struct LineTime {
+    pub line: u32,
+    pub cycles: u64,
+    pub time_s: f64,
+    pub length_mm: f64,
+    pub rapid: bool,
+}
+
+#[derive(Debug, Clone, Serialize, PartialEq)]
+pub struct Estimate {
+    pub period_ns: u64,
+    pub cycles: u64,
+    pub time_s: f64,
+    pub path_length_mm: f64,
+    /// Per source line, in program order (consecutive cycles of one line are one entry).
+    pub moves: Vec<LineTime>,
+}
+
+struct Slice<'a>(&'a [CommandBlock], usize);
+
+impl BlockSource for Slice<'_> {
+    fn next_block(&mut self) -> Option<CommandBlock> {
+        let b = self.0.get(self.1).copied();
+        self.1 += usize::from(b.is_some());
+        b
+    }
+}
+
+/// Steps the blocks to the program end. An engine fault (which a checked program cannot
+/// cause) is returned as its message.
+pub fn estimate(
+    blocks: &[CommandBlock],
+    machine: &Machine,
+    period_ns: u64,
+) -> Result<Estimate, String> {
+    let lim = Limits {
+        period_ns,
+        path_acc_mm_per_s2: machine.path_acc_mm_per_s2,
+        max_following_error_mm: machine.max_following_error_mm,
+    };
+    let mut engine = Engine::new(lim, [0.0; 3]);
+    let mut src = Slice(blocks, 0);
+    let mut moves: Vec<LineTime> = Vec::new();
+    let mut cycles = 0u64;
+    let mut last = engine.position();
+    let mut total = 0.0;
+    loop {
+        let t = engine.tick(&mut src).map_err(|f| f.to_string())?;
+        cycles += 1;
+        let d = shared::path::norm([
+            t.pos_mm[0] - last[0],
+            t.pos_mm[1] - last[1],
+            t.pos_mm[2] - last[2],
+        ]);
+        last = t.pos_mm;
+        total += d;
+        match moves.last_mut() {
+            Some(m) if m.line == t.source_line => {
+                m.cycles += 1;
+                m.length_mm += d;
+            }
+            _ => moves.push(LineTime {
+                line: t.source_line,
+                cycles: 1,
+                time_s: 0.0,
+                length_mm: d,
+                rapid: t.rapid,
+            }),
+        }
+        match t.state {
+            TickState::Done => break,
+            TickState::Running => {}
+            // All blocks are in hand from the start, so the engine can only starve if the
+            // block list lacks its end.
+            TickState::Starved => return Err("the program has no end block".into()),
+        }
+    }
+    for m in &mut moves {
+        m.time_s = (m.cycles * period_ns) as f64 * 1e-9;
+        m.rapid = m.rapid
+            || blocks
+                .iter()
+                .any(|b| b.source_line == m.line && b.flags & FLAG_RAPID != 0);
+    }
+    Ok(Estimate {
+        period_ns,
+        cycles,
+        time_s: (cycles * period_ns) as f64 * 1e-9,
+        path_length_mm: total,
+        moves,
+    })
+}
