@@ -46,11 +46,30 @@ pub enum Command {
         #[arg(long, default_value_t = 1000, value_parser = clap::value_parser!(u64).range(100..=10_000))]
         period_us: u64,
     },
+    /// Replay a command log through a fresh stack, without the NC program. Under the
+    /// lock-step servo the new setpoints.csv and feedback.csv equal the original run's,
+    /// byte for byte.
+    Replay(crate::replay::ReplayArgs),
+    /// Inspect command logs.
+    #[command(subcommand)]
+    Log(LogCommand),
     /// Print the built-in machine file (TOML), a starting point for your own.
     Machine,
     /// Internal: run one process of the stack (started by `cnc run`).
     #[command(hide = true, subcommand)]
     Role(Role),
+}
+
+#[derive(Subcommand)]
+pub enum LogCommand {
+    /// One line per block: seq, kind, source line, degree, control points, feed.
+    Show {
+        /// A commands.log, or a run directory holding one.
+        log: PathBuf,
+        /// The blocks as JSON instead.
+        #[arg(long)]
+        json: bool,
+    },
 }
 
 #[derive(Subcommand)]
@@ -62,6 +81,10 @@ pub enum Role {
         program: Option<PathBuf>,
         #[arg(long)]
         program_name: Option<String>,
+        #[arg(long)]
+        replay: Option<PathBuf>,
+        #[arg(long)]
+        salvage: bool,
     },
     Interpolator(interpolator::cli::Args),
     ServoSim(servo_sim::cli::Args),
@@ -86,6 +109,8 @@ pub fn run_interpreter(
     common: &servo_sim::cli::Args,
     program: Option<PathBuf>,
     program_name: Option<String>,
+    replay: Option<PathBuf>,
+    salvage: bool,
 ) -> ExitCode {
     let machine = match shared::machine::load(common.machine.as_deref()) {
         Ok(m) => m,
@@ -98,6 +123,8 @@ pub fn run_interpreter(
         machine,
         program,
         program_name,
+        replay,
+        salvage,
     };
     match process::run::<iceoryx2::prelude::ipc::Service>(&cfg) {
         Ok(s) if s.fault.is_none() => ExitCode::SUCCESS,
@@ -159,6 +186,8 @@ pub fn main() -> ExitCode {
                 }
             }
         }
+        Command::Replay(args) => crate::replay::replay(&args),
+        Command::Log(LogCommand::Show { log, json }) => crate::replay::show(&log, json),
         Command::Machine => {
             print!("{}", shared::Machine::default_toml());
             ExitCode::SUCCESS
@@ -167,7 +196,9 @@ pub fn main() -> ExitCode {
             common,
             program,
             program_name,
-        }) => run_interpreter(&common, program, program_name),
+            replay,
+            salvage,
+        }) => run_interpreter(&common, program, program_name, replay, salvage),
         Command::Role(Role::Interpolator(args)) => match interpolator::cli::run(&args) {
             Ok(()) => ExitCode::SUCCESS,
             Err(e) => fail(e),

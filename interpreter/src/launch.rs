@@ -75,7 +75,7 @@ pub fn utc_stamp(secs: u64) -> String {
     )
 }
 
-fn default_out_dir() -> PathBuf {
+pub fn default_out_dir() -> PathBuf {
     let secs = SystemTime::now()
         .duration_since(UNIX_EPOCH)
         .map(|d| d.as_secs())
@@ -144,84 +144,107 @@ fn run_inner(args: &RunArgs) -> Result<bool, String> {
     let program_copy = dir.join("program.ngc");
     std::fs::write(&program_copy, &src.text)
         .map_err(|e| format!("{}: {e}", program_copy.display()))?;
-    let machine_copy = dir.join("machine.toml");
-    std::fs::write(&machine_copy, toml_of(&machine))
-        .map_err(|e| format!("{}: {e}", machine_copy.display()))?;
-
-    let exe = std::env::current_exe().map_err(|e| format!("cannot find my own executable: {e}"))?;
-    let nanos = SystemTime::now()
-        .duration_since(UNIX_EPOCH)
-        .map(|d| d.subsec_nanos())
-        .unwrap_or(0);
-    let prefix = format!("cnc{}_{nanos}", std::process::id());
-    let common = vec![
-        "--prefix".to_string(),
-        prefix,
-        "--out".into(),
-        dir.display().to_string(),
-        "--period-us".into(),
-        args.period_us.to_string(),
-        "--machine".into(),
-        machine_copy.display().to_string(),
-        "--clock".into(),
-        args.clock.to_string(),
+    let input = vec![
+        "--program".into(),
+        program_copy.display().to_string(),
+        "--program-name".into(),
+        src.name.clone(),
     ];
-    catch_interrupts();
-    let mut roles: Vec<Role> = Vec::new();
-    let mut start = |name: &'static str, extra: Vec<String>| -> Result<(), String> {
-        let mut a = common.clone();
-        a.extend(extra);
-        let child = spawn(&exe, name, &a).map_err(|e| format!("starting the {name}: {e}"))?;
-        roles.push(Role {
-            name,
-            child,
-            exit: None,
-        });
-        Ok(())
-    };
-    let sched = match args.sched {
-        interpolator::rt::sched::SchedMode::Auto => "auto",
-        interpolator::rt::sched::SchedMode::Other => "other",
-    };
-    let started = start("servo-sim", vec![])
-        .and_then(|_| start("interpolator", vec!["--sched".into(), sched.into()]))
-        .and_then(|_| {
-            start(
-                "interpreter",
-                vec![
-                    "--program".into(),
-                    program_copy.display().to_string(),
-                    "--program-name".into(),
-                    src.name.clone(),
-                ],
-            )
-        });
-    let mut launcher_fault = started.err();
-    if launcher_fault.is_none() {
-        launcher_fault = supervise(&mut roles);
-    } else {
-        stop_all(&mut roles);
-    }
-    let processes = roles
-        .iter()
-        .map(|r| Process {
-            role: r.name.into(),
-            pid: r.child.id(),
-            exit: exit_text(r.exit),
-        })
-        .collect();
-    let rep = report::assemble(
-        &dir,
-        &src.name,
-        args.clock,
+    let stack = Stack {
+        dir,
+        machine,
         period_ns,
-        processes,
-        launcher_fault,
-    );
-    rep.write(&dir.join("report.json"))
-        .map_err(|e| format!("writing report.json: {e}"))?;
-    print!("{}", rep.summary_text(&dir));
-    Ok(rep.outcome == "done")
+        clock: args.clock,
+        sched: args.sched,
+    };
+    stack.launch(&src.name, input)
+}
+
+/// Everything `cnc run` and `cnc replay` share: a run directory, a machine, a period, a
+/// clock, and the three processes to start and watch.
+pub struct Stack {
+    pub dir: PathBuf,
+    pub machine: shared::Machine,
+    pub period_ns: u64,
+    pub clock: ClockMode,
+    pub sched: interpolator::rt::sched::SchedMode,
+}
+
+impl Stack {
+    /// Starts the processes (the interpreter with `input`, its program or log arguments),
+    /// supervises them, writes `report.json` and prints the summary. `Ok(true)` when the
+    /// program completed.
+    pub fn launch(&self, program_name: &str, input: Vec<String>) -> Result<bool, String> {
+        let dir = &self.dir;
+        let machine_copy = dir.join("machine.toml");
+        std::fs::write(&machine_copy, toml_of(&self.machine))
+            .map_err(|e| format!("{}: {e}", machine_copy.display()))?;
+        let exe =
+            std::env::current_exe().map_err(|e| format!("cannot find my own executable: {e}"))?;
+        let nanos = SystemTime::now()
+            .duration_since(UNIX_EPOCH)
+            .map(|d| d.subsec_nanos())
+            .unwrap_or(0);
+        let prefix = format!("cnc{}_{nanos}", std::process::id());
+        let common = vec![
+            "--prefix".to_string(),
+            prefix,
+            "--out".into(),
+            dir.display().to_string(),
+            "--period-us".into(),
+            (self.period_ns / 1000).to_string(),
+            "--machine".into(),
+            machine_copy.display().to_string(),
+            "--clock".into(),
+            self.clock.to_string(),
+        ];
+        catch_interrupts();
+        let mut roles: Vec<Role> = Vec::new();
+        let mut start = |name: &'static str, extra: Vec<String>| -> Result<(), String> {
+            let mut a = common.clone();
+            a.extend(extra);
+            let child = spawn(&exe, name, &a).map_err(|e| format!("starting the {name}: {e}"))?;
+            roles.push(Role {
+                name,
+                child,
+                exit: None,
+            });
+            Ok(())
+        };
+        let sched = match self.sched {
+            interpolator::rt::sched::SchedMode::Auto => "auto",
+            interpolator::rt::sched::SchedMode::Other => "other",
+        };
+        let started = start("servo-sim", vec![])
+            .and_then(|_| start("interpolator", vec!["--sched".into(), sched.into()]))
+            .and_then(|_| start("interpreter", input));
+        let mut launcher_fault = started.err();
+        if launcher_fault.is_none() {
+            launcher_fault = supervise(&mut roles);
+        } else {
+            stop_all(&mut roles);
+        }
+        let processes = roles
+            .iter()
+            .map(|r| Process {
+                role: r.name.into(),
+                pid: r.child.id(),
+                exit: exit_text(r.exit),
+            })
+            .collect();
+        let rep = report::assemble(
+            dir,
+            program_name,
+            self.clock,
+            self.period_ns,
+            processes,
+            launcher_fault,
+        );
+        rep.write(&dir.join("report.json"))
+            .map_err(|e| format!("writing report.json: {e}"))?;
+        print!("{}", rep.summary_text(dir));
+        Ok(rep.outcome == "done")
+    }
 }
 
 fn toml_of(m: &shared::Machine) -> String {

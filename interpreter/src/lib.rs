@@ -10,14 +10,17 @@
 //! * [`estimate`] steps the planned blocks through the interpolator's engine in-process
 //!   for a machining-time estimate (`cnc check --estimate`);
 //! * [`process`] is the interpreter process; [`launch`] starts all three processes for
-//!   `cnc run` and folds their summaries into the run's [`report`].
+//!   `cnc run` and folds their summaries into the run's [`report`]; [`replay`] runs a
+//!   command log again (`cnc replay`) and prints one (`cnc log show`).
 
 pub mod blocks;
 pub mod cli;
 pub mod estimate;
+pub mod html;
 pub mod launch;
 pub mod parse;
 pub mod process;
 pub mod program;
 pub mod publish;
+pub mod replay;
 pub mod report;

@@ -22,5 +22,5 @@ fn main() -> std::process::ExitCode {
         .with_writer(std::io::stderr)
         .init();
     let cli = Cli::parse();
-    interpreter::cli::run_interpreter(&cli.common, cli.program, None)
+    interpreter::cli::run_interpreter(&cli.common, cli.program, None, None, false)
 }

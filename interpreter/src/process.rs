@@ -7,7 +7,7 @@ use crate::report::InterpreterSummary;
 use crate::{blocks, program};
 use iceoryx2::prelude::Service;
 use shared::cmdlog::CommandLog;
-use shared::protocol::CommandBlock;
+use shared::protocol::{BlockKind, CommandBlock};
 use shared::Machine;
 use std::path::{Path, PathBuf};
 use std::time::Duration;
@@ -85,20 +85,89 @@ pub struct Config {
     pub program: Option<PathBuf>,
     /// Name to report the program under (the launcher passes the user's path).
     pub program_name: Option<String>,
+    /// Replay this command log instead of reading a program.
+    pub replay: Option<PathBuf>,
+    /// With `replay`: run the intact records of a damaged log, then stop.
+    pub salvage: bool,
+}
+
+/// A command log ready to replay.
+pub struct Replay {
+    pub header: shared::cmdlog::Header,
+    pub blocks: Vec<CommandBlock>,
+    /// What was wrong with a salvaged log: its intact blocks run, then a program end.
+    pub salvaged: Option<String>,
+}
+
+/// The blocks of a command log to replay. A damaged log is refused, unless `salvage`:
+/// then its intact records run, followed by a program end so the machine stops there.
+pub fn load_replay(path: &Path, salvage: bool) -> Result<Replay, String> {
+    let parsed = shared::cmdlog::read(path)?;
+    let mut blocks = parsed.blocks;
+    let salvaged = match parsed.damage {
+        None => None,
+        Some(damage) if !salvage => {
+            return Err(format!(
+                "{}: {damage}; nothing replayed (--salvage replays the {} intact blocks before it)",
+                path.display(),
+                blocks.len()
+            ))
+        }
+        Some(damage) => {
+            if blocks
+                .last()
+                .is_some_and(|b| b.kind == BlockKind::ProgramEnd as u32)
+            {
+                blocks.pop();
+            }
+            let note = format!(
+                "salvaged {}: {damage}; the {} intact blocks before it ran, then a stop",
+                path.display(),
+                blocks.len()
+            );
+            blocks.push(CommandBlock::empty(
+                BlockKind::ProgramEnd,
+                blocks.len() as u64,
+                0,
+            ));
+            Some(note)
+        }
+    };
+    Ok(Replay {
+        header: parsed.header,
+        blocks,
+        salvaged,
+    })
 }
 
 /// Runs the interpreter until the interpolator reports the end; writes `commands.log` and
 /// `interpreter.json`.
 pub fn run<S: Service>(cfg: &Config) -> Result<InterpreterSummary, String> {
-    let src = Source::load(cfg.program.as_deref())?;
-    let name = cfg.program_name.clone().unwrap_or(src.name.clone());
-    let (prog, blocks) = compile(&src.text, &cfg.machine, cfg.period_ns)
-        .map_err(|d| format_diagnostics(&name, &d))?;
-    for (line, m) in &prog.messages {
+    let mut salvaged = None;
+    let (name, blocks, messages) = match &cfg.replay {
+        Some(log) => {
+            let r = load_replay(log, cfg.salvage)?;
+            salvaged = r.salvaged;
+            (r.header.program, r.blocks, Vec::new())
+        }
+        None => {
+            let src = Source::load(cfg.program.as_deref())?;
+            let name = cfg.program_name.clone().unwrap_or(src.name.clone());
+            let (prog, blocks) = compile(&src.text, &cfg.machine, cfg.period_ns)
+                .map_err(|d| format_diagnostics(&name, &d))?;
+            (name, blocks, prog.messages)
+        }
+    };
+    for (line, m) in &messages {
         tracing::info!("{name}:{line}: MSG {m}");
     }
-    let mut log = CommandLog::create(&cfg.out_dir.join("commands.log"))
-        .map_err(|e| format!("creating commands.log: {e}"))?;
+    let mut log = CommandLog::create(
+        &cfg.out_dir.join("commands.log"),
+        cfg.period_ns,
+        cfg.machine.hash(),
+        &name,
+    )
+    .map_err(|e| format!("creating commands.log: {e}"))?;
     let result = publish::<S>(
         &cfg.prefix,
         &blocks,
@@ -118,7 +187,8 @@ pub fn run<S: Service>(cfg: &Config) -> Result<InterpreterSummary, String> {
         pid: std::process::id(),
         program: name,
         blocks: blocks.len(),
-        messages: prog.messages,
+        messages,
+        salvaged,
     };
     let text = serde_json::to_string_pretty(&summary).map_err(|e| e.to_string())?;
     std::fs::write(cfg.out_dir.join("interpreter.json"), text)

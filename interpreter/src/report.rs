@@ -17,6 +17,9 @@ pub struct InterpreterSummary {
     pub program: String,
     pub blocks: usize,
     pub messages: Vec<(u32, String)>,
+    /// Set when a damaged command log was salvaged: what was wrong, what ran.
+    #[serde(default)]
+    pub salvaged: Option<String>,
 }
 
 #[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
@@ -48,6 +51,8 @@ pub struct Report {
     pub max_following_error_axis_um: [f64; 3],
     pub lost_setpoints: u64,
     pub blocks: usize,
+    /// Replays of a damaged log (`--salvage`): what was wrong and what ran.
+    pub salvaged: Option<String>,
     pub sched: Option<interpolator::rt::sched::SchedReport>,
     pub miss_list: Vec<interpolator::summary::MissEntry>,
     pub processes: Vec<Process>,
@@ -109,6 +114,7 @@ pub fn assemble(
             .map_or([0.0; 3], |s| s.max_following_error_axis_um),
         lost_setpoints: servo.as_ref().map_or(0, |s| s.lost_setpoints),
         blocks: interp.as_ref().map_or(0, |s| s.blocks),
+        salvaged: interp.as_ref().and_then(|s| s.salvaged.clone()),
         sched: i.map(|s| s.sched.clone()),
         miss_list: i.map(|s| s.miss_list.clone()).unwrap_or_default(),
         processes,
@@ -150,6 +156,9 @@ impl Report {
             self.max_following_error_um,
             dir.display()
         );
+        if let Some(note) = &self.salvaged {
+            s.push_str(&format!("  warning      {note}\n"));
+        }
         if let Some(sched) = &self.sched {
             for w in &sched.warnings {
                 s.push_str(&format!("  warning      {w}\n"));

@@ -126,6 +126,12 @@ impl Machine {
         Machine::default().to_toml()
     }
 
+    /// Fingerprint of this machine (FNV-1a of its canonical TOML): what a command log
+    /// records, so a replay can tell it runs on the same machine.
+    pub fn hash(&self) -> u64 {
+        crate::cmdlog::fnv1a64(self.to_toml().as_bytes())
+    }
+
     /// This machine as a TOML machine file.
     pub fn to_toml(&self) -> String {
         toml::to_string_pretty(self).unwrap_or_default()

@@ -1,6 +1,7 @@
 //! The LinuxCNC compatibility suite (programs from LinuxCNC's distribution, unchanged):
-//! every one checks clean and runs to done through the real processes, on the simulated
-//! clock so the whole suite takes seconds, not the half hour of machining it describes.
+//! every one checks clean, runs to done through the real processes and replays from its
+//! command log to the same set-points and feedback, all on the simulated clock so the
+//! suite takes seconds, not the half hour of machining it describes.
 
 use std::path::Path;
 use std::process::Command;
@@ -64,6 +65,23 @@ fn every_linuxcnc_program_checks_clean_and_runs() {
         let (_, fb) = csv(&out.join("feedback.csv"));
         assert_eq!(sp.len(), fb.len(), "{name}");
         assert_eq!(rep["lost_setpoints"], 0, "{name}");
+        // The command log replays to the very same set-points and feedback.
+        let again = runs.join(format!("{name}.replay"));
+        let replay = Command::new(cnc_exe())
+            .args(["replay", "--clock", "sim", "--out"])
+            .arg(&again)
+            .arg(&out)
+            .output()
+            .unwrap();
+        assert!(
+            replay.status.success(),
+            "{name}: replay: {}",
+            String::from_utf8_lossy(&replay.stderr)
+        );
+        for f in ["setpoints.csv", "feedback.csv"] {
+            let same = std::fs::read(out.join(f)).unwrap() == std::fs::read(again.join(f)).unwrap();
+            assert!(same, "{name}: replayed {f} differs");
+        }
     }
     assert!(failures.is_empty(), "{}", failures.join("\n"));
     let _ = std::fs::remove_dir_all(&runs);

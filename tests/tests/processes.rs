@@ -78,6 +78,23 @@ fn demo_runs_in_three_processes_and_leaves_a_run_directory() {
             "{f} differs"
         );
     }
+    // Replaying the real run's command log (here on the simulated clock) reproduces it.
+    let rep_dir = dir.join("replay");
+    let out = Command::new(cnc_exe())
+        .args(["replay", "--clock", "sim", "--out"])
+        .arg(&rep_dir)
+        .arg(&dir)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    for f in ["setpoints.csv", "feedback.csv", "commands.log"] {
+        let same = std::fs::read(dir.join(f)).unwrap() == std::fs::read(rep_dir.join(f)).unwrap();
+        assert!(same, "replay: {f} differs");
+    }
     // And `cnc check --estimate` predicts that machining time to the cycle.
     let out = Command::new(cnc_exe())
         .args(["check", "--estimate", "--json"])
@@ -204,5 +221,72 @@ fn check_reports_every_problem_with_file_line_and_column() {
         !dir.join("run").exists(),
         "no run directory for a rejected program"
     );
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn damaged_log_is_refused_with_record_and_offset_or_salvaged() {
+    let dir = temp_dir("damaged");
+    let prog = dir.join("square.ngc");
+    std::fs::write(&prog, "G1 X10 F3000\nY10\nX0\nY0\nM2\n").unwrap();
+    let out = Command::new(cnc_exe())
+        .args(["run", "--clock", "sim", "--out"])
+        .arg(dir.join("run"))
+        .arg(&prog)
+        .output()
+        .unwrap();
+    assert!(out.status.success());
+    let mut log = std::fs::read(dir.join("run/commands.log")).unwrap();
+    let len = log.len();
+    // Flip one byte in the middle of the third record.
+    let record = 8 + std::mem::size_of::<shared::protocol::CommandBlock>();
+    let header = len - 5 * record;
+    log[header + 2 * record + 100] ^= 0x10;
+    let bad = dir.join("bad.log");
+    std::fs::write(&bad, &log).unwrap();
+    let out = Command::new(cnc_exe())
+        .args(["replay", "--clock", "sim"])
+        .arg(&bad)
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(1));
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        err.contains(&format!("record 2 at byte {}", header + 2 * record)),
+        "{err}"
+    );
+    let out = Command::new(cnc_exe())
+        .args(["log", "show"])
+        .arg(&bad)
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(1));
+    assert_eq!(
+        String::from_utf8_lossy(&out.stdout).lines().count(),
+        3,
+        "header line and the 2 intact blocks"
+    );
+
+    let out = Command::new(cnc_exe())
+        .args(["replay", "--clock", "sim", "--salvage", "--machine"])
+        .arg(dir.join("run/machine.toml"))
+        .arg("--out")
+        .arg(dir.join("salvaged"))
+        .arg(&bad)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let rep = report(&dir.join("salvaged"));
+    assert!(
+        rep["salvaged"].as_str().unwrap().contains("record 2"),
+        "{rep:#}"
+    );
+    // The two intact lines ran, then the machine stopped at (10, 10).
+    let (_, sp) = csv(&dir.join("salvaged/setpoints.csv"));
+    assert_eq!(&sp.last().unwrap()[2..4], &[10.0, 10.0]);
     let _ = std::fs::remove_dir_all(&dir);
 }

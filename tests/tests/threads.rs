@@ -46,6 +46,8 @@ fn run_stack(
         machine: Machine::default(),
         program: Some(prog),
         program_name: None,
+        replay: None,
+        salvage: false,
     };
     let servo =
         std::thread::spawn(move || servo_sim::run::run::<local::Service>(&servo_cfg).unwrap());
