@@ -7,8 +7,11 @@
 //! knot each appear `degree + 1` times.
 
 mod eval;
+pub mod fast;
 mod knots;
 mod length;
+pub mod reference;
+pub mod surface;
 
 pub use eval::{eval, find_span, CurvePoint};
 pub use knots::{insert_knot, split_to_capacity, SplitCurve};

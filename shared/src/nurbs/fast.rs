@@ -1,0 +1,524 @@
+//! Real-time evaluation of a rational curve and its first two derivatives by the
+//! extended-space scheme with moving data (seed 001, Yeh & Sun: §3.1 computation structure,
+//! §3.2 extended basis function, §3.3 moving data method).
+//!
+//! * **Extended space** (§3.1, eq. 3.3–3.7): the control points are stored homogeneous,
+//!   `r_i = [w_i·P_i, w_i]`, so numerator and denominator of the NURBS are one
+//!   four-component B-spline `r(u) = Σ N_i(u) r_i`. Its first and second derivatives come
+//!   from the same basis values, and the quotient rule is applied once per point, not
+//!   once per control point.
+//! * **Extended basis function** (§3.2): the basis functions and the terms their first
+//!   and second derivatives are made of come out of one pass over the triangular
+//!   recurrence. The shared intermediate terms are the products `N_{i,j-1} / (u_{i+j} -
+//!   u_i)` of the last two levels, the `γ`/`Ω` terms of eq. 3.10–3.12; the closed form of
+//!   the extended branch at the top (The NURBS Book eq. 2.9) turns them into `N'`, `N''`
+//!   with O(p) extra work instead of carrying derivatives through every level
+//!   (`SpanCursor::ders`, used by the surfaces). For curves the derivative sums are
+//!   regrouped once more: `Σ N'_r r_r = Σ t1_r q_r` with the per-span differences
+//!   `q_r = p (r_{r+1} - r_r)`, and likewise for `N''`, so a point costs `3p + 1` four-
+//!   component products and `N'`, `N''` are never formed.
+//! * **Moving data** (§3.3): the evaluator keeps, for the current span, the window of the
+//!   `p + 1` homogeneous control points, the knots either side and the reciprocals of every
+//!   knot difference the recurrence divides by. While the parameter stays inside the span
+//!   (forward stepping, the interpolator's common case) an evaluation is a range check plus
+//!   multiply-adds: no span search, no division except the one `1 / w`. Crossing a knot
+//!   reloads the window (a short forward walk, or a binary search for a jump backwards or
+//!   far ahead), so every call gives the same bits as a fresh evaluator would.
+//!
+//! Degrees 1..=5 are specialised at compile time ([`CurveEval<P>`], and [`FastCurve`]
+//! dispatches to those) so every loop unrolls and the scratch arrays live in registers;
+//! degrees 6..=9 share one kernel with the degree read at run time.
+//!
+//! What bounds the cost: per point `p(p+1)/2` recurrence steps of three flops, `4(3p+1)`
+//! multiply-adds for the three homogeneous sums, one division and about fifteen flops for
+//! the quotient rule: about 70 flops at p = 3, 110 at p = 5, in short dependency chains.
+//! Measured (see the bench `eval`), the cost is higher than the flop count says: the
+//! per-point overhead (range check, the result written through memory) is a few ns, and
+//! degree 5 runs at about twice the cost of degree 4, more than its flops explain (not yet
+//! understood; the general kernel at degree 9 is only a little slower than degree 5).
+//!
+//! The evaluator owns a copy of the curve (fixed capacity: [`MAX_CTRL`] control points,
+//! premultiplied once at construction), so it holds no borrow and can live in the
+//! interpolator's state between cycles. Curves with more control points are first split
+//! exactly with [`super::split_to_capacity`].
+
+// Index loops mirror the recurrence formulas (seed 001 eq. 2.3, 3.10-3.12); with the
+// degree a constant they unroll and the bounds checks fold away.
+#![allow(clippy::needless_range_loop)]
+
+use super::{find_span, validate, CurveError, CurvePoint, MAX_CTRL, MAX_DEGREE, MAX_KNOTS};
+use crate::protocol::CommandBlock;
+
+/// Highest order (degree + 1) any evaluator here handles.
+pub(crate) const ORD: usize = MAX_DEGREE + 1;
+
+// `SpanCursor::terms` lists the levels 1..=9 of the recurrence by hand.
+const _: () = assert!(
+    MAX_DEGREE == 9,
+    "update the level! list in SpanCursor::terms"
+);
+
+/// Basis functions of one span and their first derivatives: `n[r]`, `d1[r]` belong to
+/// `N_{span-p+r, p}`, `r = 0..=p`.
+pub(crate) struct BasisDers {
+    pub n: [f64; ORD],
+    pub d1: [f64; ORD],
+}
+
+/// The moving-data registers of one parametric direction: the current span, its bounds
+/// and the knot terms the recurrence needs, reloaded only when the parameter leaves the
+/// span. `K` is the knot capacity.
+#[derive(Debug, Clone)]
+pub(crate) struct SpanCursor<const K: usize> {
+    degree: usize,
+    n_ctrl: usize,
+    knots: [f64; K],
+    u_min: f64,
+    u_max: f64,
+    /// Index of the current span `[knots[span], knots[span+1])`.
+    span: usize,
+    /// Parameter range in which the registers are valid; open-ended at the domain ends,
+    /// so the closed last span and clamped parameters never trigger a reload.
+    lo: f64,
+    hi: f64,
+    /// `kl[i] = knots[span+1-i]`, `kr[i] = knots[span+i]` for `i = 1..=p`.
+    kl: [f64; ORD],
+    kr: [f64; ORD],
+    /// `inv[j][r] = 1 / (knots[span+r+1] - knots[span+1-j+r])`: the reciprocal support
+    /// length of `N_{span-j+1+r, j-1}`; never a division by zero on a non-empty span.
+    inv: [[f64; ORD]; ORD],
+}
+
+impl<const K: usize> SpanCursor<K> {
+    /// A cursor over validated knots (`degree + n_ctrl + 1` of them, at most `K`).
+    pub(crate) fn new(degree: usize, knots: &[f64], n_ctrl: usize) -> Self {
+        let mut own = [0.0; K];
+        for (d, s) in own.iter_mut().zip(knots) {
+            *d = *s;
+        }
+        let mut c = SpanCursor {
+            degree,
+            n_ctrl,
+            knots: own,
+            u_min: own[degree.min(K - 1)],
+            u_max: own[n_ctrl.min(K - 1)],
+            span: degree,
+            lo: f64::INFINITY,
+            hi: f64::NEG_INFINITY,
+            kl: [0.0; ORD],
+            kr: [0.0; ORD],
+            inv: [[0.0; ORD]; ORD],
+        };
+        let first = find_span(degree, c.knots(), n_ctrl, c.u_min);
+        c.load(first);
+        c
+    }
+
+    fn knots(&self) -> &[f64] {
+        &self.knots[..(self.n_ctrl + self.degree + 1).min(K)]
+    }
+
+    pub(crate) fn span(&self) -> usize {
+        self.span
+    }
+
+    /// Clamps `u` into the domain without `f64::clamp` (which panics on NaN bounds);
+    /// NaN stays NaN and yields NaN results, never a panic.
+    #[inline(always)]
+    pub(crate) fn clamp(&self, u: f64) -> f64 {
+        if u < self.u_min {
+            self.u_min
+        } else if u > self.u_max {
+            self.u_max
+        } else {
+            u
+        }
+    }
+
+    /// Makes the registers hold the span of `u` (already clamped). Returns whether the
+    /// span changed, so the owner reloads its control-point window.
+    #[inline(always)]
+    pub(crate) fn locate(&mut self, u: f64) -> bool {
+        if u >= self.lo && u < self.hi {
+            return false;
+        }
+        self.seek(u)
+    }
+
+    #[cold]
+    #[inline(never)]
+    fn seek(&mut self, u: f64) -> bool {
+        let last = self.n_ctrl - 1;
+        let mut s = self.span;
+        // A few steps forward cover the common crossing of one (possibly repeated) knot
+        // without a search; anything else is a binary search.
+        let mut steps = 0;
+        while steps < 4 && s < last && u >= self.knots[s + 1] {
+            s += 1;
+            steps += 1;
+        }
+        let found = if s < last && u >= self.knots[s] && u < self.knots[s + 1] {
+            s
+        } else {
+            find_span(self.degree, self.knots(), self.n_ctrl, u)
+        };
+        let changed = found != self.span;
+        self.load(found);
+        changed
+    }
+
+    /// Loads the registers for span `s` (`degree <= s < n_ctrl`, non-empty).
+    fn load(&mut self, s: usize) {
+        let p = self.degree;
+        self.span = s;
+        let (a, b) = (self.knots[s], self.knots[s + 1]);
+        self.lo = if a <= self.u_min {
+            f64::NEG_INFINITY
+        } else {
+            a
+        };
+        self.hi = if b >= self.u_max { f64::INFINITY } else { b };
+        for i in 1..=p {
+            self.kl[i] = self.knots[s + 1 - i];
+            self.kr[i] = self.knots[s + i];
+        }
+        for j in 1..=p {
+            for r in 0..j {
+                self.inv[j][r] = 1.0 / (self.kr[r + 1] - self.kl[j - r]);
+            }
+        }
+    }
+
+    /// One pass of the triangular recurrence at `u` in the current span, for degree `p`
+    /// (a constant after inlining in the specialised evaluators; it must be the cursor's
+    /// degree, passed so the compiler sees it). Returns the basis functions of level `p`
+    /// and the shared terms of levels `p` and `p - 1`: `t1[r+1] = N_{.,p-1}[r] ·
+    /// inv[p][r]` and `t2[r+1] = N_{.,p-2}[r] · inv[p-1][r]`, stored one up so the zero
+    /// borders of the derivative formulas need no branches.
+    #[inline(always)]
+    pub(crate) fn terms(&self, p: usize, u: f64) -> BasisTerms {
+        let p = p.min(MAX_DEGREE);
+        let mut left = [0.0; ORD];
+        let mut right = [0.0; ORD];
+        for i in 1..=p {
+            left[i] = u - self.kl[i];
+            right[i] = self.kr[i] - u;
+        }
+        let mut n = [0.0; ORD];
+        n[0] = 1.0;
+        // One call per level, each with a constant trip count, so the triangle unrolls
+        // completely at every specialised degree (a nested loop stops unrolling at p = 5)
+        // and a run-time degree costs a predictable branch per level, not a loop.
+        let (mut last, mut prev) = ([0.0; ORD], [0.0; ORD]);
+        macro_rules! level {
+            ($($j:literal)*) => {$(
+                if p >= $j {
+                    prev = last;
+                    last = self.level::<$j>(&mut n, &left, &right);
+                }
+            )*};
+        }
+        level!(1 2 3 4 5 6 7 8 9);
+        let mut t1 = [0.0; ORD + 1];
+        let mut t2 = [0.0; ORD + 1];
+        t1[1..].copy_from_slice(&last);
+        t2[1..].copy_from_slice(&prev);
+        BasisTerms { n, t1, t2 }
+    }
+
+    /// Level `J` of the recurrence (The NURBS Book A2.2 with the divisions replaced by
+    /// the span's reciprocals): `n` goes from degree `J - 1` to `J`; returns the terms
+    /// `N_{.,J-1}[r] · inv[J][r]`.
+    #[inline(always)]
+    fn level<const J: usize>(
+        &self,
+        n: &mut [f64; ORD],
+        left: &[f64; ORD],
+        right: &[f64; ORD],
+    ) -> [f64; ORD] {
+        let mut terms = [0.0; ORD];
+        let mut saved = 0.0;
+        for r in 0..J {
+            let temp = n[r] * self.inv[J][r];
+            n[r] = saved + right[r + 1] * temp;
+            saved = left[J - r] * temp;
+            terms[r] = temp;
+        }
+        n[J] = saved;
+        terms
+    }
+
+    /// The extended basis function of seed 001 §3.2 as far as surfaces need it: `N` and
+    /// `N'` of the current span at `u`, the derivative from the shared terms by the
+    /// closed form of the extended branch (The NURBS Book eq. 2.9).
+    #[inline(always)]
+    pub(crate) fn ders(&self, p: usize, u: f64) -> BasisDers {
+        let BasisTerms { n, t1, .. } = self.terms(p, u);
+        let p = p.min(MAX_DEGREE);
+        let pf = p as f64;
+        let mut d1 = [0.0; ORD];
+        for r in 0..=p {
+            d1[r] = pf * (t1[r] - t1[r + 1]);
+        }
+        BasisDers { n, d1 }
+    }
+
+    /// `inv[p][r]`, the reciprocal support of `N_{span-p+1+r, p-1}`.
+    pub(crate) fn inv_top(&self, r: usize) -> f64 {
+        self.inv[self.degree][r]
+    }
+}
+
+/// `acc += s · c` on a homogeneous point, written out: an inner loop here kept the
+/// outer sum over the window from unrolling at degree 5.
+#[inline(always)]
+pub(crate) fn axpy(acc: &mut [f64; 4], s: f64, c: &[f64; 4]) {
+    acc[0] += s * c[0];
+    acc[1] += s * c[1];
+    acc[2] += s * c[2];
+    acc[3] += s * c[3];
+}
+
+/// The outcome of [`SpanCursor::terms`].
+pub(crate) struct BasisTerms {
+    pub n: [f64; ORD],
+    pub t1: [f64; ORD + 1],
+    pub t2: [f64; ORD + 1],
+}
+
+/// The shared state of [`CurveEval`] and [`FastCurve`]: the premultiplied curve, the
+/// knot cursor and the window of the current span's homogeneous control points.
+#[derive(Debug, Clone)]
+struct Core {
+    cursor: SpanCursor<MAX_KNOTS>,
+    /// `[w·x, w·y, w·z, w]` for every control point.
+    hw: [[f64; 4]; MAX_CTRL],
+    /// `hw[span-p ..= span]`, the moving window.
+    win: [[f64; 4]; ORD],
+    /// `q[r] = p (win[r+1] - win[r])`, `r < p`: with the shared terms `t1` these give
+    /// `Σ N'_r win[r]` (the sum of eq. 3.6) in `p` instead of `p + 1` products, and no
+    /// `N'` to form first.
+    q: [[f64; 4]; ORD],
+    /// `s[r] = (p-1) (g[r+1] - g[r])` with `g[r] = inv[p][r] q[r]`, `r < p - 1`: with
+    /// `t2` these give `Σ N''_r win[r]` (eq. 3.7).
+    s: [[f64; 4]; ORD],
+}
+
+impl Core {
+    fn new(degree: usize, knots: &[f64], ctrl: &[[f64; 4]]) -> Result<Self, CurveError> {
+        validate(degree, knots, ctrl, MAX_CTRL)?;
+        let mut hw = [[0.0; 4]; MAX_CTRL];
+        for (h, c) in hw.iter_mut().zip(ctrl) {
+            *h = [c[0] * c[3], c[1] * c[3], c[2] * c[3], c[3]];
+        }
+        let mut core = Core {
+            cursor: SpanCursor::new(degree, knots, ctrl.len()),
+            hw,
+            win: [[0.0; 4]; ORD],
+            q: [[0.0; 4]; ORD],
+            s: [[0.0; 4]; ORD],
+        };
+        core.load_window();
+        Ok(core)
+    }
+
+    fn load_window(&mut self) {
+        let (p, s) = (self.cursor.degree, self.cursor.span);
+        for (w, h) in self.win.iter_mut().zip(&self.hw[s - p..=s]) {
+            *w = *h;
+        }
+        // The derivative terms are fixed per span: moving data, computed once per knot
+        // crossing instead of once per point.
+        let pf = p as f64;
+        let mut g = [[0.0; 4]; ORD];
+        for r in 0..p {
+            for k in 0..4 {
+                self.q[r][k] = pf * (self.win[r + 1][k] - self.win[r][k]);
+                g[r][k] = self.cursor.inv_top(r) * self.q[r][k];
+            }
+        }
+        for r in 0..p.saturating_sub(1) {
+            for k in 0..4 {
+                self.s[r][k] = (pf - 1.0) * (g[r + 1][k] - g[r][k]);
+            }
+        }
+    }
+
+    #[inline(always)]
+    fn eval_deg(&mut self, p: usize, u: f64) -> CurvePoint {
+        let u = self.cursor.clamp(u);
+        if self.cursor.locate(u) {
+            self.load_window();
+        }
+        let b = self.cursor.terms(p, u);
+        let p = p.min(MAX_DEGREE);
+        // Extended space (seed 001 eq. 3.5-3.7): one four-component sum per derivative.
+        let (mut a0, mut a1, mut a2) = ([0.0f64; 4], [0.0f64; 4], [0.0f64; 4]);
+        for r in 0..=p {
+            axpy(&mut a0, b.n[r], &self.win[r]);
+        }
+        for r in 0..p {
+            axpy(&mut a1, b.t1[r + 1], &self.q[r]);
+        }
+        for r in 0..p.saturating_sub(1) {
+            axpy(&mut a2, b.t2[r + 1], &self.s[r]);
+        }
+        let inv_w = 1.0 / a0[3];
+        let (w1, w2) = (a1[3], a2[3]);
+        let mut out = CurvePoint {
+            span: self.cursor.span(),
+            ..CurvePoint::default()
+        };
+        for k in 0..3 {
+            let pk = a0[k] * inv_w;
+            let d1 = (a1[k] - w1 * pk) * inv_w;
+            out.p[k] = pk;
+            out.d1[k] = d1;
+            out.d2[k] = (a2[k] - 2.0 * w1 * d1 - w2 * pk) * inv_w;
+        }
+        out
+    }
+
+    /// One specialised kernel per degree, kept out of line: inlined into a caller's loop
+    /// next to its siblings, the degree-5 copy lost its unrolling and ran slower than
+    /// the general kernel at degree 9.
+    #[inline(never)]
+    fn eval_fixed<const P: usize>(&mut self, u: f64) -> CurvePoint {
+        self.eval_deg(P, u)
+    }
+
+    /// Degrees 6..=9: one kernel, degree read at run time.
+    #[inline(never)]
+    fn eval_general(&mut self, u: f64) -> CurvePoint {
+        self.eval_deg(self.cursor.degree, u)
+    }
+}
+
+/// Why an evaluator could not be built.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum FastCurveError {
+    /// The curve itself is invalid.
+    Curve(CurveError),
+    /// A [`CurveEval<P>`] was asked to hold a curve of another degree.
+    DegreeMismatch { expected: u32, found: u32 },
+}
+
+impl core::fmt::Display for FastCurveError {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        match *self {
+            FastCurveError::Curve(e) => e.fmt(f),
+            FastCurveError::DegreeMismatch { expected, found } => write!(
+                f,
+                "curve of degree {found} given to an evaluator built for degree {expected}"
+            ),
+        }
+    }
+}
+
+impl From<CurveError> for FastCurveError {
+    fn from(e: CurveError) -> Self {
+        FastCurveError::Curve(e)
+    }
+}
+
+/// Evaluator for a curve of degree `P` known at compile time (`1 <= P <= 9`; degrees
+/// up to 5 are the ones worth a type of their own, [`FastCurve`] covers the rest).
+#[derive(Debug, Clone)]
+pub struct CurveEval<const P: usize> {
+    core: Core,
+}
+
+impl<const P: usize> CurveEval<P> {
+    const DEGREE_OK: () = assert!(P >= 1 && P <= MAX_DEGREE, "degree outside 1..=9");
+
+    /// Checks the curve (clamped, weights > 0, at most [`MAX_CTRL`] control points
+    /// `[x, y, z, w]`, weight not premultiplied) and positions on its first span.
+    pub fn new(degree: usize, knots: &[f64], ctrl: &[[f64; 4]]) -> Result<Self, FastCurveError> {
+        #[allow(clippy::let_unit_value)]
+        let () = Self::DEGREE_OK;
+        if degree != P {
+            return Err(FastCurveError::DegreeMismatch {
+                expected: P as u32,
+                found: degree as u32,
+            });
+        }
+        Ok(CurveEval {
+            core: Core::new(degree, knots, ctrl)?,
+        })
+    }
+
+    /// The curve of a motion block (validated again here: a block is data from outside).
+    pub fn from_block(block: &CommandBlock) -> Result<Self, FastCurveError> {
+        Self::new(block.degree as usize, block.knots(), block.ctrl())
+    }
+
+    /// Point, first and second derivative at `u` (clamped into the domain).
+    #[inline]
+    pub fn eval(&mut self, u: f64) -> CurvePoint {
+        self.core.eval_fixed::<P>(u)
+    }
+
+    /// The parameter domain `[u_min, u_max]`.
+    pub fn domain(&self) -> (f64, f64) {
+        (self.core.cursor.u_min, self.core.cursor.u_max)
+    }
+}
+
+/// Evaluator for any degree 1..=9, dispatching to the compile-time specialisations for
+/// degrees 1..=5 (one well-predicted branch per call) and a general kernel above.
+#[derive(Debug, Clone)]
+pub struct FastCurve {
+    core: Core,
+}
+
+impl FastCurve {
+    /// Checks the curve (clamped, weights > 0, at most [`MAX_CTRL`] control points
+    /// `[x, y, z, w]`, weight not premultiplied) and positions on its first span.
+    pub fn new(degree: usize, knots: &[f64], ctrl: &[[f64; 4]]) -> Result<Self, CurveError> {
+        Ok(FastCurve {
+            core: Core::new(degree, knots, ctrl)?,
+        })
+    }
+
+    /// The curve of a motion block (validated again here: a block is data from outside).
+    pub fn from_block(block: &CommandBlock) -> Result<Self, CurveError> {
+        Self::new(block.degree as usize, block.knots(), block.ctrl())
+    }
+
+    /// Replaces the curve, reusing the evaluator's storage; on error the evaluator keeps
+    /// its previous curve.
+    pub fn load(
+        &mut self,
+        degree: usize,
+        knots: &[f64],
+        ctrl: &[[f64; 4]],
+    ) -> Result<(), CurveError> {
+        self.core = Core::new(degree, knots, ctrl)?;
+        Ok(())
+    }
+
+    pub fn degree(&self) -> usize {
+        self.core.cursor.degree
+    }
+
+    /// The parameter domain `[u_min, u_max]`.
+    pub fn domain(&self) -> (f64, f64) {
+        (self.core.cursor.u_min, self.core.cursor.u_max)
+    }
+
+    /// Point, first and second derivative at `u` (clamped into the domain).
+    #[inline]
+    pub fn eval(&mut self, u: f64) -> CurvePoint {
+        match self.core.cursor.degree {
+            1 => self.core.eval_fixed::<1>(u),
+            2 => self.core.eval_fixed::<2>(u),
+            3 => self.core.eval_fixed::<3>(u),
+            4 => self.core.eval_fixed::<4>(u),
+            5 => self.core.eval_fixed::<5>(u),
+            _ => self.core.eval_general(u),
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests;
