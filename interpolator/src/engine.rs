@@ -13,6 +13,8 @@
     clippy::panic
 )]
 
+use shared::nurbs::fast::FastCurve;
+use shared::nurbs::CurvePoint;
 use shared::path::{self, norm};
 use shared::protocol::{BlockKind, CommandBlock, Feedback, ProtocolError, FLAG_RAPID};
 
@@ -88,6 +90,8 @@ pub struct Tick {
 struct Motion {
     block: CommandBlock,
     u: f64,
+    /// The path (point and derivatives) at `u`, kept from the previous step.
+    at: CurvePoint,
     u_end: f64,
     s_mm: f64,
     end_mm: [f64; 3],
@@ -121,6 +125,8 @@ pub struct Limits {
 
 pub struct Engine {
     lim: Limits,
+    /// The moving-data evaluator (seed 001 §3.3), loaded with each motion block's curve.
+    curve: FastCurve,
     t_s: f64,
     cur: Current,
     next: Option<CommandBlock>,
@@ -151,8 +157,18 @@ fn dot(a: [f64; 3], b: [f64; 3]) -> f64 {
 impl Engine {
     /// A stopped machine at `start_mm`.
     pub fn new(lim: Limits, start_mm: [f64; 3]) -> Self {
+        // Any valid curve will do until the first motion block is loaded.
+        let curve = match FastCurve::new(
+            1,
+            &[0.0, 0.0, 1.0, 1.0],
+            &[[0.0; 3], [1.0, 0.0, 0.0]].map(|p| [p[0], p[1], p[2], 1.0]),
+        ) {
+            Ok(c) => c,
+            Err(_) => unreachable!("a unit line is a valid curve"),
+        };
         Engine {
             lim,
+            curve,
             t_s: lim.period_ns as f64 * 1e-9,
             cur: Current::None,
             next: None,
@@ -203,18 +219,22 @@ impl Engine {
         Ok(())
     }
 
-    fn start(&mut self, b: CommandBlock) {
+    fn start(&mut self, b: CommandBlock) -> Result<(), Fault> {
         self.line = b.source_line;
         self.seq = b.seq;
         self.cur = match b.kind() {
             Some(BlockKind::Motion) => {
+                self.curve
+                    .load(b.degree as usize, b.knots(), b.ctrl())
+                    .map_err(|err| Fault::Protocol(ProtocolError::Curve { seq: b.seq, err }))?;
                 let (u0, u1) = path::domain(&b);
                 Current::Motion(Motion {
                     block: b,
                     u: u0,
                     u_end: u1,
                     s_mm: 0.0,
-                    end_mm: path::eval(&b, u1).p,
+                    end_mm: eval(&mut self.curve, &b, u1).p,
+                    at: eval(&mut self.curve, &b, u0),
                     feed_mm_per_s: b.feed_mm_per_min / 60.0,
                 })
             }
@@ -228,6 +248,7 @@ impl Engine {
                 seq: b.seq,
             },
         };
+        Ok(())
     }
 
     /// Speed the next motion may be entered with: the planned end speed if the next block
@@ -251,7 +272,7 @@ impl Engine {
             if let Current::None = self.cur {
                 match self.next.take() {
                     Some(b) => {
-                        self.start(b);
+                        self.start(b)?;
                         self.fill(src)?;
                     }
                     None => {
@@ -325,9 +346,11 @@ impl Engine {
                         budget = Some(ds - s_rem);
                         continue;
                     }
-                    m.u = advance(&m.block, m.u, m.u_end, ds);
+                    let (u, e) = advance(&mut self.curve, &m.block, &m.at, m.u, m.u_end, ds);
+                    m.u = u;
+                    m.at = e;
                     m.s_mm += ds;
-                    self.pos = path::eval(&m.block, m.u).p;
+                    self.pos = e.p;
                     self.cur = Current::Motion(m);
                     break;
                 }
@@ -368,8 +391,14 @@ impl Engine {
 /// The parameter `ds` mm of path further on from `u`: the second-order Taylor step of
 /// seed 001, `du = ds/|C'| - ds²(C'·C'')/(2|C'|⁴)`, then one Newton correction so the
 /// chord actually covered matches `ds`.
-fn advance(block: &CommandBlock, u: f64, u_end: f64, ds: f64) -> f64 {
-    let e = path::eval(block, u);
+fn advance(
+    curve: &mut FastCurve,
+    block: &CommandBlock,
+    e: &CurvePoint,
+    u: f64,
+    u_end: f64,
+    ds: f64,
+) -> (f64, CurvePoint) {
     let sp = norm(e.d1);
     let du = if sp > 1e-12 {
         ds / sp - ds * ds * dot(e.d1, e.d2) / (2.0 * sp.powi(4))
@@ -383,13 +412,21 @@ fn advance(block: &CommandBlock, u: f64, u_end: f64, ds: f64) -> f64 {
         }
     };
     let mut u1 = (u + du.max(0.0)).min(u_end);
-    let e1 = path::eval(block, u1);
+    let e1 = eval(curve, block, u1);
     let sp1 = norm(e1.d1);
     if sp1 > 1e-12 {
         let chord = dist(e1.p, e.p);
         u1 = (u1 + (ds - chord) / sp1).clamp(u, u_end);
     }
-    u1
+    (u1, eval(curve, block, u1))
+}
+
+/// The block's path at `u`: its NURBS by the moving-data evaluator, plus any helix.
+#[inline]
+fn eval(curve: &mut FastCurve, block: &CommandBlock, u: f64) -> CurvePoint {
+    let mut e = curve.eval(u);
+    path::add_axial(block, u, &mut e);
+    e
 }
 
 #[cfg(test)]

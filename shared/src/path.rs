@@ -17,10 +17,17 @@ pub fn domain(block: &CommandBlock) -> (f64, f64) {
 /// Point, first and second derivative of a validated motion block at `u`.
 pub fn eval(block: &CommandBlock, u: f64) -> CurvePoint {
     let mut e = nurbs::eval(block.degree as usize, block.knots(), block.ctrl(), u);
-    if block.helix.axis != NO_AXIS {
-        add_helix(&block.helix, block.ctrl(), u, &mut e);
-    }
+    add_axial(block, u, &mut e);
     e
+}
+
+/// Completes an evaluation of the block's NURBS at `u` (by any evaluator) with the
+/// block's helical axial motion, if it has one.
+#[inline]
+pub fn add_axial(block: &CommandBlock, u: f64, e: &mut CurvePoint) {
+    if block.helix.axis != NO_AXIS {
+        add_helix(&block.helix, block.ctrl(), u, e);
+    }
 }
 
 fn add_helix(h: &Helix, ctrl: &[[f64; 4]], u: f64, e: &mut CurvePoint) {
