@@ -31,6 +31,7 @@ pub struct Args {
 
 /// Runs the interpolator process; the error names what went wrong.
 pub fn run(args: &Args) -> anyhow::Result<()> {
+    shared::stop::install_handler();
     let cfg = Config {
         prefix: args.prefix.clone(),
         out_dir: args.out.clone(),

@@ -37,10 +37,12 @@ pub enum Fault {
         limit_mm: f64,
     },
     Feedback(ProtocolError),
-    /// Simulated clock: the drives did not answer this cycle's set-point.
+    /// The drives did not answer this cycle's set-point in time (dead or stalled).
     PeerSilent {
         cycle: u64,
     },
+    /// SIGTERM/SIGINT: the launcher stops the stack (a peer failed) or the operator did.
+    StopRequested,
 }
 
 impl core::fmt::Display for Fault {
@@ -54,6 +56,7 @@ impl core::fmt::Display for Fault {
                 ferr_mm
             ),
             Fault::Feedback(e) => write!(f, "bad feedback: {e}"),
+            Fault::StopRequested => write!(f, "stopped on request (SIGTERM/SIGINT): holding position"),
             Fault::PeerSilent { cycle } => {
                 write!(f, "cycle {cycle}: the servo-sim did not answer the set-point (dead or stalled)")
             }

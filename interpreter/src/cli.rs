@@ -116,6 +116,7 @@ pub fn run_interpreter(
         Ok(m) => m,
         Err(e) => return fail(e),
     };
+    shared::stop::install_handler();
     let cfg = process::Config {
         prefix: common.prefix.clone(),
         out_dir: common.out.clone(),

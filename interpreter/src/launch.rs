@@ -254,7 +254,22 @@ fn toml_of(m: &shared::Machine) -> String {
     )
 }
 
+/// Asks every live process to stop (SIGTERM: each holds position, writes its summary and
+/// exits), then kills whatever is still there after a grace period.
 fn stop_all(roles: &mut [Role]) {
+    for r in roles.iter().filter(|r| r.exit.is_none()) {
+        // SAFETY: plain kill(2) on a child we started and have not reaped.
+        unsafe { libc::kill(r.child.id() as libc::pid_t, libc::SIGTERM) };
+    }
+    let deadline = Instant::now() + Duration::from_secs(3);
+    while Instant::now() < deadline && roles.iter().any(|r| r.exit.is_none()) {
+        for r in roles.iter_mut().filter(|r| r.exit.is_none()) {
+            if let Ok(Some(status)) = r.child.try_wait() {
+                r.exit = Some(status);
+            }
+        }
+        std::thread::sleep(Duration::from_millis(5));
+    }
     for r in roles.iter_mut().filter(|r| r.exit.is_none()) {
         let _ = r.child.kill();
         r.exit = r.child.wait().ok();

@@ -63,6 +63,12 @@ pub fn publish<S: Service>(
             if last_state == RunState::Fault {
                 return Ok(Finish::Fault);
             }
+            if shared::stop::requested() {
+                return Err(IpcError(format!(
+                    "stopped on request before block {}",
+                    b.seq
+                )));
+            }
             if !connected && started.elapsed() > start_timeout {
                 return Err(IpcError("no interpolator took the first block".into()));
             }

@@ -25,6 +25,7 @@ pub struct Args {
 }
 
 pub fn run(args: &Args, machine: shared::Machine) -> anyhow::Result<()> {
+    shared::stop::install_handler();
     let cfg = Config {
         prefix: args.prefix.clone(),
         out_dir: args.out.clone(),
@@ -32,7 +33,12 @@ pub fn run(args: &Args, machine: shared::Machine) -> anyhow::Result<()> {
         machine,
         clock: args.clock,
         start_timeout: Duration::from_secs(30),
-        idle_timeout: Duration::from_secs(5),
+        // Set-points come every period under the real clock: 100 ms of silence means the
+        // interpolator is gone. The simulated clock may pause while blocks are late.
+        idle_timeout: match args.clock {
+            ClockMode::Real => Duration::from_millis(100),
+            ClockMode::Sim => Duration::from_secs(5),
+        },
     };
     let summary = run::run::<iceoryx2::prelude::ipc::Service>(&cfg)?;
     match summary.fault {

@@ -200,6 +200,12 @@ pub fn run<S: Service>(cfg: &Config) -> Result<Summary, IpcError> {
                 break;
             }
         }
+        if !done && shared::stop::requested() {
+            fault = Some(format!(
+                "stopped on request (SIGTERM/SIGINT) after {count} set-points; drives hold position"
+            ));
+            done = true;
+        }
         let limit = if count == 0 {
             cfg.start_timeout
         } else {

@@ -21,6 +21,7 @@ pub mod machine;
 pub mod nurbs;
 pub mod path;
 pub mod protocol;
+pub mod stop;
 pub mod trace;
 
 pub use machine::Machine;

@@ -52,6 +52,9 @@ impl<T: Copy + Send + 'static> TraceWriter<T> {
                     if stopping {
                         break;
                     }
+                    // Hand what we have to the kernel every round: if this process is
+                    // killed, at most the last few milliseconds of records are lost.
+                    out.flush()?;
                     std::thread::sleep(Duration::from_millis(5));
                 }
                 out.flush()?;

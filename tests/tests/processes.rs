@@ -290,3 +290,45 @@ fn damaged_log_is_refused_with_record_and_offset_or_salvaged() {
     assert_eq!(&sp.last().unwrap()[2..4], &[10.0, 10.0]);
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+#[test]
+fn a_killed_servo_stops_the_stack_and_the_report_says_so() {
+    let dir = temp_dir("kill");
+    let mut child = Command::new(cnc_exe())
+        .args(["run", "--out"])
+        .arg(&dir)
+        .stdout(std::process::Stdio::null())
+        .stderr(std::process::Stdio::null())
+        .spawn()
+        .unwrap();
+    // Wait until the stack is moving, then kill the drives without warning.
+    let t = std::time::Instant::now();
+    while std::fs::metadata(dir.join("feedback.csv")).map_or(0, |m| m.len()) < 20_000 {
+        assert!(t.elapsed().as_secs() < 30, "the run never started");
+        std::thread::sleep(std::time::Duration::from_millis(20));
+    }
+    let killed = Command::new("pkill")
+        .args([
+            "-9",
+            "-f",
+            &format!("cnc role servo-sim --prefix cnc{}_", child.id()),
+        ])
+        .status()
+        .unwrap();
+    assert!(killed.success());
+    let status = child.wait().unwrap();
+    assert_eq!(status.code(), Some(1));
+    let rep = report(&dir);
+    assert_eq!(rep["outcome"], "fault");
+    let fault = rep["fault"].as_str().unwrap();
+    assert!(fault.starts_with("servo-sim failed (signal 9)"), "{fault}");
+    // The survivors stopped in order and kept what they had measured.
+    let procs = rep["processes"].as_array().unwrap();
+    assert!(
+        procs.iter().all(|p| p["exit"] != "killed by the launcher"),
+        "{procs:?}"
+    );
+    let (_, sp) = csv(&dir.join("setpoints.csv"));
+    assert_eq!(sp.len() as u64, rep["cycles"].as_u64().unwrap());
+    let _ = std::fs::remove_dir_all(&dir);
+}

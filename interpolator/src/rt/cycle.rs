@@ -276,6 +276,18 @@ pub fn run<S: Service>(cfg: &Config) -> Result<Summary, RunError> {
 
         // inputs → faults
         answers.drain(&fb_sub, &engine, &mut fault);
+        if shared::stop::requested() {
+            fault.get_or_insert(Fault::StopRequested);
+        }
+        // Real clock: the drives answer within the period; a long silence means the
+        // servo-sim is dead or stalled. The floor rides out the hypervisor stalls of a
+        // few ms these machines show.
+        let lag_limit = (100_000_000 / cfg.period_ns).max(5);
+        if !sim && cycle > lag_limit && !answers.has(cycle - lag_limit) {
+            fault.get_or_insert(Fault::PeerSilent {
+                cycle: cycle - lag_limit,
+            });
+        }
         // command
         let tick = match fault {
             None => engine.tick(&mut src),
