@@ -50,6 +50,17 @@ pub enum Command {
     /// lock-step servo the new setpoints.csv and feedback.csv equal the original run's,
     /// byte for byte.
     Replay(crate::replay::ReplayArgs),
+    /// Turn a run directory into one self-contained HTML page of plots (report.html).
+    Report {
+        /// The run directory.
+        run_dir: PathBuf,
+        /// Where to write the page [default: RUN_DIR/report.html].
+        #[arg(long)]
+        out: Option<PathBuf>,
+        /// Open the page in the desktop's browser (says where the file is when there is none).
+        #[arg(long)]
+        open: bool,
+    },
     /// Inspect command logs.
     #[command(subcommand)]
     Log(LogCommand),
@@ -134,6 +145,25 @@ pub fn run_interpreter(
     }
 }
 
+/// Hands the page to the desktop's browser, or says where it is when there is no desktop.
+fn open_in_browser(page: &std::path::Path) {
+    let desktop =
+        std::env::var_os("DISPLAY").is_some() || std::env::var_os("WAYLAND_DISPLAY").is_some();
+    let opened = desktop
+        && std::process::Command::new("xdg-open")
+            .arg(page)
+            .stdout(std::process::Stdio::null())
+            .stderr(std::process::Stdio::null())
+            .status()
+            .is_ok_and(|s| s.success());
+    if !opened {
+        eprintln!(
+            "cnc report: no desktop browser to open here; the page is {}",
+            page.display()
+        );
+    }
+}
+
 pub fn main() -> ExitCode {
     let cli = Cli::parse();
     init_tracing();
@@ -188,6 +218,18 @@ pub fn main() -> ExitCode {
             }
         }
         Command::Replay(args) => crate::replay::replay(&args),
+        Command::Report { run_dir, out, open } => {
+            match crate::html::write(&run_dir, out.as_deref()) {
+                Ok(page) => {
+                    println!("{}", page.display());
+                    if open {
+                        open_in_browser(&page);
+                    }
+                    ExitCode::SUCCESS
+                }
+                Err(e) => fail(e),
+            }
+        }
         Command::Log(LogCommand::Show { log, json }) => crate::replay::show(&log, json),
         Command::Machine => {
             print!("{}", shared::Machine::default_toml());

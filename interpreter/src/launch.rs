@@ -51,6 +51,9 @@ pub struct RunArgs {
     /// Scheduling of the interpolator: `auto` tries SCHED_FIFO and falls back with a warning.
     #[arg(long, value_enum, default_value_t = interpolator::rt::sched::SchedMode::Auto)]
     pub sched: interpolator::rt::sched::SchedMode,
+    /// Do not write report.html at the end (see `cnc report`).
+    #[arg(long)]
+    pub no_report: bool,
 }
 
 /// `YYYYMMDDTHHMMSSZ` for a Unix time (UTC, proleptic Gregorian).
@@ -156,6 +159,7 @@ fn run_inner(args: &RunArgs) -> Result<bool, String> {
         period_ns,
         clock: args.clock,
         sched: args.sched,
+        html: !args.no_report,
     };
     stack.launch(&src.name, input)
 }
@@ -168,6 +172,9 @@ pub struct Stack {
     pub period_ns: u64,
     pub clock: ClockMode,
     pub sched: interpolator::rt::sched::SchedMode,
+    /// Write report.html after report.json (after every process has ended, so it never
+    /// touches a cycle).
+    pub html: bool,
 }
 
 impl Stack {
@@ -243,6 +250,12 @@ impl Stack {
         rep.write(&dir.join("report.json"))
             .map_err(|e| format!("writing report.json: {e}"))?;
         print!("{}", rep.summary_text(dir));
+        if self.html {
+            match crate::html::write(dir, None) {
+                Ok(page) => println!("  report page  {}", page.display()),
+                Err(e) => eprintln!("cnc: report.html not written: {e}"),
+            }
+        }
         Ok(rep.outcome == "done")
     }
 }

@@ -16,6 +16,7 @@
 pub mod blocks;
 pub mod cli;
 pub mod estimate;
+pub mod html;
 pub mod launch;
 pub mod parse;
 pub mod process;

@@ -32,6 +32,9 @@ pub struct ReplayArgs {
     /// Scheduling of the interpolator.
     #[arg(long, value_enum, default_value_t = interpolator::rt::sched::SchedMode::Auto)]
     pub sched: interpolator::rt::sched::SchedMode,
+    /// Do not write report.html at the end.
+    #[arg(long)]
+    pub no_report: bool,
 }
 
 /// The log file of a run directory, or the file itself.
@@ -92,6 +95,7 @@ fn replay_inner(args: &ReplayArgs) -> Result<bool, String> {
         period_ns: header.period_ns,
         clock: args.clock,
         sched: args.sched,
+        html: !args.no_report,
     };
     stack.launch(&header.program, input)
 }

@@ -1,0 +1,230 @@
+//! The page: heading, what is missing, the summary table, then each section, with one
+//! `<style>` block. Summary cells carry `data-key` attributes naming the `report.json`
+//! field they show, so tools and tests can find a figure without parsing prose.
+
+use super::data::{Report, Run};
+use super::svg::{esc, num};
+use super::{path, polar, series, timing};
+use std::fmt::Write;
+
+const CSS: &str = r#"
+body{font:15px/1.45 system-ui,-apple-system,"Segoe UI",Roboto,sans-serif;color:#111;margin:0;background:#f3f3f1}
+main{max-width:1060px;margin:0 auto;padding:16px 24px 48px;background:#fff}
+h1{font-size:22px;margin:8px 0 4px}h2{font-size:18px;border-bottom:2px solid #222;margin-top:32px}h3{font-size:15px}
+.sub{color:#555;margin:0 0 12px}
+.problems{border:2px solid #b00020;background:#fff3f3;padding:8px 16px;margin:12px 0}
+.problems h2{border:0;margin:4px 0;color:#b00020}
+.missing{border-left:4px solid #b00020;padding:6px 10px;background:#fff3f3}
+.note{color:#333;font-size:13px}
+table{border-collapse:collapse;margin:8px 0}
+th,td{padding:3px 10px;border-bottom:1px solid #ddd;text-align:left;vertical-align:top}
+td{font-variant-numeric:tabular-nums}
+table.data td{text-align:right}table.data td:nth-child(4),table.data td:nth-child(5){text-align:left}
+.bad{color:#b00020;font-weight:600}.good{color:#1b6e2f;font-weight:600}
+.row{display:flex;flex-wrap:wrap;gap:12px;align-items:flex-start}
+svg.chart{display:block;max-width:100%;height:auto;margin:6px 0}
+svg text{font-family:system-ui,sans-serif;fill:#111}
+.ttl{font-size:14px;font-weight:600}.tx{font-size:11px;text-anchor:middle}.ty{font-size:11px;text-anchor:end}
+.xl,.yl{font-size:12px;text-anchor:middle}.lg{font-size:12px}.lim{font-size:11px;text-anchor:end;fill:#b00020}
+.area{fill:#fff;stroke:#444}.grid{stroke:#d8d8d8;stroke-width:.6}.ring0{stroke:#000;stroke-width:1.4}
+.feed{fill:none;stroke-width:2;stroke-linejoin:round;stroke-linecap:round}
+.rapid{fill:none;stroke:#8a8a8a;stroke-width:1;stroke-dasharray:5 4}
+.blk:hover .feed,.blk:hover .rapid{stroke-width:4}
+.mark text{font-size:12px;font-weight:600}
+@media print{body{background:#fff}main{padding:0}}
+"#;
+
+/// The whole page for `run`.
+pub fn page(run: &Run) -> String {
+    let mut body = String::new();
+    path::section(run, &mut body);
+    series::motion(run, &mut body);
+    let max_contour = series::errors(run, &mut body);
+    polar::section(run, &mut body);
+    timing::section(run, &mut body);
+
+    let program = run
+        .report
+        .as_ref()
+        .and_then(|r| r.program.clone())
+        .unwrap_or_else(|| "(program unknown)".into());
+    let mut out = String::with_capacity(body.len() + 16_384);
+    let _ = write!(
+        out,
+        "<!DOCTYPE html><html lang=\"en\"><head><meta charset=\"utf-8\"><meta name=\"viewport\" content=\"width=device-width, initial-scale=1\"><title>cnc run: {p}</title><style>{CSS}</style></head><body><main><h1>Run report: {p}</h1><p class=\"sub\">Run directory <code>{d}</code></p>",
+        p = esc(&program),
+        d = esc(&run.dir.display().to_string())
+    );
+    if !run.problems.is_empty() {
+        out.push_str("<div class=\"problems\" id=\"problems\"><h2>Missing or damaged in this run directory</h2><ul>");
+        for p in &run.problems {
+            let _ = write!(out, "<li>{}</li>", esc(p));
+        }
+        out.push_str("</ul><p>Everything that could be read is drawn below; plots that need a missing file say so in place.</p></div>");
+    }
+    summary(run, max_contour, &mut out);
+    out.push_str(&body);
+    out.push_str("<p class=\"note\">Made by <code>cnc report</code>. Plots reduce the data to the minimum and maximum per pixel column, so no single-cycle spike is lost; the figures in the summary are those of report.json.</p></main></body></html>\n");
+    out
+}
+
+fn row(out: &mut String, key: &str, name: &str, value: &str) {
+    let _ = write!(
+        out,
+        "<tr><th>{name}</th><td data-key=\"{key}\">{value}</td></tr>"
+    );
+}
+
+fn or_missing<T>(v: Option<T>, f: impl Fn(T) -> String) -> String {
+    v.map_or_else(|| "<span class=\"bad\">not recorded</span>".into(), f)
+}
+
+fn summary(run: &Run, max_contour: Option<f64>, out: &mut String) {
+    out.push_str("<section id=\"summary\"><h2>Summary</h2>");
+    let Some(r) = &run.report else {
+        out.push_str("<p class=\"missing\">No summary figures: report.json is missing or unusable (see above). The plots below are drawn from the other files.</p></section>");
+        return;
+    };
+    out.push_str("<table class=\"figs\">");
+    row(
+        out,
+        "program",
+        "program",
+        &or_missing(r.program.as_deref(), |p| format!("<code>{}</code>", esc(p))),
+    );
+    row(out, "outcome", "outcome", &outcome(r));
+    row(
+        out,
+        "period_ns",
+        "interpolation period",
+        &format!(
+            "{} µs ({} Hz)",
+            num(run.period_ns as f64 / 1000.0),
+            num(1e9 / run.period_ns as f64)
+        ),
+    );
+    row(
+        out,
+        "clock",
+        "clock",
+        &or_missing(r.clock.as_deref(), |c| match c {
+            "real" => "real time (cycles released by the system clock)".into(),
+            "sim" => "simulated (cycles run back to back, no sleeping; timing not measured)".into(),
+            other => esc(other),
+        }),
+    );
+    row(
+        out,
+        "sched",
+        "scheduling in force",
+        &or_missing(r.sched.as_ref(), |s| {
+            let mut t = match s.policy.as_str() {
+                "fifo" => format!("SCHED_FIFO (real-time) priority {}", s.priority),
+                "other" => "SCHED_OTHER (ordinary time sharing, not real-time)".into(),
+                p => esc(p),
+            };
+            t.push_str(if s.memory_locked {
+                ", memory locked"
+            } else {
+                ", memory not locked"
+            });
+            for w in &s.warnings {
+                let _ = write!(t, "<br><span class=\"bad\">warning: {}</span>", esc(w));
+            }
+            t
+        }),
+    );
+    row(
+        out,
+        "time_s",
+        "machining time",
+        &or_missing(r.time_s, |v| format!("{v:.3} s")),
+    );
+    row(
+        out,
+        "cycles",
+        "cycles",
+        &or_missing(r.cycles, |v| v.to_string()),
+    );
+    row(
+        out,
+        "path_length_mm",
+        "path length",
+        &or_missing(r.path_length_mm, |v| format!("{v:.3} mm")),
+    );
+    row(
+        out,
+        "avg_feed_mm_per_min",
+        "average feed",
+        &or_missing(r.avg_feed_mm_per_min, |v| format!("{v:.1} mm/min")),
+    );
+    row(
+        out,
+        "peak_feed_mm_per_min",
+        "peak feed",
+        &or_missing(r.peak_feed_mm_per_min, |v| format!("{v:.1} mm/min")),
+    );
+    row(
+        out,
+        "max_following_error_um",
+        "max following error",
+        &or_missing(r.max_following_error_um, |v| {
+            let axes = r.max_following_error_axis_um.map_or(String::new(), |a| {
+                format!(" (X {:.2}, Y {:.2}, Z {:.2} µm)", a[0], a[1], a[2])
+            });
+            format!("{v:.2} µm{axes}")
+        }),
+    );
+    row(
+        out,
+        "max_contour_error_um",
+        "max contour error (computed here)",
+        &max_contour.map_or_else(|| "not available".into(), |v| format!("{v:.2} µm")),
+    );
+    row(
+        out,
+        "chord_tolerance_mm",
+        "chord tolerance (machine limit)",
+        &format!("{} mm", num(run.machine.chord_tolerance_mm)),
+    );
+    let misses = match (r.misses, r.clock.as_deref()) {
+        (Some(0), _) => "<span class=\"good\">0</span>".to_string(),
+        (Some(m), _) => format!("<span class=\"bad\">{m}</span> (see Timing)"),
+        (None, Some("sim")) => "not measured (simulated clock)".into(),
+        (None, _) => "not recorded".into(),
+    };
+    row(out, "misses", "deadline misses", &misses);
+    row(
+        out,
+        "blocks",
+        "command blocks",
+        &or_missing(r.blocks, |v| v.to_string()),
+    );
+    row(
+        out,
+        "lost_setpoints",
+        "lost set-points",
+        &or_missing(r.lost_setpoints, |v| {
+            if v == 0 {
+                "0".into()
+            } else {
+                format!("<span class=\"bad\">{v}</span>")
+            }
+        }),
+    );
+    out.push_str("</table></section>");
+}
+
+fn outcome(r: &Report) -> String {
+    match (r.outcome.as_deref(), r.fault.as_deref()) {
+        (Some("done"), _) => {
+            "<span class=\"good\">completed</span>: the program ran to its end".into()
+        }
+        (Some(_), Some(f)) => format!(
+            "<span class=\"bad\">stopped with a fault</span>: {}",
+            esc(f)
+        ),
+        (Some(o), None) => format!("<span class=\"bad\">{}</span>", esc(o)),
+        (None, _) => "<span class=\"bad\">not recorded</span>".into(),
+    }
+}

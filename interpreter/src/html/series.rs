@@ -1,0 +1,255 @@
+//! Plots over time: path speed against the feed limits, path acceleration and jerk against
+//! the machine's limits, following and contour error.
+//!
+//! Speed, acceleration and jerk are finite differences of consecutive set-points (first,
+//! second and third, divided by the period's powers): the motion the drives were asked
+//! for, including the centripetal part on curves. A gap in cycle numbers (a lost row)
+//! breaks the line instead of inventing a difference across it. Every series goes through
+//! [`Reducer`], so a one-hour run draws as quickly and as small as a one-second one.
+
+use super::data::Run;
+use super::svg::{num, pad_range, y_extent, Chart, Reducer, Style, AXES, LIMIT, SOLID};
+use shared::path::norm;
+use std::collections::HashMap;
+use std::fmt::Write;
+
+/// The time axis shared by every plot over time: `(0, last cycle × period)` in s.
+pub fn time_range(run: &Run) -> (f64, f64) {
+    let last_sp = run.setpoints.as_ref().and_then(|s| s.cycle.last().copied());
+    let last_fb = run.feedback.as_ref().and_then(|f| f.cycle.last().copied());
+    let last = last_sp.max(last_fb).unwrap_or(0).max(1);
+    (0.0, last as f64 * run.period_s())
+}
+
+fn chart(id: &str, title: &str, y_label: &str, t: (f64, f64), y: (f64, f64)) -> Chart {
+    Chart::new(id, title, "time (s)", y_label, t, y)
+}
+
+fn draw(c: &Chart, segs: &[Vec<(f64, f64)>], st: &Style, out: &mut String) {
+    for s in segs {
+        c.line(out, s, st);
+    }
+}
+
+/// The feed, acceleration and jerk plots.
+pub fn motion(run: &Run, out: &mut String) {
+    out.push_str("<section id=\"feed\"><h2>Feed, acceleration and jerk</h2>");
+    let Some(sp) = &run.setpoints else {
+        out.push_str("<p class=\"missing\">Not drawn: setpoints.csv is missing or unusable (see the problems above).</p></section>");
+        return;
+    };
+    let tr = time_range(run);
+    let cols = chart("x", "", "", tr, (0.0, 1.0)).plot_w();
+    let period = run.period_s();
+    let mut limit_of_line: HashMap<u32, f64> = HashMap::new();
+    for b in run.motion() {
+        let e = limit_of_line.entry(b.source_line).or_insert(0.0);
+        *e = e.max(b.feed_mm_per_min);
+    }
+    let [mut speed, mut limit, mut acc, mut jerk] = [0; 4].map(|_| Reducer::new(tr.0, tr.1, cols));
+    // Positions of the last four consecutive cycles, newest first.
+    let mut hist: Vec<[f64; 3]> = Vec::with_capacity(4);
+    let mut prev_cycle: Option<u64> = None;
+    for i in 0..sp.cycle.len() {
+        let (cyc, p) = (sp.cycle[i], sp.pos_mm[i]);
+        let t = cyc as f64 * period;
+        if prev_cycle.is_some_and(|c| c + 1 != cyc) {
+            hist.clear();
+            for r in [&mut speed, &mut acc, &mut jerk, &mut limit] {
+                r.gap();
+            }
+        }
+        prev_cycle = Some(cyc);
+        hist.insert(0, p);
+        hist.truncate(4);
+        if let Some(f) = limit_of_line.get(&sp.line[i]) {
+            limit.push(t, *f);
+        }
+        let d = |k: usize| [0, 1, 2].map(|j| hist[k][j] - hist[k + 1][j]);
+        if hist.len() >= 2 {
+            speed.push(t, norm(d(0)) / period * 60.0);
+        }
+        if hist.len() >= 3 {
+            let (a, b) = (d(0), d(1));
+            acc.push(t, norm([0, 1, 2].map(|j| a[j] - b[j])) / (period * period));
+        }
+        if hist.len() >= 4 {
+            let (a, b, c) = (d(0), d(1), d(2));
+            let j3 = [0, 1, 2].map(|j| a[j] - 2.0 * b[j] + c[j]);
+            jerk.push(t, norm(j3) / (period * period * period));
+        }
+    }
+    let (speed, limit, acc, jerk) = (speed.finish(), limit.finish(), acc.finish(), jerk.finish());
+
+    let peak = run.report.as_ref().and_then(|r| r.peak_feed_mm_per_min);
+    let (lo, hi) = y_extent(&speed);
+    let (_, lhi) = y_extent(&limit);
+    let y = pad_range(
+        lo.min(0.0),
+        hi.max(if lhi.is_finite() { lhi } else { hi }),
+        true,
+    );
+    let c = chart(
+        "feed-plot",
+        "Path speed over time: measured from the set-points, against the block's feed limit",
+        "feed (mm/min)",
+        tr,
+        y,
+    );
+    c.open(out);
+    let limit_style = Style {
+        dash: "7 4",
+        ..LIMIT
+    };
+    draw(&c, &limit, &limit_style, out);
+    draw(&c, &speed, &SOLID, out);
+    c.close(
+        out,
+        &[
+            ("path speed |Δp|/T", SOLID),
+            (
+                "feed limit of the block (programmed F or rapid, lowered by curvature)",
+                limit_style,
+            ),
+        ],
+    );
+    let _ = write!(
+        out,
+        "<p class=\"note\">The feed limit is the block's planned maximum (the programmed feed, or the rapid rate for G0, reduced where the curvature demands it), drawn for the source line of each cycle.{}</p>",
+        peak.map_or(String::new(), |p| format!(
+            " Peak feed reported by the interpolator: {} mm/min.",
+            num(p.round())
+        ))
+    );
+
+    let amax = run.machine.path_acc_mm_per_s2;
+    let (_, ahi) = y_extent(&acc);
+    let c = chart(
+        "acc-plot",
+        "Path acceleration over time (second difference of the set-points), with the machine limit",
+        "acceleration (mm/s²)",
+        tr,
+        pad_range(0.0, ahi.max(amax * 1.05), true),
+    );
+    c.open(out);
+    draw(&c, &acc, &SOLID, out);
+    c.hline(
+        out,
+        amax,
+        &LIMIT,
+        &format!("path_acc_mm_per_s2 = {}", num(amax)),
+    );
+    c.close(
+        out,
+        &[
+            ("|a| of the set-points (tangential and centripetal)", SOLID),
+            ("machine limit path_acc_mm_per_s2", LIMIT),
+        ],
+    );
+
+    let (_, jhi) = y_extent(&jerk);
+    let c = chart(
+        "jerk-plot",
+        "Path jerk over time (third difference of the set-points)",
+        "jerk (mm/s³)",
+        tr,
+        pad_range(0.0, jhi, true),
+    );
+    c.open(out);
+    draw(&c, &jerk, &SOLID, out);
+    c.close(out, &[("|j| of the set-points", SOLID)]);
+    out.push_str("<p class=\"note\">The machine file sets no jerk limit: the profile is acceleration-limited, so jerk peaks where the acceleration switches (corners, ramps, exact stops). Each pixel column shows the minimum and maximum of the cycles in it, so no single-cycle spike is hidden.</p></section>");
+}
+
+/// Following error per axis and the contour error (its part normal to the path).
+/// Returns the largest contour error in µm, when it could be computed.
+pub fn errors(run: &Run, out: &mut String) -> Option<f64> {
+    out.push_str("<section id=\"errors\"><h2>Following and contour error</h2>");
+    let Some(fb) = &run.feedback else {
+        out.push_str("<p class=\"missing\">Not drawn: feedback.csv is missing or unusable (see the problems above).</p></section>");
+        return None;
+    };
+    let tr = time_range(run);
+    let cols = chart("x", "", "", tr, (0.0, 1.0)).plot_w();
+    let period = run.period_s();
+    let mut axes = [0; 3].map(|_| Reducer::new(tr.0, tr.1, cols));
+    let mut contour = Reducer::new(tr.0, tr.1, cols);
+    let sp = run.setpoints.as_ref();
+    let mut max_contour = 0.0f64;
+    let mut prev: Option<u64> = None;
+    for i in 0..fb.cycle.len() {
+        let cyc = fb.cycle[i];
+        let t = cyc as f64 * period;
+        if prev.is_some_and(|c| c + 1 != cyc) {
+            for r in axes.iter_mut() {
+                r.gap();
+            }
+            contour.gap();
+        }
+        prev = Some(cyc);
+        let e = fb.ferr_um[i].map(f64::from);
+        for (r, v) in axes.iter_mut().zip(e) {
+            r.push(t, v);
+        }
+        if let Some(tan) = sp.and_then(|s| tangent(s, i, cyc)) {
+            let along = e[0] * tan[0] + e[1] * tan[1] + e[2] * tan[2];
+            let n = norm([0, 1, 2].map(|j| e[j] - along * tan[j]));
+            max_contour = max_contour.max(n);
+            contour.push(t, n);
+        }
+    }
+    let axes = axes.map(Reducer::finish);
+    let contour = contour.finish();
+    let mut lo = f64::INFINITY;
+    let mut hi = f64::NEG_INFINITY;
+    for s in axes.iter().chain([&contour]) {
+        let (a, b) = y_extent(s);
+        lo = lo.min(a);
+        hi = hi.max(b);
+    }
+    let c = chart(
+        "ferr-plot",
+        "Following error per axis (commanded − measured) and contour error, over time",
+        "error (µm)",
+        tr,
+        pad_range(lo, hi, false),
+    );
+    c.open(out);
+    for (k, s) in axes.iter().enumerate() {
+        draw(&c, s, &AXES[k], out);
+    }
+    draw(&c, &contour, &AXES[3], out);
+    c.close(
+        out,
+        &[
+            ("X", AXES[0]),
+            ("Y", AXES[1]),
+            ("Z", AXES[2]),
+            ("contour error (normal to the path)", AXES[3]),
+        ],
+    );
+    let _ = write!(
+        out,
+        "<p class=\"note\">Contour error is estimated as the part of the following-error vector normal to the commanded direction of motion (set-point differences); it is the error that shows on the part. Largest contour error: <b id=\"max-contour\">{:.2} µm</b>.{}</p></section>",
+        max_contour,
+        if sp.is_none() { " (Not available: setpoints.csv is unusable.)" } else { "" }
+    );
+    sp.map(|_| max_contour)
+}
+
+/// Unit direction of motion at cycle `cyc` from the set-points, `fb_index` being the hint
+/// where the same cycle usually sits (both files hold one row per cycle).
+fn tangent(sp: &super::data::Setpoints, fb_index: usize, cyc: u64) -> Option<[f64; 3]> {
+    let i = if sp.cycle.get(fb_index) == Some(&cyc) {
+        fb_index
+    } else {
+        sp.cycle.binary_search(&cyc).ok()?
+    };
+    let j = i.checked_sub(1)?;
+    if sp.cycle[j] + 1 != cyc {
+        return None;
+    }
+    let d = [0, 1, 2].map(|k| sp.pos_mm[i][k] - sp.pos_mm[j][k]);
+    let n = norm(d);
+    (n > 1e-9).then(|| d.map(|v| v / n))
+}

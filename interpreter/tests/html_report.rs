@@ -1,0 +1,414 @@
+//! The HTML run report (`interpreter::html`) over real run directories: the circle, the
+//! built-in demo and a LinuxCNC NURBS program are run through the real three-process
+//! stack under the simulated clock, then rendered, and the page's content is checked
+//! against `report.json`. Damaged run directories must give a clear error or a page that
+//! names what is missing, never a panic.
+
+use interpreter::html::{self, HtmlError};
+use serde_json::Value;
+use std::fs;
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+const CIRCLE: &str = "G21 G17 G90\nG0 X10 Y0\nG3 X10 Y0 I-10 J0 F3000\nM2\n";
+
+fn scratch(name: &str) -> PathBuf {
+    let d =
+        Path::new(env!("CARGO_TARGET_TMPDIR")).join(format!("html-{name}-{}", std::process::id()));
+    let _ = fs::remove_dir_all(&d);
+    fs::create_dir_all(&d).unwrap();
+    d
+}
+
+/// `cnc run --clock sim` into `out`; `program` None runs the built-in demo.
+fn run_sim(program: Option<&Path>, out: &Path) {
+    let mut cmd = Command::new(env!("CARGO_BIN_EXE_cnc"));
+    cmd.args(["run", "--clock", "sim", "--out"]).arg(out);
+    if let Some(p) = program {
+        cmd.arg(p);
+    }
+    let o = cmd.output().unwrap();
+    assert!(
+        o.status.success(),
+        "cnc run failed: {}\n{}",
+        String::from_utf8_lossy(&o.stdout),
+        String::from_utf8_lossy(&o.stderr)
+    );
+}
+
+fn circle_run(name: &str) -> PathBuf {
+    let d = scratch(name);
+    let prog = d.join("circle.ngc");
+    fs::write(&prog, CIRCLE).unwrap();
+    let run = d.join("run");
+    run_sim(Some(&prog), &run);
+    run
+}
+
+fn report(run: &Path) -> Value {
+    serde_json::from_str(&fs::read_to_string(run.join("report.json")).unwrap()).unwrap()
+}
+
+fn copy_dir(from: &Path, to: &Path) {
+    fs::create_dir_all(to).unwrap();
+    for e in fs::read_dir(from).unwrap() {
+        let e = e.unwrap();
+        fs::copy(e.path(), to.join(e.file_name())).unwrap();
+    }
+}
+
+/// The cell of the summary that shows `key`, up to its closing tag.
+fn cell<'a>(page: &'a str, key: &str) -> &'a str {
+    let tag = format!("data-key=\"{key}\">");
+    let at = page
+        .find(&tag)
+        .unwrap_or_else(|| panic!("no summary cell {key}"))
+        + tag.len();
+    let end = page[at..].find("</td>").unwrap() + at;
+    &page[at..end]
+}
+
+/// Every figure of the summary equals report.json's, as the page rounds it.
+fn check_summary(page: &str, rep: &Value) {
+    let f = |k: &str| rep[k].as_f64().unwrap();
+    assert_eq!(cell(page, "time_s"), format!("{:.3} s", f("time_s")));
+    assert_eq!(
+        cell(page, "path_length_mm"),
+        format!("{:.3} mm", f("path_length_mm"))
+    );
+    assert_eq!(
+        cell(page, "avg_feed_mm_per_min"),
+        format!("{:.1} mm/min", f("avg_feed_mm_per_min"))
+    );
+    assert_eq!(
+        cell(page, "peak_feed_mm_per_min"),
+        format!("{:.1} mm/min", f("peak_feed_mm_per_min"))
+    );
+    let axes = rep["max_following_error_axis_um"].as_array().unwrap();
+    assert_eq!(
+        cell(page, "max_following_error_um"),
+        format!(
+            "{:.2} µm (X {:.2}, Y {:.2}, Z {:.2} µm)",
+            f("max_following_error_um"),
+            axes[0].as_f64().unwrap(),
+            axes[1].as_f64().unwrap(),
+            axes[2].as_f64().unwrap()
+        )
+    );
+    assert_eq!(
+        cell(page, "cycles"),
+        rep["cycles"].as_u64().unwrap().to_string()
+    );
+    assert_eq!(
+        cell(page, "blocks"),
+        rep["blocks"].as_u64().unwrap().to_string()
+    );
+    let period_us = rep["period_ns"].as_u64().unwrap() / 1000;
+    assert!(cell(page, "period_ns").starts_with(&format!("{period_us} µs")));
+    assert!(cell(page, "program").contains(rep["program"].as_str().unwrap()));
+    if rep["outcome"] == "done" {
+        assert!(cell(page, "outcome").contains("completed"));
+    }
+    if rep["clock"] == "sim" {
+        assert_eq!(cell(page, "misses"), "not measured (simulated clock)");
+        assert!(page.contains("id=\"timing-not-measured\""));
+        assert!(!page.contains("id=\"pct-plot\""));
+    }
+}
+
+/// Each plot is there with its title and the axis labels with their units.
+fn check_plots(page: &str) {
+    for (id, labels) in [
+        ("path-plot", &["(mm)"][..]),
+        ("feed-plot", &["time (s)", "feed (mm/min)"][..]),
+        (
+            "acc-plot",
+            &["time (s)", "acceleration (mm/s²)", "path_acc_mm_per_s2"][..],
+        ),
+        ("jerk-plot", &["time (s)", "jerk (mm/s³)"][..]),
+        ("ferr-plot", &["time (s)", "error (µm)"][..]),
+    ] {
+        let at = page
+            .find(&format!("id=\"{id}\""))
+            .unwrap_or_else(|| panic!("no {id}"));
+        let svg = &page[at..at + page[at..].find("</svg>").unwrap()];
+        assert!(
+            svg.contains(&format!("<title id=\"{id}-t\">")),
+            "{id}: no title"
+        );
+        for l in labels {
+            assert!(svg.contains(l), "{id}: no `{l}`");
+        }
+        assert!(svg.contains("<polyline"), "{id}: no data");
+    }
+    // Self-contained: no script, nothing fetched.
+    assert!(!page.contains("<script"));
+    assert!(!page.contains("http://") && !page.contains("https://"));
+    assert!(page.len() < 5_000_000);
+}
+
+#[test]
+fn circle_page_matches_report_and_has_a_roundness_plot() {
+    let run = circle_run("circle");
+    let path = html::write(&run, None).unwrap();
+    assert_eq!(path, run.join("report.html"));
+    let page = fs::read_to_string(&path).unwrap();
+    let rep = report(&run);
+    check_summary(&page, &rep);
+    check_plots(&page);
+    assert!(
+        !page.contains("id=\"problems\""),
+        "an intact run lists no problems"
+    );
+    assert!(page.contains("XY plane"));
+    // The roundness plot with its figure, about the programmed centre and radius.
+    assert!(page.contains("id=\"polar-plot\""));
+    assert!(page.contains("id=\"circularity\">"));
+    assert!(page.contains("10.0000 mm"), "best-fit radius");
+    assert!(page.contains("X 0.0000 mm, Y 0.0000 mm"), "best-fit centre");
+    // Source-line tooltips on the path, the rapid drawn dashed, start and end marked.
+    assert!(page.contains("<title>line 3: G3 X10 Y0 I-10 J0 F3000 |"));
+    assert!(page.contains("class=\"rapid\""));
+    assert!(page.contains("<title>start</title>") && page.contains("<title>end</title>"));
+    // Written elsewhere on request.
+    let other = run.join("elsewhere.html");
+    assert_eq!(html::write(&run, Some(&other)).unwrap(), other);
+    assert_eq!(fs::read_to_string(other).unwrap(), page);
+}
+
+#[test]
+fn demo_and_linuxcnc_pages_have_no_roundness_plot() {
+    let d = scratch("open");
+    let demo = d.join("demo");
+    run_sim(None, &demo);
+    let page = html::render(&demo).unwrap();
+    check_summary(&page, &report(&demo));
+    check_plots(&page);
+    assert!(!page.contains("id=\"polar-plot\""));
+    assert!(page.contains("No roundness plot"));
+    assert!(
+        page.contains("XY plane (projection)"),
+        "the demo also moves in Z"
+    );
+
+    let prog =
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("../tests/peers/linuxcnc/g5_butterfly-yz.ngc");
+    let bfly = d.join("butterfly");
+    run_sim(Some(&prog), &bfly);
+    let page = html::render(&bfly).unwrap();
+    check_summary(&page, &report(&bfly));
+    check_plots(&page);
+    assert!(!page.contains("id=\"polar-plot\""));
+    assert!(
+        page.contains("YZ plane"),
+        "a G19 program is drawn in its own plane"
+    );
+    assert!(
+        page.contains("<title>line ") && page.contains("G5.2"),
+        "NURBS tooltips name the G5.2 line"
+    );
+    fs::write(d.join("butterfly.html"), page).unwrap();
+}
+
+#[test]
+fn misses_are_listed_exactly() {
+    let run = circle_run("misses");
+    let mut rep = report(&run);
+    rep["clock"] = "real".into();
+    rep["misses"] = 3.into();
+    for k in ["wake_late_ns", "compute_ns", "publish_ns"] {
+        rep[k] = serde_json::json!({"p50": 20000, "p99": 90000, "max": 1500000});
+    }
+    let miss = |cycle: u64, cause: &str, overrun: u64| {
+        serde_json::json!({"cycle": cycle, "line": 3, "cause": cause, "wake_late_ns": 1_200_000,
+            "compute_ns": 5_000, "publish_ns": 9_000, "overrun_ns": overrun})
+    };
+    rep["miss_list"] = serde_json::json!([
+        miss(100, "late_wake", 250_000),
+        miss(700, "compute", 40_000),
+        miss(1200, "publish", 1_000_000)
+    ]);
+    fs::write(run.join("report.json"), rep.to_string()).unwrap();
+    let page = html::render(&run).unwrap();
+    for id in ["pct-plot", "miss-plot", "miss-table", "timing-table"] {
+        assert!(page.contains(&format!("id=\"{id}\"")), "no {id}");
+    }
+    let table = &page[page.find("id=\"miss-table\"").unwrap()..];
+    let table = &table[..table.find("</table>").unwrap()];
+    let rows: Vec<&str> = table.split("<tr><td>").skip(1).collect();
+    assert_eq!(rows.len(), 3);
+    // Worst first, each with its source line and cause in words.
+    assert!(rows[0].starts_with("1200<") && rows[0].contains("publish"));
+    assert!(rows[1].starts_with("100<") && rows[1].contains("late wake-up"));
+    assert!(rows[2].starts_with("700<") && rows[2].contains("compute"));
+    assert!(rows.iter().all(|r| r.contains("G3 X10 Y0 I-10 J0 F3000")));
+    assert!(page.contains("period 1000 µs"));
+    assert!(cell(&page, "misses").contains('3'));
+}
+
+#[test]
+fn damaged_run_directories_are_named_never_a_panic() {
+    let good = circle_run("damaged");
+    let d = good.parent().unwrap().to_path_buf();
+
+    // setpoints.csv cut off mid-row: the page names file and line and draws the rest.
+    let cut = d.join("cut");
+    copy_dir(&good, &cut);
+    let text = fs::read_to_string(cut.join("setpoints.csv")).unwrap();
+    let at = text.len() / 2;
+    let at = at + text[at..].find(',').unwrap() + 1; // inside a row
+    fs::write(cut.join("setpoints.csv"), &text[..at]).unwrap();
+    let whole_rows = text[..at].matches('\n').count();
+    let page = html::render(&cut).unwrap();
+    assert!(page.contains("id=\"problems\""));
+    assert!(
+        page.contains(&format!("setpoints.csv:{}: ", whole_rows + 1)),
+        "names the cut line"
+    );
+    assert!(
+        page.contains("id=\"feed-plot\""),
+        "the rows before the cut are drawn"
+    );
+
+    // A value that is not a number.
+    let nan = d.join("nan");
+    copy_dir(&good, &nan);
+    let text = fs::read_to_string(nan.join("feedback.csv")).unwrap();
+    let mut lines: Vec<String> = text.lines().map(str::to_owned).collect();
+    let mut cells: Vec<&str> = lines[10].split(',').collect();
+    cells[5] = "abc";
+    lines[10] = cells.join(",");
+    fs::write(nan.join("feedback.csv"), lines.join("\n")).unwrap();
+    let page = html::render(&nan).unwrap();
+    assert!(page.contains("feedback.csv:11: column `ferr_x_um`: `abc` is not a number"));
+
+    // No report.json: the page says so where the summary would be.
+    let norep = d.join("norep");
+    copy_dir(&good, &norep);
+    fs::remove_file(norep.join("report.json")).unwrap();
+    let page = html::render(&norep).unwrap();
+    assert!(page.contains("report.json: "));
+    assert!(page.contains("No summary figures"));
+    assert!(page.contains("Timing unknown"));
+    assert!(page.contains("id=\"path-plot\""));
+
+    // A report.json that is not JSON: named with line and column.
+    let bad = d.join("badjson");
+    copy_dir(&good, &bad);
+    fs::write(bad.join("report.json"), "{\n  \"outcome\": done\n}").unwrap();
+    let page = html::render(&bad).unwrap();
+    assert!(page.contains("report.json:2:"), "names the line");
+
+    // An older report without some fields: those are "not recorded", the rest shown.
+    let old = d.join("old");
+    copy_dir(&good, &old);
+    let mut rep = report(&old);
+    rep.as_object_mut().unwrap().remove("path_length_mm");
+    fs::write(old.join("report.json"), rep.to_string()).unwrap();
+    let page = html::render(&old).unwrap();
+    assert!(cell(&page, "path_length_mm").contains("not recorded"));
+    assert!(page.contains("no usable path_length_mm"));
+    assert_eq!(
+        cell(&page, "time_s"),
+        format!("{:.3} s", rep["time_s"].as_f64().unwrap())
+    );
+
+    // Nothing usable at all, and no directory at all: errors naming the files.
+    let empty = d.join("empty");
+    fs::create_dir_all(&empty).unwrap();
+    let err = html::render(&empty).unwrap_err();
+    assert!(matches!(err, HtmlError::NothingUsable { .. }));
+    let msg = err.to_string();
+    for f in ["report.json", "setpoints.csv", "commands.log"] {
+        assert!(msg.contains(f), "{msg}");
+    }
+    let err = html::render(&d.join("nope")).unwrap_err();
+    assert!(err.to_string().contains("not a run directory"));
+
+    // Every file cut at many lengths: a page or an error, never a panic.
+    let fuzz = d.join("fuzz");
+    for name in [
+        "report.json",
+        "setpoints.csv",
+        "feedback.csv",
+        "commands.log",
+        "machine.toml",
+        "program.ngc",
+    ] {
+        let full = fs::read(good.join(name)).unwrap();
+        for k in 0..=8 {
+            let _ = fs::remove_dir_all(&fuzz);
+            copy_dir(&good, &fuzz);
+            fs::write(fuzz.join(name), &full[..full.len() * k / 8]).unwrap();
+            match html::render(&fuzz) {
+                Ok(page) => {
+                    assert!(page.ends_with("</html>\n"));
+                    if k < 8 && name != "program.ngc" && name != "machine.toml" {
+                        assert!(
+                            page.contains("id=\"problems\""),
+                            "{name} cut at {k}/8 not reported"
+                        );
+                    }
+                }
+                Err(e) => assert!(!e.to_string().is_empty()),
+            }
+        }
+    }
+}
+
+/// A run directory of `n` cycles: the circle's blocks, a circle traced over and over, and
+/// one following-error spike of 777 µm in the middle.
+fn synthetic(dir: &Path, from: &Path, n: u64) {
+    copy_dir(from, dir);
+    let mut sp = String::from("cycle,t_ns,x_mm,y_mm,z_mm,line\n");
+    let mut fb = String::from("cycle,t_ns,x_mm,y_mm,z_mm,ferr_x_um,ferr_y_um,ferr_z_um\n");
+    use std::fmt::Write;
+    for k in 0..n {
+        let a = k as f64 * 0.004;
+        let (x, y) = (10.0 * a.cos(), 10.0 * a.sin());
+        let spike = if k == n / 2 { 777.0 } else { 3.0 * a.sin() };
+        let t = k * 1_000_000;
+        let _ = writeln!(sp, "{k},{t},{x},{y},0,3");
+        let _ = writeln!(fb, "{k},{t},{x},{y},0,{spike},1,0");
+    }
+    fs::write(dir.join("setpoints.csv"), sp).unwrap();
+    fs::write(dir.join("feedback.csv"), fb).unwrap();
+}
+
+#[test]
+fn page_size_does_not_grow_with_run_length() {
+    let good = circle_run("scale");
+    let d = good.parent().unwrap().to_path_buf();
+    let mut sizes = Vec::new();
+    for n in [20_000, 300_000] {
+        let dir = d.join(format!("n{n}"));
+        synthetic(&dir, &good, n);
+        let page = html::render(&dir).unwrap();
+        // The one-cycle spike survives the reduction: the y axis reaches past it.
+        let ferr = &page[page.find("id=\"ferr-plot\"").unwrap()..];
+        let ferr = &ferr[..ferr.find("</svg>").unwrap()];
+        assert!(ferr.contains(">800</text>"), "spike of 777 µm lost");
+        sizes.push(page.len());
+    }
+    assert!(sizes[1] < 5_000_000);
+    assert!(
+        (sizes[1] as f64) < sizes[0] as f64 * 1.3,
+        "15× the cycles made the page grow from {} to {} bytes",
+        sizes[0],
+        sizes[1]
+    );
+}
+
+/// One hour at 1 ms (3.6 million set-points): run by hand with
+/// `cargo test --release -p interpreter --test html_report -- --ignored --nocapture`.
+#[test]
+#[ignore]
+fn one_hour_run_stays_under_5_mb() {
+    let good = circle_run("hour");
+    let dir = good.parent().unwrap().join("hour");
+    synthetic(&dir, &good, 3_600_000);
+    let t = std::time::Instant::now();
+    let page = html::render(&dir).unwrap();
+    println!("one-hour run: {} bytes in {:.2?}", page.len(), t.elapsed());
+    assert!(page.len() < 5_000_000);
+}
