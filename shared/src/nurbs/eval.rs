@@ -52,7 +52,12 @@ pub fn find_span(degree: usize, knots: &[f64], n_ctrl: usize, u: f64) -> usize {
 
 /// Basis functions of `span` at `u` and their first and second derivatives:
 /// `ders[k][j]` is the k-th derivative of N_{span-degree+j, degree}.
-fn basis_ders(degree: usize, knots: &[f64], span: usize, u: f64) -> [[f64; ORDER_MAX]; 3] {
+pub(crate) fn basis_ders(
+    degree: usize,
+    knots: &[f64],
+    span: usize,
+    u: f64,
+) -> [[f64; ORDER_MAX]; 3] {
     let p = degree;
     let mut ndu = [[0.0f64; ORDER_MAX]; ORDER_MAX];
     let mut left = [0.0f64; ORDER_MAX];

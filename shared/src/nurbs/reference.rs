@@ -149,65 +149,12 @@ pub fn conventional_surface(s: &SurfaceData<'_>, u: f64, v: f64) -> SurfacePoint
 }
 
 /// The NURBS Book A2.3 (`DersBasisFuns`) for `n <= 2` derivatives: `ders[k][j]` is the
-/// `k`-th derivative of `N_{span-p+j, p}` at `u`. Derivatives above `p` are zero.
+/// `k`-th derivative of `N_{span-p+j, p}` at `u`. Derivatives above `n` are zeroed. This is
+/// the standard evaluator's own table ([`super::eval`]), not a second copy of it.
 pub fn ders_basis_funs(p: usize, knots: &[f64], span: usize, u: f64, n: usize) -> [[f64; ORD]; 3] {
-    let n = n.min(2);
-    // ndu: basis functions (upper triangle) and knot differences (lower triangle).
-    let mut ndu = [[0.0f64; ORD]; ORD];
-    let mut left = [0.0f64; ORD];
-    let mut right = [0.0f64; ORD];
-    ndu[0][0] = 1.0;
-    for j in 1..=p {
-        left[j] = u - knots[span + 1 - j];
-        right[j] = knots[span + j] - u;
-        let mut saved = 0.0;
-        for r in 0..j {
-            ndu[j][r] = right[r + 1] + left[j - r];
-            let temp = ndu[r][j - 1] / ndu[j][r];
-            ndu[r][j] = saved + right[r + 1] * temp;
-            saved = left[j - r] * temp;
-        }
-        ndu[j][j] = saved;
-    }
-    let mut ders = [[0.0f64; ORD]; 3];
-    for j in 0..=p {
-        ders[0][j] = ndu[j][p];
-    }
-    // a[s][j]: coefficients of the k-th derivative as differences of lower-degree
-    // functions (The NURBS Book eq. 2.10), two rows used alternately.
-    for r in 0..=p {
-        let mut a = [[0.0f64; ORD]; 2];
-        let (mut s1, mut s2) = (0, 1);
-        a[0][0] = 1.0;
-        for k in 1..=n.min(p) {
-            let mut d = 0.0;
-            let pk = p - k;
-            if r >= k {
-                a[s2][0] = a[s1][0] / ndu[pk + 1][r - k];
-                d = a[s2][0] * ndu[r - k][pk];
-            }
-            // j runs over the terms whose lower-degree function exists in this span.
-            let j1 = if r + 1 >= k { 1 } else { k - r };
-            let j2 = if r <= pk + 1 { k - 1 } else { p - r };
-            for j in j1..=j2 {
-                let row = r + j - k;
-                a[s2][j] = (a[s1][j] - a[s1][j - 1]) / ndu[pk + 1][row];
-                d += a[s2][j] * ndu[row][pk];
-            }
-            if r <= pk {
-                a[s2][k] = -a[s1][k - 1] / ndu[pk + 1][r];
-                d += a[s2][k] * ndu[r][pk];
-            }
-            ders[k][r] = d;
-            core::mem::swap(&mut s1, &mut s2);
-        }
-    }
-    let mut factor = p as f64;
-    for k in 1..=n.min(p) {
-        for j in 0..=p {
-            ders[k][j] *= factor;
-        }
-        factor *= (p - k) as f64;
+    let mut ders = super::eval::basis_ders(p, knots, span, u);
+    for row in ders.iter_mut().skip(n.min(2) + 1) {
+        *row = [0.0; ORD];
     }
     ders
 }
