@@ -35,11 +35,23 @@ pub fn node<S: Service>(role: &str) -> Result<Node<S>, IpcError> {
     // errors are worth the operator's attention unless IOX2_LOG_LEVEL asks for more.
     set_log_level_from_env_or(LogLevel::Error);
     let name = NodeName::new(role).map_err(|e| err("node name", e))?;
-    NodeBuilder::new()
+    let node = NodeBuilder::new()
         .name(&name)
         .signal_handling_mode(SignalHandlingMode::Disabled)
         .create::<S>()
-        .map_err(|e| err("creating node", e))
+        .map_err(|e| err("creating node", e))?;
+    // A process killed in an earlier run leaves its node, ports and shared memory behind.
+    // iceoryx2 removes them on node creation by default; ask once more explicitly, so the
+    // stack never depends on a configuration default for it.
+    let cleaned = node.try_cleanup_dead_nodes();
+    if cleaned.cleanups > 0 || cleaned.failed_cleanups > 0 {
+        tracing::info!(
+            "removed {} dead iceoryx2 node(s) left by earlier runs ({} could not be removed)",
+            cleaned.cleanups,
+            cleaned.failed_cleanups
+        );
+    }
+    Ok(node)
 }
 
 fn name(s: &str) -> Result<ServiceName, IpcError> {

@@ -11,6 +11,9 @@ pub struct SchedReport {
     pub policy: String,
     pub priority: i32,
     pub memory_locked: bool,
+    /// The CPU the cycle thread is pinned to, if pinning was possible.
+    #[serde(default)]
+    pub cpu: Option<usize>,
     pub warnings: Vec<String>,
 }
 
@@ -33,6 +36,7 @@ pub fn setup(mode: SchedMode, priority: i32) -> SchedReport {
         policy: "other".into(),
         priority: 0,
         memory_locked: false,
+        cpu: None,
         warnings: vec![],
     };
     // SAFETY: plain syscalls with valid arguments.
@@ -59,6 +63,26 @@ pub fn setup(mode: SchedMode, priority: i32) -> SchedReport {
             if libc::sched_setscheduler(0, libc::SCHED_FIFO, &param) == 0 {
                 rep.policy = "fifo".into();
                 rep.priority = priority;
+                // Pin the cycle to the last CPU: no migrations, warm caches. The other
+                // processes stay free to use every CPU.
+                let size = core::mem::size_of::<libc::cpu_set_t>();
+                let mut allowed: libc::cpu_set_t = core::mem::zeroed();
+                if libc::sched_getaffinity(0, size, &mut allowed) == 0
+                    && libc::CPU_COUNT(&allowed) > 1
+                {
+                    // The highest CPU this process may use (containers restrict the set).
+                    let max = 8 * size;
+                    if let Some(cpu) = (0..max).rev().find(|&c| libc::CPU_ISSET(c, &allowed)) {
+                        let mut one: libc::cpu_set_t = core::mem::zeroed();
+                        libc::CPU_SET(cpu, &mut one);
+                        if libc::sched_setaffinity(0, size, &one) == 0 {
+                            rep.cpu = Some(cpu);
+                        } else {
+                            rep.warnings
+                                .push(format!("pinning to CPU {cpu} refused ({})", errno_text()));
+                        }
+                    }
+                }
             } else {
                 rep.warnings.push(format!(
                     "SCHED_FIFO refused ({}); running SCHED_OTHER, expect more deadline misses",
