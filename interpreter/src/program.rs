@@ -629,11 +629,8 @@ fn nurbs_line(
             if p.value <= 0.0 {
                 return Err(lw.err(p.col, "weight P must be > 0"));
             }
-            let mut pt = st.pos;
-            for ax in [a, b] {
-                let v = lw.value(AXES[ax]).unwrap_or(0.0) * unit;
-                pt[ax] = if st.absolute { v } else { st.pos[ax] + v };
-            }
+            // The normal axis word was refused above, so this moves only the plane's two.
+            let pt = target(st, lw, unit);
             if let Some(n) = st.nurbs.as_mut() {
                 n.ctrl.push([pt[0], pt[1], pt[2], p.value]);
             }
@@ -767,11 +764,8 @@ fn g62_line(
                 "G6.2 weight R must be > 0",
             ));
         }
-        let mut pt = st.pos;
-        for ax in [a, b] {
-            let v = lw.value(AXES[ax]).unwrap_or(0.0) * unit;
-            pt[ax] = if st.absolute { v } else { st.pos[ax] + v };
-        }
+        // The normal axis word was refused above, so this moves only the plane's two.
+        let pt = target(st, lw, unit);
         let Some(n) = st.g62.as_mut() else {
             return Ok(());
         };

@@ -4,25 +4,7 @@
 use super::*;
 use proptest::prelude::*;
 
-/// Cox–de Boor recursion, the textbook definition (half-open spans, last span closed).
-fn basis(i: usize, p: usize, knots: &[f64], u: f64) -> f64 {
-    if p == 0 {
-        let last = knots[knots.len() - 1];
-        let in_span = knots[i] <= u && u < knots[i + 1];
-        let at_end = u == last && knots[i] < knots[i + 1] && knots[i + 1] == last;
-        return if in_span || at_end { 1.0 } else { 0.0 };
-    }
-    let mut v = 0.0;
-    let d1 = knots[i + p] - knots[i];
-    if d1 > 0.0 {
-        v += (u - knots[i]) / d1 * basis(i, p - 1, knots, u);
-    }
-    let d2 = knots[i + p + 1] - knots[i + 1];
-    if d2 > 0.0 {
-        v += (knots[i + p + 1] - u) / d2 * basis(i + 1, p - 1, knots, u);
-    }
-    v
-}
+use super::reference::cox_de_boor as basis;
 
 fn reference_point(p: usize, knots: &[f64], ctrl: &[[f64; 4]], u: f64) -> [f64; 3] {
     let mut a = [0.0; 3];
