@@ -248,6 +248,10 @@ pub fn run<S: Service>(cfg: &Config) -> Result<Summary, RunError> {
 
     let mut fault: Option<Fault> = None;
     let mut answers = Answers::default();
+    // Real clock: the drives answer within the period; a long silence means the
+    // servo-sim is dead or stalled. The floor rides out the hypervisor stalls of a
+    // few ms these machines show.
+    let lag_limit = (100_000_000 / cfg.period_ns).max(5);
     let t0 = now_ns() + cfg.period_ns;
     let mut cycle: u64 = 0;
     loop {
@@ -279,10 +283,6 @@ pub fn run<S: Service>(cfg: &Config) -> Result<Summary, RunError> {
         if shared::stop::requested() {
             fault.get_or_insert(Fault::StopRequested);
         }
-        // Real clock: the drives answer within the period; a long silence means the
-        // servo-sim is dead or stalled. The floor rides out the hypervisor stalls of a
-        // few ms these machines show.
-        let lag_limit = (100_000_000 / cfg.period_ns).max(5);
         if !sim && cycle > lag_limit && !answers.has(cycle - lag_limit) {
             fault.get_or_insert(Fault::PeerSilent {
                 cycle: cycle - lag_limit,
