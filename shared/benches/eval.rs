@@ -7,9 +7,19 @@
 //! * `curve_eval/p{1,2,3,4,5,9}`: a rational curve with 12 control points, point + first +
 //!   second derivative, stepping through the whole parameter range in 10 000 increasing
 //!   steps per iteration (the evaluator persists across iterations, so each iteration
-//!   starts with one jump back to the start, as a new block would).
+//!   starts with one jump back to the start, as a new block would). Functions:
+//!   `extended` (what the interpolator runs: moving data holding the span's power form),
+//!   `extended_recurrence` (the seed's literal per-point recurrence on the same moving
+//!   data), `piegl_tiller`, `conventional`, and `curvo` (the `curvo` crate's
+//!   `NurbsCurve3D::rational_derivatives(u, 2)`, which gives exactly point, first and
+//!   second derivative; it searches the span and allocates its result vectors on every
+//!   call, which is part of what is measured).
 //! * `surface_eval/p2q2`, `surface_eval/p3q3`: the seed's 10x10 rational surface,
-//!   `(S, S_u, S_v)` plus the unit normal along a zig-zag of 100 rows of 100 points.
+//!   `(S, S_u, S_v)` plus the unit normal along a zig-zag of 100 rows of 100 points, `u`
+//!   fixed in each row. `extended` is the evaluator set up for that path
+//!   ([`Passes::AlongV`]: it keeps the partial sums over `u` through a row);
+//!   `extended_no_reuse` is the same evaluator set up the other way, so it recomputes
+//!   them at every point: the cost on a path that holds neither parameter fixed.
 //!
 //! The conventional method is so slow that it runs on every tenth point only (1 000 per
 //! iteration); the throughput figures (elements per second) stay per point, so compare
@@ -17,9 +27,11 @@
 //! `cargo bench -p shared --bench eval`.
 
 use criterion::{black_box, criterion_group, criterion_main, Criterion, Throughput};
+use curvo::prelude::NurbsCurve3D;
+use nalgebra::Point4;
 use shared::nurbs::fast::FastCurve;
 use shared::nurbs::reference::{conventional_curve, conventional_surface, piegl_tiller_surface};
-use shared::nurbs::surface::{FastSurface, SurfaceData};
+use shared::nurbs::surface::{FastSurface, Passes, SurfaceData};
 use shared::nurbs::{eval, CurvePoint};
 
 const STEPS: usize = 10_000;
@@ -65,6 +77,29 @@ fn fold(e: &CurvePoint) -> f64 {
     e.p[0] + e.d1[1] + e.d2[2]
 }
 
+/// The same curve as a `curvo` NURBS (homogeneous control points `[w·x, w·y, w·z, w]`,
+/// as curvo stores them), checked against ours at a few parameters before it is timed so
+/// the comparison is of equal work and equal answers.
+fn curvo_curve(cv: &Curve) -> NurbsCurve3D<f64> {
+    let pts = cv
+        .ctrl
+        .iter()
+        .map(|c| Point4::new(c[0] * c[3], c[1] * c[3], c[2] * c[3], c[3]))
+        .collect();
+    let other = NurbsCurve3D::try_new(cv.degree, pts, cv.knots.clone()).expect("curvo curve");
+    for u in [0.0, 0.123, 0.5, 0.77, 1.0] {
+        let ours = eval(cv.degree, &cv.knots, &cv.ctrl, u);
+        let d = other.rational_derivatives(u, 2);
+        for (k, want) in [ours.p, ours.d1, ours.d2].iter().enumerate() {
+            for i in 0..3 {
+                let err = (d[k][i] - want[i]).abs() / want[i].abs().max(100.0);
+                assert!(err < 1e-9, "curvo disagrees at u = {u}, derivative {k}");
+            }
+        }
+    }
+    other
+}
+
 fn curve_eval(c: &mut Criterion) {
     for degree in [1, 2, 3, 4, 5, 9] {
         let cv = curve(degree);
@@ -81,11 +116,32 @@ fn curve_eval(c: &mut Criterion) {
                 acc
             })
         });
+        let mut literal = FastCurve::new(cv.degree, &cv.knots, &cv.ctrl).expect("valid curve");
+        g.bench_function("extended_recurrence", |b| {
+            b.iter(|| {
+                let mut acc = 0.0;
+                for &u in &us {
+                    acc += fold(&literal.eval_recurrence(black_box(u)));
+                }
+                acc
+            })
+        });
         g.bench_function("piegl_tiller", |b| {
             b.iter(|| {
                 let mut acc = 0.0;
                 for &u in &us {
                     acc += fold(&eval(cv.degree, &cv.knots, &cv.ctrl, black_box(u)));
+                }
+                acc
+            })
+        });
+        let other = curvo_curve(&cv);
+        g.bench_function("curvo", |b| {
+            b.iter(|| {
+                let mut acc = 0.0;
+                for &u in &us {
+                    let d = other.rational_derivatives(black_box(u), 2);
+                    acc += d[0][0] + d[1][1] + d[2][2];
                 }
                 acc
             })
@@ -179,17 +235,23 @@ fn surface_eval(c: &mut Criterion) {
         let data = s.data();
         let mut g = c.benchmark_group(format!("surface_eval/p{degree}q{degree}"));
         g.throughput(Throughput::Elements(path.len() as u64));
-        let mut fast = FastSurface::new(&data).expect("valid surface");
-        g.bench_function("extended", |b| {
-            b.iter(|| {
-                let mut acc = 0.0;
-                for &(u, v) in &path {
-                    let e = fast.eval(black_box(u), black_box(v));
-                    acc += e.p[0] + e.du[1] + e.dv[2] + e.normal[2];
-                }
-                acc
-            })
-        });
+        // The zig-zag holds u fixed in each pass.
+        for (name, passes) in [
+            ("extended", Passes::AlongV),
+            ("extended_no_reuse", Passes::AlongU),
+        ] {
+            let mut fast = FastSurface::with_passes(&data, passes).expect("valid surface");
+            g.bench_function(name, |b| {
+                b.iter(|| {
+                    let mut acc = 0.0;
+                    for &(u, v) in &path {
+                        let e = fast.eval(black_box(u), black_box(v));
+                        acc += e.p[0] + e.du[1] + e.dv[2] + e.normal[2];
+                    }
+                    acc
+                })
+            });
+        }
         g.bench_function("piegl_tiller", |b| {
             b.iter(|| {
                 let mut acc = 0.0;

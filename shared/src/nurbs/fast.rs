@@ -24,18 +24,31 @@
 //!   multiply-adds: no span search, no division except the one `1 / w`. Crossing a knot
 //!   reloads the window (a short forward walk, or a binary search for a jump backwards or
 //!   far ahead), so every call gives the same bits as a fresh evaluator would.
+//! * **The span's power form** (moving data taken one step further): inside one span the
+//!   extended basis functions are fixed polynomials of degree `p`, so the whole sum
+//!   `Σ N_r(u) r_r` is one four-component polynomial, and so are its derivatives. On a knot
+//!   crossing the registers receive that polynomial's Taylor coefficients about the span's
+//!   centre (from the window's difference points and one pass of the recurrence: about
+//!   `p³/2` four-component operations, The NURBS Book eq. 3.3/3.8); a point then costs
+//!   three independent Horner chains, `3p - 3` four-component multiply-adds, and the
+//!   quotient rule. The expansion about the centre keeps `|t| <= h/2`, so the sums lose no
+//!   more than the recurrence does (the property tests hold it to the same 1e-12).
+//!   [`FastCurve::eval_recurrence`] keeps the seed's literal per-point recurrence on the
+//!   same registers, for comparison and as a cross-check.
 //!
 //! Degrees 1..=5 are specialised at compile time ([`CurveEval<P>`], and [`FastCurve`]
 //! dispatches to those) so every loop unrolls and the scratch arrays live in registers;
-//! degrees 6..=9 share one kernel with the degree read at run time.
+//! degrees 6..=9 share one kernel with the degree read at run time. Every kernel is also
+//! compiled for AVX2 and chosen at construction when the CPU has it: one homogeneous
+//! point is one 256-bit register. Both forms do the same IEEE operations in the same
+//! order (Rust never contracts a multiply and an add into an FMA), so they give the same
+//! bits, tested; a log replayed on a CPU without AVX2 still reproduces a run exactly.
 //!
-//! What bounds the cost: per point `p(p+1)/2` recurrence steps of three flops, `4(3p+1)`
-//! multiply-adds for the three homogeneous sums, one division and about fifteen flops for
-//! the quotient rule: about 70 flops at p = 3, 110 at p = 5, in short dependency chains.
-//! Measured (see the bench `eval`), the cost is higher than the flop count says: the
-//! per-point overhead (range check, the result written through memory) is a few ns, and
-//! degree 5 runs at about twice the cost of degree 4, more than its flops explain (not yet
-//! understood; the general kernel at degree 9 is only a little slower than degree 5).
+//! What bounds the cost: per point `4(3p - 3)` multiply-adds (one vector instruction
+//! each with AVX2), one division and about fifteen flops for the quotient rule, plus the
+//! range check and the result written through memory: at p = 3 about 25 dependent vector
+//! operations in three parallel chains, a few ns; the division's latency and the call
+//! overhead are what remain at p = 1. Measured figures: `shared/BENCHMARKS.md`.
 //!
 //! The evaluator owns a copy of the curve (fixed capacity: [`MAX_CTRL`] control points,
 //! premultiplied once at construction), so it holds no borrow and can live in the
@@ -302,6 +315,46 @@ struct Core {
     /// `s[r] = (p-1) (g[r+1] - g[r])` with `g[r] = inv[p][r] q[r]`, `r < p - 1`: with
     /// `t2` these give `Σ N''_r win[r]` (eq. 3.7).
     s: [[f64; 4]; ORD],
+    /// Centre of the current span: the power form below is in `t = u - mid`.
+    mid: f64,
+    /// The current span's homogeneous curve and its first two derivatives as
+    /// polynomials in `t`: `r(u) = Σ c0[k] t^k` (`k <= p`), `r'(u) = Σ c1[k] t^k`
+    /// (`k < p`), `r''(u) = Σ c2[k] t^k` (`k < p - 1`).
+    c0: [[f64; 4]; ORD],
+    c1: [[f64; 4]; ORD],
+    c2: [[f64; 4]; ORD],
+    /// Whether the CPU has AVX2, so the kernels compiled for it may run (checked once,
+    /// at construction). They do the same IEEE operations in the same order as the
+    /// baseline kernels (Rust never fuses a multiply and an add on its own), four lanes
+    /// at a time, so both give the same bits: a replay on a machine without AVX2 is still
+    /// bit-exact.
+    simd: bool,
+}
+
+/// Whether the kernels compiled for AVX2 may run on this CPU.
+pub(crate) fn simd_available() -> bool {
+    #[cfg(target_arch = "x86_64")]
+    {
+        std::arch::is_x86_feature_detected!("avx2")
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    {
+        false
+    }
+}
+
+/// Calls the kernel `$name::<P>` for the degree `$deg` (1..=5, else the general one).
+macro_rules! by_degree {
+    ($core:expr, $deg:expr, $fixed:ident, $general:ident, $u:expr) => {
+        match $deg {
+            1 => $core.$fixed::<1>($u),
+            2 => $core.$fixed::<2>($u),
+            3 => $core.$fixed::<3>($u),
+            4 => $core.$fixed::<4>($u),
+            5 => $core.$fixed::<5>($u),
+            _ => $core.$general($u),
+        }
+    };
 }
 
 impl Core {
@@ -317,6 +370,11 @@ impl Core {
             win: [[0.0; 4]; ORD],
             q: [[0.0; 4]; ORD],
             s: [[0.0; 4]; ORD],
+            mid: 0.0,
+            c0: [[0.0; 4]; ORD],
+            c1: [[0.0; 4]; ORD],
+            c2: [[0.0; 4]; ORD],
+            simd: simd_available(),
         };
         core.load_window();
         Ok(core)
@@ -342,6 +400,96 @@ impl Core {
                 self.s[r][k] = (pf - 1.0) * (g[r + 1][k] - g[r][k]);
             }
         }
+        self.load_power_form();
+    }
+
+    /// The span's Taylor expansion about its centre `m`: `c0[k] = r^(k)(m) / k!`.
+    ///
+    /// `r^(k)(m) = Σ_r N_{s-p+k+r, p-k}(m) Q^(k)_r` (The NURBS Book eq. 3.8 and 3.3):
+    /// the basis functions of degree `p - k` are level `p - k` of one pass of the
+    /// triangular recurrence at `m`, and the `Q^(k)` are the window's `k`-th difference
+    /// points, `Q^(k)_r = (p-k+1) / (u_{s+r+1} - u_{s-p+r+k}) · (Q^(k-1)_{r+1} -
+    /// Q^(k-1)_r)`. Every denominator spans the current (non-empty) span, so none is zero.
+    /// About `p³/2` four-component operations, once per knot crossing.
+    fn load_power_form(&mut self) {
+        let c = &self.cursor;
+        let (p, s) = (c.degree, c.span);
+        let (a, b) = (c.knots[s], c.knots[s + 1]);
+        let m = 0.5 * (a + b);
+        self.mid = m;
+        // levels[j][r] = N_{s-j+r, j}(m), A2.2 keeping every level.
+        let mut levels = [[0.0f64; ORD]; ORD];
+        levels[0][0] = 1.0;
+        for j in 1..=p {
+            let mut saved = 0.0;
+            for r in 0..j {
+                let left = m - c.knots[s + 1 + r - j];
+                let right = c.knots[s + 1 + r] - m;
+                let temp = levels[j - 1][r] / (right + left);
+                levels[j][r] = saved + right * temp;
+                saved = left * temp;
+            }
+            levels[j][j] = saved;
+        }
+        let mut diff = self.win;
+        let mut fact = 1.0;
+        self.c0 = [[0.0; 4]; ORD];
+        for k in 0..=p {
+            if k > 0 {
+                fact *= k as f64;
+                let scale = (p - k + 1) as f64;
+                for r in 0..=p - k {
+                    let f = scale / (c.knots[s + r + 1] - c.knots[s - p + r + k]);
+                    for i in 0..4 {
+                        diff[r][i] = f * (diff[r + 1][i] - diff[r][i]);
+                    }
+                }
+            }
+            let basis = &levels[p - k];
+            let mut sum = [0.0f64; 4];
+            for r in 0..=p - k {
+                axpy(&mut sum, basis[r], &diff[r]);
+            }
+            for i in 0..4 {
+                self.c0[k][i] = sum[i] / fact;
+            }
+        }
+        self.c1 = [[0.0; 4]; ORD];
+        self.c2 = [[0.0; 4]; ORD];
+        for k in 0..p {
+            let f1 = (k + 1) as f64;
+            let f2 = ((k + 1) * (k + 2)) as f64;
+            for i in 0..4 {
+                self.c1[k][i] = f1 * self.c0[k + 1][i];
+                if k + 2 <= p {
+                    self.c2[k][i] = f2 * self.c0[k + 2][i];
+                }
+            }
+        }
+    }
+
+    /// The evaluation every cycle runs: three Horner chains over the span's power form
+    /// (independent, so they overlap in the pipeline) and the quotient rule.
+    #[inline(always)]
+    fn eval_power(&mut self, p: usize, u: f64) -> CurvePoint {
+        let u = self.cursor.clamp(u);
+        if self.cursor.locate(u) {
+            self.load_window();
+        }
+        let p = p.min(MAX_DEGREE);
+        let t = u - self.mid;
+        let a0 = horner(&self.c0, p, t);
+        let a1 = if p >= 1 {
+            horner(&self.c1, p - 1, t)
+        } else {
+            [0.0; 4]
+        };
+        let a2 = if p >= 2 {
+            horner(&self.c2, p - 2, t)
+        } else {
+            [0.0; 4]
+        };
+        quotient(self.cursor.span(), &a0, &a1, &a2)
     }
 
     #[inline(always)]
@@ -363,20 +511,7 @@ impl Core {
         for r in 0..p.saturating_sub(1) {
             axpy(&mut a2, b.t2[r + 1], &self.s[r]);
         }
-        let inv_w = 1.0 / a0[3];
-        let (w1, w2) = (a1[3], a2[3]);
-        let mut out = CurvePoint {
-            span: self.cursor.span(),
-            ..CurvePoint::default()
-        };
-        for k in 0..3 {
-            let pk = a0[k] * inv_w;
-            let d1 = (a1[k] - w1 * pk) * inv_w;
-            out.p[k] = pk;
-            out.d1[k] = d1;
-            out.d2[k] = (a2[k] - 2.0 * w1 * d1 - w2 * pk) * inv_w;
-        }
-        out
+        quotient(self.cursor.span(), &a0, &a1, &a2)
     }
 
     /// One specialised kernel per degree, kept out of line: inlined into a caller's loop
@@ -384,14 +519,91 @@ impl Core {
     /// the general kernel at degree 9.
     #[inline(never)]
     fn eval_fixed<const P: usize>(&mut self, u: f64) -> CurvePoint {
-        self.eval_deg(P, u)
+        self.eval_power(P, u)
     }
 
     /// Degrees 6..=9: one kernel, degree read at run time.
     #[inline(never)]
     fn eval_general(&mut self, u: f64) -> CurvePoint {
+        self.eval_power(self.cursor.degree, u)
+    }
+
+    /// [`Self::eval_fixed`] compiled for AVX2: the four homogeneous components of every
+    /// Horner step and the three of the quotient rule go one vector instruction each.
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2")]
+    #[inline(never)]
+    fn eval_fixed_avx2<const P: usize>(&mut self, u: f64) -> CurvePoint {
+        self.eval_power(P, u)
+    }
+
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2")]
+    #[inline(never)]
+    fn eval_general_avx2(&mut self, u: f64) -> CurvePoint {
+        self.eval_power(self.cursor.degree, u)
+    }
+
+    /// The evaluation the interpolator runs: the AVX2 kernels where the CPU has them.
+    #[inline(always)]
+    fn eval(&mut self, u: f64) -> CurvePoint {
+        #[cfg(target_arch = "x86_64")]
+        if self.simd {
+            // SAFETY: `simd` is set only when the running CPU reports AVX2.
+            return unsafe {
+                by_degree!(
+                    self,
+                    self.cursor.degree,
+                    eval_fixed_avx2,
+                    eval_general_avx2,
+                    u
+                )
+            };
+        }
+        by_degree!(self, self.cursor.degree, eval_fixed, eval_general, u)
+    }
+
+    #[inline(never)]
+    fn eval_recurrence_fixed<const P: usize>(&mut self, u: f64) -> CurvePoint {
+        self.eval_deg(P, u)
+    }
+
+    #[inline(never)]
+    fn eval_recurrence_general(&mut self, u: f64) -> CurvePoint {
         self.eval_deg(self.cursor.degree, u)
     }
+}
+
+/// `Σ coef[k] t^k` for `k <= deg`, on homogeneous points.
+#[inline(always)]
+fn horner(coef: &[[f64; 4]; ORD], deg: usize, t: f64) -> [f64; 4] {
+    let mut acc = coef[deg];
+    for k in (0..deg).rev() {
+        for i in 0..4 {
+            acc[i] = acc[i] * t + coef[k][i];
+        }
+    }
+    acc
+}
+
+/// Extended space back to Cartesian (seed 001 eq. 3.5–3.7): point, first and second
+/// derivative from the homogeneous `r`, `r'`, `r''`, one division.
+#[inline(always)]
+fn quotient(span: usize, a0: &[f64; 4], a1: &[f64; 4], a2: &[f64; 4]) -> CurvePoint {
+    let inv_w = 1.0 / a0[3];
+    let (w1, w2) = (a1[3], a2[3]);
+    let mut out = CurvePoint {
+        span,
+        ..CurvePoint::default()
+    };
+    for k in 0..3 {
+        let pk = a0[k] * inv_w;
+        let d1 = (a1[k] - w1 * pk) * inv_w;
+        out.p[k] = pk;
+        out.d1[k] = d1;
+        out.d2[k] = (a2[k] - 2.0 * w1 * d1 - w2 * pk) * inv_w;
+    }
+    out
 }
 
 /// Why an evaluator could not be built.
@@ -455,6 +667,11 @@ impl<const P: usize> CurveEval<P> {
     /// Point, first and second derivative at `u` (clamped into the domain).
     #[inline]
     pub fn eval(&mut self, u: f64) -> CurvePoint {
+        #[cfg(target_arch = "x86_64")]
+        if self.core.simd {
+            // SAFETY: `simd` is set only when the running CPU reports AVX2.
+            return unsafe { self.core.eval_fixed_avx2::<P>(u) };
+        }
         self.core.eval_fixed::<P>(u)
     }
 
@@ -509,14 +726,32 @@ impl FastCurve {
     /// Point, first and second derivative at `u` (clamped into the domain).
     #[inline]
     pub fn eval(&mut self, u: f64) -> CurvePoint {
-        match self.core.cursor.degree {
-            1 => self.core.eval_fixed::<1>(u),
-            2 => self.core.eval_fixed::<2>(u),
-            3 => self.core.eval_fixed::<3>(u),
-            4 => self.core.eval_fixed::<4>(u),
-            5 => self.core.eval_fixed::<5>(u),
-            _ => self.core.eval_general(u),
-        }
+        self.core.eval(u)
+    }
+
+    /// [`Self::eval`] without the AVX2 kernels: for the test that both give the same bits.
+    #[doc(hidden)]
+    pub fn eval_baseline(&mut self, u: f64) -> CurvePoint {
+        by_degree!(
+            self.core,
+            self.core.cursor.degree,
+            eval_fixed,
+            eval_general,
+            u
+        )
+    }
+
+    /// The same result by the seed's per-point recurrence (§3.2, the extended basis
+    /// function evaluated afresh at every point) instead of the span's power form: kept
+    /// as the literal form of the method, for the benches and as a cross-check.
+    pub fn eval_recurrence(&mut self, u: f64) -> CurvePoint {
+        by_degree!(
+            self.core,
+            self.core.cursor.degree,
+            eval_recurrence_fixed,
+            eval_recurrence_general,
+            u
+        )
     }
 }
 

@@ -13,6 +13,16 @@
 //! window of homogeneous control points is reloaded only when `u` or `v` crosses a knot.
 //! Degrees `p = q` in 1..=5 are specialised at compile time, other pairs share a kernel.
 //!
+//! Moving data across points, too: a tool path over a surface runs in passes along which
+//! one parameter is fixed (iso-parametric, zig-zag: seed 000's tool paths, ISO 14649's
+//! `UV_STRATEGY`). The evaluator is told which ([`Passes`]) and contracts that parameter
+//! first; the partial sums (`a_i`, `b_i` above) depend on that parameter and the window
+//! only, so they are kept and reused while it does not change, and a point costs the
+//! other direction's basis and `12(q+1)` multiply-adds. The order of every sum is fixed
+//! by the [`Passes`] setting alone, never by the history of calls, so an evaluator gives
+//! the same bits as a fresh one with the same setting, on any path; a path that does not
+//! hold the parameter fixed just recomputes the partial sums at every point.
+//!
 //! Capacity (fixed, no allocation): degrees up to [`MAX_SURF_DEGREE`] = 5 and at most
 //! [`MAX_SURF_CTRL`] = 16 control points in each direction (8 kB of homogeneous points in
 //! the evaluator). Control points are row-major: `ctrl[i * n_v + j]` is `P_ij`, `i` along
@@ -167,6 +177,17 @@ pub fn unit_normal(du: [f64; 3], dv: [f64; 3]) -> [f64; 3] {
     }
 }
 
+/// Which parameter the tool path holds fixed pass by pass (see the module docs): the
+/// evaluator contracts that direction first and keeps the partial sums while it stays.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum Passes {
+    /// Passes run along `u`, `v` fixed in each (the contraction order of seed 000 eq. 17).
+    #[default]
+    AlongU,
+    /// Passes run along `v`, `u` fixed in each.
+    AlongV,
+}
+
 /// Surface evaluator with moving data in both directions.
 #[derive(Debug, Clone)]
 pub struct FastSurface {
@@ -178,6 +199,17 @@ pub struct FastSurface {
     hw: [[[f64; 4]; MAX_SURF_CTRL]; MAX_SURF_CTRL],
     /// `hw[span_u-p+r][span_v-q+c]` at `win[r][c]`.
     win: [[[f64; 4]; SORD]; SORD],
+    passes: Passes,
+    /// The fixed parameter's bits the partial sums below belong to (`None` after a
+    /// window reload).
+    key: Option<u64>,
+    /// Partial sums over the fixed direction: values and derivatives of that direction's
+    /// basis against each row (`AlongU`) or column (`AlongV`) of the window.
+    part_n: [[f64; 4]; SORD],
+    part_d: [[f64; 4]; SORD],
+    /// Whether the AVX2 kernel may run (same operations, same bits; see
+    /// [`super::fast`]).
+    simd: bool,
 }
 
 impl FastSurface {
@@ -197,8 +229,20 @@ impl FastSurface {
             degree_v: s.degree_v,
             hw,
             win: [[[0.0; 4]; SORD]; SORD],
+            passes: Passes::default(),
+            key: None,
+            part_n: [[0.0; 4]; SORD],
+            part_d: [[0.0; 4]; SORD],
+            simd: super::fast::simd_available(),
         };
         out.load_window();
+        Ok(out)
+    }
+
+    /// The same evaluator for a tool path whose passes run as `passes` says.
+    pub fn with_passes(s: &SurfaceData<'_>, passes: Passes) -> Result<Self, SurfaceError> {
+        let mut out = Self::new(s)?;
+        out.passes = passes;
         Ok(out)
     }
 
@@ -210,6 +254,7 @@ impl FastSurface {
                 *w = *h;
             }
         }
+        self.key = None;
     }
 
     /// `(u_min, u_max, v_min, v_max)`.
@@ -228,19 +273,38 @@ impl FastSurface {
     /// `S`, `S_u`, `S_v` and the unit normal at `(u, v)`, each clamped into its domain.
     #[inline]
     pub fn eval(&mut self, u: f64, v: f64) -> SurfacePoint {
+        #[cfg(target_arch = "x86_64")]
+        if self.simd {
+            // SAFETY: `simd` is set only when the running CPU reports AVX2.
+            return unsafe { self.eval_avx2(u, v) };
+        }
+        self.eval_baseline(u, v)
+    }
+
+    /// [`Self::eval`] without the AVX2 kernel: for the test that both give the same bits.
+    #[doc(hidden)]
+    #[inline(never)]
+    pub fn eval_baseline(&mut self, u: f64, v: f64) -> SurfacePoint {
+        self.dispatch(u, v)
+    }
+
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2")]
+    #[inline(never)]
+    fn eval_avx2(&mut self, u: f64, v: f64) -> SurfacePoint {
+        self.dispatch(u, v)
+    }
+
+    #[inline(always)]
+    fn dispatch(&mut self, u: f64, v: f64) -> SurfacePoint {
         match (self.degree_u, self.degree_v) {
             (1, 1) => self.eval_deg(1, 1, u, v),
             (2, 2) => self.eval_deg(2, 2, u, v),
             (3, 3) => self.eval_deg(3, 3, u, v),
             (4, 4) => self.eval_deg(4, 4, u, v),
             (5, 5) => self.eval_deg(5, 5, u, v),
-            _ => self.eval_general(u, v),
+            (p, q) => self.eval_deg(p, q, u, v),
         }
-    }
-
-    #[inline(never)]
-    fn eval_general(&mut self, u: f64, v: f64) -> SurfacePoint {
-        self.eval_deg(self.degree_u, self.degree_v, u, v)
     }
 
     #[inline(always)]
@@ -251,19 +315,53 @@ impl FastSurface {
         if self.cu.locate(u) | self.cv.locate(v) {
             self.load_window();
         }
-        let bu = self.cu.ders(p, u);
-        let bv = self.cv.ders(q, v);
         let (p, q) = (p.min(MAX_SURF_DEGREE), q.min(MAX_SURF_DEGREE));
         let (mut r0, mut ru, mut rv) = ([0.0f64; 4], [0.0f64; 4], [0.0f64; 4]);
-        for (r, row) in self.win.iter().enumerate().take(p + 1) {
-            let (mut a, mut b) = ([0.0f64; 4], [0.0f64; 4]);
-            for (c, pt) in row.iter().enumerate().take(q + 1) {
-                axpy(&mut a, bv.n[c], pt);
-                axpy(&mut b, bv.d1[c], pt);
+        match self.passes {
+            Passes::AlongU => {
+                // v fixed: per row r, a_r = Σ_c N_c(v) r_rc and b_r = Σ_c N'_c(v) r_rc.
+                if self.key != Some(v.to_bits()) {
+                    let bv = self.cv.ders(q, v);
+                    for (r, row) in self.win.iter().enumerate().take(p + 1) {
+                        let (mut a, mut b) = ([0.0f64; 4], [0.0f64; 4]);
+                        for (c, pt) in row.iter().enumerate().take(q + 1) {
+                            axpy(&mut a, bv.n[c], pt);
+                            axpy(&mut b, bv.d1[c], pt);
+                        }
+                        self.part_n[r] = a;
+                        self.part_d[r] = b;
+                    }
+                    self.key = Some(v.to_bits());
+                }
+                let bu = self.cu.ders(p, u);
+                for r in 0..=p {
+                    axpy(&mut r0, bu.n[r], &self.part_n[r]);
+                    axpy(&mut ru, bu.d1[r], &self.part_n[r]);
+                    axpy(&mut rv, bu.n[r], &self.part_d[r]);
+                }
             }
-            axpy(&mut r0, bu.n[r], &a);
-            axpy(&mut ru, bu.d1[r], &a);
-            axpy(&mut rv, bu.n[r], &b);
+            Passes::AlongV => {
+                // u fixed: per column c, a_c = Σ_r N_r(u) r_rc and b_c = Σ_r N'_r(u) r_rc.
+                if self.key != Some(u.to_bits()) {
+                    let bu = self.cu.ders(p, u);
+                    for c in 0..=q {
+                        let (mut a, mut b) = ([0.0f64; 4], [0.0f64; 4]);
+                        for (r, row) in self.win.iter().enumerate().take(p + 1) {
+                            axpy(&mut a, bu.n[r], &row[c]);
+                            axpy(&mut b, bu.d1[r], &row[c]);
+                        }
+                        self.part_n[c] = a;
+                        self.part_d[c] = b;
+                    }
+                    self.key = Some(u.to_bits());
+                }
+                let bv = self.cv.ders(q, v);
+                for c in 0..=q {
+                    axpy(&mut r0, bv.n[c], &self.part_n[c]);
+                    axpy(&mut rv, bv.d1[c], &self.part_n[c]);
+                    axpy(&mut ru, bv.n[c], &self.part_d[c]);
+                }
+            }
         }
         let inv_w = 1.0 / r0[3];
         let mut out = SurfacePoint {
@@ -502,13 +600,25 @@ mod tests {
             // Exact knot hits, both ends and the corners.
             pts.extend(s.ku.iter().zip(s.kv.iter().rev()).map(|(&a, &b)| (a, b)));
             pts.extend([(0.0, 0.0), (u1, v1), (0.0, v1), (u1, 0.0)]);
+            // Iso-parametric passes both ways through the first random point.
+            let (pu, pv) = pts[0];
+            pts.extend((0..=20).map(|k| (k as f64 / 20.0 * u1, pv)));
+            pts.extend((0..=20).map(|k| (pu, k as f64 / 20.0 * v1)));
+            let mut along_v = FastSurface::with_passes(&s.data(), Passes::AlongV).expect("valid");
+            let mut baseline = FastSurface::new(&s.data()).expect("valid surface");
             for (u, v) in pts {
                 let e = f.eval(u, v);
                 let mut g = FastSurface::new(&s.data()).expect("valid surface");
                 prop_assert_eq!(e, g.eval(u, v));
+                prop_assert_eq!(e, baseline.eval_baseline(u, v), "AVX2 and baseline kernels");
+                let t = along_v.eval(u, v);
+                let mut h = FastSurface::with_passes(&s.data(), Passes::AlongV).expect("valid");
+                prop_assert_eq!(t, h.eval(u, v));
                 for want in [piegl_tiller_surface(&s.data(), u, v), conventional_surface(&s.data(), u, v)] {
-                    if let Some(m) = mismatch(&e, &want, s.scale()) {
-                        prop_assert!(false, "p = {} q = {} at ({u}, {v}): {m}", s.p, s.q);
+                    for (name, got) in [("along u", &e), ("along v", &t)] {
+                        if let Some(m) = mismatch(got, &want, s.scale()) {
+                            prop_assert!(false, "{name}: p = {} q = {} at ({u}, {v}): {m}", s.p, s.q);
+                        }
                     }
                 }
             }

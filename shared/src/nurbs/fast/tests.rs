@@ -135,6 +135,7 @@ proptest! {
     fn fast_matches_both_references(c in random_curve(MAX_DEGREE),
                                     ts in proptest::collection::vec(0.0f64..=1.0, 8)) {
         let mut f = fast(&c);
+        let mut literal = fast(&c);
         for u in c.params(&ts) {
             let got = f.eval(u);
             let standard = eval(c.degree, &c.knots, &c.ctrl, u);
@@ -143,6 +144,10 @@ proptest! {
             for (name, want) in [("standard", standard), ("conventional", conventional), ("A2.3", a23)] {
                 if let Some(m) = mismatch(&got, &want, c.scale()) {
                     prop_assert!(false, "p = {} u = {u} vs {name}: {m}", c.degree);
+                }
+                // The seed's per-point recurrence, kept beside the power form, too.
+                if let Some(m) = mismatch(&literal.eval_recurrence(u), &want, c.scale()) {
+                    prop_assert!(false, "recurrence, p = {} u = {u} vs {name}: {m}", c.degree);
                 }
             }
         }
@@ -159,8 +164,12 @@ proptest! {
         let mut us = c.params(&ts);
         us.sort_by(f64::total_cmp);
         let mut f = fast(&c);
+        let mut baseline = fast(&c);
         for &u in &us {
-            prop_assert_eq!(f.eval(u), fresh(&c, u), "forward step to u = {}", u);
+            let got = f.eval(u);
+            prop_assert_eq!(got, fresh(&c, u), "forward step to u = {}", u);
+            // The AVX2 kernels and the baseline ones: the same operations, the same bits.
+            prop_assert_eq!(got, baseline.eval_baseline(u), "baseline kernel at u = {}", u);
         }
         let (lo, hi) = c.domain();
         for t in jumps {
