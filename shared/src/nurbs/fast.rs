@@ -90,8 +90,8 @@ pub(crate) struct SpanCursor<const K: usize> {
     u_max: f64,
     /// Index of the current span `[knots[span], knots[span+1])`.
     span: usize,
-    /// Parameter range in which the registers are valid; open-ended at the domain ends,
-    /// so the closed last span and clamped parameters never trigger a reload.
+    /// Parameter range `[lo, hi)` in which the registers are valid, inside the domain
+    /// (`hi` is just above the domain's end for the closed last span).
     lo: f64,
     hi: f64,
     /// `kl[i] = knots[span+1-i]`, `kr[i] = knots[span+i]` for `i = 1..=p`.
@@ -148,14 +148,26 @@ impl<const K: usize> SpanCursor<K> {
         }
     }
 
-    /// Makes the registers hold the span of `u` (already clamped). Returns whether the
-    /// span changed, so the owner reloads its control-point window.
+    /// Clamps `u` into the domain and makes the registers hold its span. Returns the
+    /// clamped parameter and whether the span changed, so the owner reloads its window.
+    /// The common case, `u` inside the current span, is two comparisons: the registers'
+    /// range lies inside the domain, so no clamping is needed there.
     #[inline(always)]
-    pub(crate) fn locate(&mut self, u: f64) -> bool {
+    pub(crate) fn enter(&mut self, u: f64) -> (f64, bool) {
         if u >= self.lo && u < self.hi {
-            return false;
+            return (u, false);
         }
-        self.seek(u)
+        self.enter_slow(u)
+    }
+
+    #[cold]
+    #[inline(never)]
+    fn enter_slow(&mut self, u: f64) -> (f64, bool) {
+        let u = self.clamp(u);
+        if u >= self.lo && u < self.hi {
+            return (u, false);
+        }
+        (u, self.seek(u))
     }
 
     #[cold]
@@ -185,12 +197,13 @@ impl<const K: usize> SpanCursor<K> {
         let p = self.degree;
         self.span = s;
         let (a, b) = (self.knots[s], self.knots[s + 1]);
-        self.lo = if a <= self.u_min {
-            f64::NEG_INFINITY
+        // The last span is closed at the domain's end.
+        self.lo = a;
+        self.hi = if b >= self.u_max {
+            self.u_max.next_up()
         } else {
-            a
+            b
         };
-        self.hi = if b >= self.u_max { f64::INFINITY } else { b };
         for i in 1..=p {
             self.kl[i] = self.knots[s + 1 - i];
             self.kr[i] = self.knots[s + i];
@@ -472,8 +485,8 @@ impl Core {
     /// (independent, so they overlap in the pipeline) and the quotient rule.
     #[inline(always)]
     fn eval_power(&mut self, p: usize, u: f64) -> CurvePoint {
-        let u = self.cursor.clamp(u);
-        if self.cursor.locate(u) {
+        let (u, moved) = self.cursor.enter(u);
+        if moved {
             self.load_window();
         }
         let p = p.min(MAX_DEGREE);
@@ -494,8 +507,8 @@ impl Core {
 
     #[inline(always)]
     fn eval_deg(&mut self, p: usize, u: f64) -> CurvePoint {
-        let u = self.cursor.clamp(u);
-        if self.cursor.locate(u) {
+        let (u, moved) = self.cursor.enter(u);
+        if moved {
             self.load_window();
         }
         let b = self.cursor.terms(p, u);

@@ -309,10 +309,9 @@ impl FastSurface {
 
     #[inline(always)]
     fn eval_deg(&mut self, p: usize, q: usize, u: f64, v: f64) -> SurfacePoint {
-        let u = self.cu.clamp(u);
-        let v = self.cv.clamp(v);
-        // Both cursors must move before the window is reloaded; `|` keeps both calls.
-        if self.cu.locate(u) | self.cv.locate(v) {
+        let (u, moved_u) = self.cu.enter(u);
+        let (v, moved_v) = self.cv.enter(v);
+        if moved_u || moved_v {
             self.load_window();
         }
         let (p, q) = (p.min(MAX_SURF_DEGREE), q.min(MAX_SURF_DEGREE));
