@@ -6,6 +6,12 @@
 //! at most `a·T` per cycle, never exceeds the block's feed, and is always low enough to
 //! reach the block's planned end speed (zero when no next motion is known yet, so a
 //! starved interpolator stops on the path instead of running off its end).
+//!
+//! A fault does not freeze the set-point where it is: [`Engine::stop`] starts a controlled
+//! stop, as a real control does on a following-error or peer fault. From then on no block
+//! is taken from the source, and the speed falls by `a·T` every cycle along the path
+//! already in hand (crossing into a look-ahead block that is already validated), down to
+//! zero ([`Engine::at_rest`]). The stop is bounded: at most `v/(a·T) + 1` cycles.
 #![deny(
     clippy::indexing_slicing,
     clippy::unwrap_used,
@@ -35,24 +41,74 @@ pub enum Fault {
         axis: usize,
         ferr_mm: f64,
         limit_mm: f64,
+        /// Source line of the set-point the drives were answering.
+        line: u32,
     },
     Feedback(ProtocolError),
     /// The drives did not answer this cycle's set-point in time (dead or stalled).
     PeerSilent {
         cycle: u64,
     },
+    /// A peer process is gone: iceoryx2 found its node dead (the kernel released its
+    /// liveness lock) or its port left the service before the program end. `cycle` is the
+    /// cycle in which the interpolator noticed.
+    PeerGone {
+        peer: Peer,
+        cycle: u64,
+    },
     /// SIGTERM/SIGINT: the launcher stops the stack (a peer failed) or the operator did.
     StopRequested,
+}
+
+/// The processes the interpolator watches.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Peer {
+    Interpreter,
+    ServoSim,
+}
+
+impl Peer {
+    pub fn name(self) -> &'static str {
+        match self {
+            Peer::Interpreter => "interpreter",
+            Peer::ServoSim => "servo-sim",
+        }
+    }
+}
+
+/// Axis letter of an axis index.
+pub fn axis_name(axis: usize) -> &'static str {
+    ["X", "Y", "Z"].get(axis).copied().unwrap_or("?")
+}
+
+impl Fault {
+    /// A short, stable name for reports and tests.
+    pub fn kind(&self) -> &'static str {
+        match self {
+            Fault::Protocol(_) => "bad_block",
+            Fault::FollowingError { .. } => "following_error",
+            Fault::Feedback(_) => "bad_feedback",
+            Fault::PeerSilent { .. } => "peer_silent",
+            Fault::PeerGone { .. } => "peer_gone",
+            Fault::StopRequested => "stop_requested",
+        }
+    }
 }
 
 impl core::fmt::Display for Fault {
     fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
         match self {
             Fault::Protocol(e) => write!(f, "bad command block: {e}"),
-            Fault::FollowingError { cycle, axis, ferr_mm, limit_mm } => write!(
+            Fault::FollowingError {
+                cycle,
+                axis,
+                ferr_mm,
+                limit_mm,
+                line,
+            } => write!(
                 f,
-                "cycle {cycle}: following error on {} is {:.3} mm, above the limit of {limit_mm} mm",
-                ["X", "Y", "Z"].get(*axis).unwrap_or(&"?"),
+                "cycle {cycle}, line {line}: following error on {} is {:.4} mm, above the limit of {limit_mm} mm",
+                axis_name(*axis),
                 ferr_mm
             ),
             Fault::Feedback(e) => write!(f, "bad feedback: {e}"),
@@ -60,6 +116,11 @@ impl core::fmt::Display for Fault {
             Fault::PeerSilent { cycle } => {
                 write!(f, "cycle {cycle}: the servo-sim did not answer the set-point (dead or stalled)")
             }
+            Fault::PeerGone { peer, cycle } => write!(
+                f,
+                "cycle {cycle}: the {} is gone (its process ended or died)",
+                peer.name()
+            ),
         }
     }
 }
@@ -142,6 +203,14 @@ pub struct Engine {
     rapid: bool,
     end_received: bool,
     done: bool,
+    /// A controlled stop is under way: no new blocks, speed only falls.
+    stopping: bool,
+    /// A fault found while taking a block in the middle of a tick, reported at the start
+    /// of the next one (so that an `Err` from `tick` never leaves a half-made step).
+    deferred: Option<Fault>,
+    /// Times the engine came to a stop for want of a block (not counting the program end).
+    starvations: u64,
+    starved: bool,
 }
 
 fn dist(a: [f64; 3], b: [f64; 3]) -> f64 {
@@ -184,7 +253,42 @@ impl Engine {
             rapid: false,
             end_received: false,
             done: false,
+            stopping: false,
+            deferred: None,
+            starvations: 0,
+            starved: false,
         }
+    }
+
+    /// Starts a controlled stop: from the next tick on, no block is taken from the source
+    /// and the speed only falls, by `a·T` per cycle, along the path already in hand.
+    pub fn stop(&mut self) {
+        self.stopping = true;
+    }
+
+    /// A controlled stop is under way (or over).
+    pub fn stopping(&self) -> bool {
+        self.stopping
+    }
+
+    /// The controlled stop is complete: the machine stands still on the path.
+    pub fn at_rest(&self) -> bool {
+        self.stopping && self.speed <= 0.0
+    }
+
+    /// Times the engine ran out of blocks mid-program and stopped on the path to wait.
+    pub fn starvations(&self) -> u64 {
+        self.starvations
+    }
+
+    /// Path speed commanded in the last tick.
+    pub fn speed_mm_per_s(&self) -> f64 {
+        self.speed
+    }
+
+    /// Source line of the block being run.
+    pub fn source_line(&self) -> u32 {
+        self.line
     }
 
     /// Blocks taken from the source so far.
@@ -199,12 +303,24 @@ impl Engine {
     /// True while the engine holds no look-ahead block and the program end has not been
     /// received yet (it will ask the source for one).
     pub fn wants_block(&self) -> bool {
-        self.next.is_none() && !self.done && !self.end_received
+        self.next.is_none() && !self.done && !self.end_received && !self.stopping
+    }
+
+    /// Takes the next block into the look-ahead slot if there is room. A bad block is
+    /// never taken; its fault is kept for the start of the next tick.
+    fn fill_or_defer(&mut self, src: &mut impl BlockSource) {
+        if self.deferred.is_some() {
+            return;
+        }
+        if let Err(f) = self.fill(src) {
+            self.deferred = Some(f);
+        }
     }
 
     fn fill(&mut self, src: &mut impl BlockSource) -> Result<(), Fault> {
-        // Nothing follows the program end: never ask the source past it.
-        if self.next.is_some() || self.done || self.end_received {
+        // Nothing follows the program end: never ask the source past it. A stopping
+        // machine takes nothing more.
+        if self.next.is_some() || self.done || self.end_received || self.stopping {
             return Ok(());
         }
         if let Some(b) = src.next_block() {
@@ -264,19 +380,39 @@ impl Engine {
     }
 
     /// Advances one period. Allocation-free, panic-free.
+    ///
+    /// An `Err` is returned before anything moves: the engine is then exactly as after the
+    /// previous tick, so the caller can [`stop`](Engine::stop) and keep ticking, and the
+    /// set-points decelerate along the path from where they were.
     pub fn tick(&mut self, src: &mut impl BlockSource) -> Result<Tick, Fault> {
+        if !self.stopping {
+            if let Some(f) = self.deferred.take() {
+                return Err(f);
+            }
+            self.fill(src)?;
+        }
         let a = self.lim.path_acc_mm_per_s2;
         let t = self.t_s;
         let mut budget: Option<f64> = None;
         let prev_pos = self.pos;
         let mut state = TickState::Running;
-        for _ in 0..MAX_BLOCKS_PER_CYCLE {
-            self.fill(src)?;
+        for pass in 0..MAX_BLOCKS_PER_CYCLE {
+            // The first pass's block was asked for above, before anything moved.
+            if pass > 0 {
+                self.fill_or_defer(src);
+            }
             if let Current::None = self.cur {
                 match self.next.take() {
                     Some(b) => {
-                        self.start(b)?;
-                        self.fill(src)?;
+                        if let Err(f) = self.start(b) {
+                            // Not loadable after all: stand still here, fault next tick.
+                            self.deferred.get_or_insert(f);
+                            self.cur = Current::None;
+                            self.speed = 0.0;
+                            state = TickState::Starved;
+                            break;
+                        }
+                        self.fill_or_defer(src);
                     }
                     None => {
                         state = if self.done {
@@ -306,6 +442,16 @@ impl Engine {
                 } => {
                     self.line = line;
                     self.seq = seq;
+                    if self.stopping {
+                        // Already at rest: a stop ends the dwell.
+                        self.cur = Current::Dwell {
+                            cycles_left: 0,
+                            line,
+                            seq,
+                        };
+                        self.speed = 0.0;
+                        break;
+                    }
                     if cycles_left == 0 {
                         self.cur = Current::None;
                         continue;
@@ -334,16 +480,30 @@ impl Engine {
                             let brake = (-a * t
                                 + (a * a * t * t + v_exit * v_exit + 2.0 * a * s_rem).sqrt())
                             .max(v_exit);
-                            let v = m.feed_mm_per_s.min(self.speed + a * t).min(brake).max(0.0);
+                            // A controlled stop only ever slows down.
+                            let up = if self.stopping {
+                                self.speed - a * t
+                            } else {
+                                self.speed + a * t
+                            };
+                            let v = m.feed_mm_per_s.min(up).min(brake).max(0.0);
                             self.speed = v;
                             v * t
                         }
                     };
+                    if ds <= 0.0 && self.stopping {
+                        // Stopped inside the block: stay exactly where the last step ended.
+                        self.cur = Current::Motion(m);
+                        break;
+                    }
                     if ds >= s_rem - 1e-9 {
                         // The block ends inside this period; carry the rest into the next.
                         self.pos = m.end_mm;
                         self.cur = Current::None;
                         if v_exit <= 0.0 {
+                            // An exact stop: the next motion starts from rest, whatever
+                            // the speed of this last, short step was.
+                            self.speed = 0.0;
                             break;
                         }
                         budget = Some(ds - s_rem);
@@ -359,6 +519,12 @@ impl Engine {
                 }
             }
         }
+        // A starvation is a stop for want of a block mid-program, counted once per stop.
+        let starved = state == TickState::Starved && !self.stopping;
+        if starved && !self.starved {
+            self.starvations += 1;
+        }
+        self.starved = starved;
         let vel = rate(self.pos, prev_pos, t);
         let acc = rate(vel, self.vel, t);
         self.vel = vel;
@@ -384,6 +550,7 @@ impl Engine {
                     axis,
                     ferr_mm: *e,
                     limit_mm: self.lim.max_following_error_mm,
+                    line: self.line,
                 });
             }
         }

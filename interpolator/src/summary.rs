@@ -1,7 +1,7 @@
 //! What the interpolator reports at the end of a run (`interpolator.json`), which the
 //! launcher folds into the run's `report.json`.
 
-use crate::engine::Tick;
+use crate::engine::{axis_name, Engine, Fault, Tick};
 use crate::rt::cycle::Config;
 use crate::rt::sched::SchedReport;
 use crate::timing::{Miss, Percentiles, Timing};
@@ -71,6 +71,82 @@ impl From<&Miss> for MissEntry {
     }
 }
 
+/// A fault in figures: what it was, when it was noticed, and the controlled stop after it.
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
+pub struct FaultInfo {
+    /// `following_error`, `peer_gone`, `peer_silent`, `bad_block`, `bad_feedback` or
+    /// `stop_requested`.
+    pub kind: String,
+    /// The cycle the fault is about: for a following error the cycle whose set-point the
+    /// drives answered with it, otherwise the cycle in which the interpolator noticed.
+    pub cycle: u64,
+    /// The source line that cycle ran.
+    pub line: u32,
+    /// Following error: the axis (`X`, `Y`, `Z`).
+    pub axis: Option<String>,
+    /// Dead or silent peer: `interpreter` or `servo-sim`.
+    pub peer: Option<String>,
+    /// The last cycle the drives had answered when the fault was noticed.
+    pub last_feedback_cycle: Option<u64>,
+    /// The cycle in which the controlled stop began (the fault was acted on).
+    pub stop_from_cycle: u64,
+    /// Path speed when the stop began.
+    pub speed_at_fault_mm_per_min: f64,
+    /// The cycle of the last set-point: the machine at rest on the path.
+    pub stopped_cycle: u64,
+}
+
+/// A fault as the cycle notes it: plain data, no allocation (the text comes later).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct FaultRecord {
+    pub fault: Fault,
+    /// The cycle in which the stop began.
+    pub now: u64,
+    /// The source line being run then.
+    pub line: u32,
+    pub speed_mm_per_s: f64,
+    pub last_feedback_cycle: Option<u64>,
+}
+
+impl FaultRecord {
+    /// The fault `f`, acted on in cycle `now` with the engine as it is.
+    #[inline]
+    pub fn at(f: Fault, now: u64, engine: &Engine, last_feedback_cycle: Option<u64>) -> Self {
+        FaultRecord {
+            fault: f,
+            now,
+            line: engine.source_line(),
+            speed_mm_per_s: engine.speed_mm_per_s(),
+            last_feedback_cycle,
+        }
+    }
+}
+
+impl FaultInfo {
+    /// The report form of a fault record; `stopped_cycle` is the run's last cycle.
+    pub fn new(r: &FaultRecord, stopped_cycle: u64) -> Self {
+        let (cycle, line, axis, peer) = match r.fault {
+            Fault::FollowingError {
+                cycle, axis, line, ..
+            } => (cycle, line, Some(axis_name(axis).to_string()), None),
+            Fault::PeerGone { peer, cycle } => (cycle, r.line, None, Some(peer.name().into())),
+            Fault::PeerSilent { cycle } => (cycle, r.line, None, Some("servo-sim".into())),
+            _ => (r.now, r.line, None, None),
+        };
+        FaultInfo {
+            kind: r.fault.kind().into(),
+            cycle,
+            line,
+            axis,
+            peer,
+            last_feedback_cycle: r.last_feedback_cycle,
+            stop_from_cycle: r.now,
+            speed_at_fault_mm_per_min: r.speed_mm_per_s * 60.0,
+            stopped_cycle,
+        }
+    }
+}
+
 #[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
 pub struct Summary {
     pub outcome: String,
@@ -97,6 +173,14 @@ pub struct Summary {
     pub sched: SchedReport,
     /// Set-point trace records lost because the writer fell a whole ring behind.
     pub trace_dropped: u64,
+    /// Times the interpolator ran out of blocks mid-program, decelerated and waited at a
+    /// stop on the path for the interpreter (real clock only: the simulated clock waits
+    /// for late blocks without moving time on).
+    #[serde(default)]
+    pub starvations: u64,
+    /// The fault in figures, when there was one.
+    #[serde(default)]
+    pub fault_info: Option<FaultInfo>,
 }
 
 impl Summary {
@@ -137,7 +221,16 @@ impl Summary {
             max_following_error_um: max_ferr_mm * 1000.0,
             sched,
             trace_dropped,
+            starvations: 0,
+            fault_info: None,
         }
+    }
+
+    /// Adds the fault figures and the starvation count.
+    pub fn with_faults(mut self, fault_info: Option<FaultInfo>, starvations: u64) -> Self {
+        self.fault_info = fault_info;
+        self.starvations = starvations;
+        self
     }
 
     pub fn write(&self, path: &std::path::Path) -> std::io::Result<()> {

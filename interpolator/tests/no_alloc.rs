@@ -3,41 +3,12 @@
 //! counts only on the measuring thread (the trace writer thread formats and allocates
 //! freely, off the cycle).
 
-use interpolator::engine::{BlockSource, Engine, Limits, TickState};
-use interpolator::summary::FeedStats;
+use interpolator::engine::{BlockSource, Engine, Fault, Limits, TickState};
+use interpolator::summary::{FaultRecord, FeedStats};
 use interpolator::timing::Timing;
+use shared::alloc_count::{arm, count, Counting};
 use shared::protocol::{BlockKind, CommandBlock};
 use shared::trace::TraceWriter;
-use std::alloc::{GlobalAlloc, Layout, System};
-use std::cell::Cell;
-use std::sync::atomic::{AtomicU64, Ordering};
-
-struct Counting;
-static ALLOCS: AtomicU64 = AtomicU64::new(0);
-thread_local! {
-    static ARMED: Cell<bool> = const { Cell::new(false) };
-}
-
-fn count() {
-    if ARMED.with(|a| a.get()) {
-        ALLOCS.fetch_add(1, Ordering::Relaxed);
-    }
-}
-
-unsafe impl GlobalAlloc for Counting {
-    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
-        count();
-        unsafe { System.alloc(layout) }
-    }
-    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
-        count();
-        unsafe { System.dealloc(ptr, layout) }
-    }
-    unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
-        count();
-        unsafe { System.realloc(ptr, layout, new_size) }
-    }
-}
 
 #[global_allocator]
 static GLOBAL: Counting = Counting;
@@ -114,7 +85,7 @@ fn cycle_work_does_not_allocate() {
         s.push_str(&format!("{},{}", r.0, r.1[0]));
     })
     .unwrap();
-    ARMED.with(|a| a.set(true));
+    arm(true);
     let mut cycles = 0u64;
     loop {
         let t = engine.tick(&mut src).unwrap();
@@ -133,17 +104,81 @@ fn cycle_work_does_not_allocate() {
         }
         if cycles.is_multiple_of(1024) {
             // Let the writer keep up, without counting what sleeping may allocate.
-            ARMED.with(|a| a.set(false));
+            arm(false);
             std::thread::sleep(std::time::Duration::from_millis(6));
-            ARMED.with(|a| a.set(true));
+            arm(true);
         }
     }
-    ARMED.with(|a| a.set(false));
-    let allocs = ALLOCS.load(Ordering::Relaxed);
+    arm(false);
+    let allocs = count();
     assert_eq!(trace.dropped(), 0);
     trace.finish().unwrap();
     let _ = std::fs::remove_file(&path);
     assert!(cycles > 10_000, "only {cycles} cycles");
     assert!(timing.misses > 5);
     assert_eq!(allocs, 0, "{allocs} allocations in {cycles} cycles");
+}
+
+#[test]
+fn controlled_stop_does_not_allocate() {
+    let lim = Limits {
+        period_ns: 1_000_000,
+        path_acc_mm_per_s2: 2000.0,
+        max_following_error_mm: 1.0,
+    };
+    let mut engine = Engine::new(lim, [0.0; 3]);
+    let mut src = Loop {
+        block: closed_curve(),
+        next_seq: 0,
+        count: 40,
+    };
+    // The peer watch the cycle reads (its thread allocates freely, off the cycle).
+    let prefix = format!("noalloc{}", std::process::id());
+    let svc = shared::protocol::Services::new(&prefix);
+    let node = shared::ipc::node::<iceoryx2::prelude::local::Service>("noalloc").unwrap();
+    let blocks = shared::ipc::blocks(&node, &svc).unwrap();
+    let _publisher = blocks.publisher_builder().create().unwrap();
+    let setpoints = shared::ipc::setpoints(&node, &svc).unwrap();
+    let _subscriber = setpoints.subscriber_builder().create().unwrap();
+    let watch = interpolator::rt::watch::PeerWatch::start::<iceoryx2::prelude::local::Service>(
+        &prefix,
+        std::time::Duration::from_millis(1),
+    )
+    .unwrap();
+    // The watch is running (its first look is done) before the cycle work is measured.
+    while watch.polls() == 0 {
+        std::thread::sleep(std::time::Duration::from_millis(1));
+    }
+    let mut feed = FeedStats::default();
+    arm(true);
+    let mut record = None;
+    let mut cycles = 0u64;
+    loop {
+        if cycles == 3000 {
+            let f = watch
+                .gone()
+                .map(|peer| Fault::PeerGone {
+                    peer,
+                    cycle: cycles,
+                })
+                .unwrap_or(Fault::StopRequested);
+            record = Some(FaultRecord::at(f, cycles, &engine, Some(cycles - 1)));
+            engine.stop();
+        }
+        let t = engine.tick(&mut src).unwrap();
+        feed.add(&t, 1_000_000);
+        cycles += 1;
+        if engine.at_rest() || t.state == TickState::Done {
+            break;
+        }
+    }
+    arm(false);
+    let allocs = count();
+    assert!(
+        record.is_some_and(|r| r.speed_mm_per_s > 0.0),
+        "stopped from speed"
+    );
+    assert!(engine.at_rest() && cycles > 3001, "{cycles} cycles");
+    assert_eq!(watch.gone(), None, "both ports are still there");
+    assert_eq!(allocs, 0, "{allocs} allocations in a controlled stop");
 }

@@ -96,6 +96,12 @@ pub enum Role {
         replay: Option<PathBuf>,
         #[arg(long)]
         salvage: bool,
+        /// Run the program this many times in one stream (see `cnc run --repeat`).
+        #[arg(long, default_value_t = 1)]
+        repeat: u32,
+        /// Test aid: wait this many ms before publishing each block (a slow interpreter).
+        #[arg(long)]
+        throttle_ms: Option<u64>,
     },
     Interpolator(interpolator::cli::Args),
     ServoSim(servo_sim::cli::Args),
@@ -123,6 +129,25 @@ pub fn run_interpreter(
     replay: Option<PathBuf>,
     salvage: bool,
 ) -> ExitCode {
+    run_interpreter_streaming(
+        common,
+        program,
+        program_name,
+        replay,
+        salvage,
+        process::Streaming::default(),
+    )
+}
+
+/// [`run_interpreter`], repeating or pacing the program as `streaming` says.
+pub fn run_interpreter_streaming(
+    common: &servo_sim::cli::Args,
+    program: Option<PathBuf>,
+    program_name: Option<String>,
+    replay: Option<PathBuf>,
+    salvage: bool,
+    streaming: process::Streaming,
+) -> ExitCode {
     let machine = match shared::machine::load(common.machine.as_deref()) {
         Ok(m) => m,
         Err(e) => return fail(e),
@@ -138,7 +163,7 @@ pub fn run_interpreter(
         replay,
         salvage,
     };
-    match process::run::<iceoryx2::prelude::ipc::Service>(&cfg) {
+    match process::run_streaming::<iceoryx2::prelude::ipc::Service>(&cfg, streaming) {
         Ok(s) if s.fault.is_none() => ExitCode::SUCCESS,
         Ok(s) => fail(s.fault.unwrap_or_default()),
         Err(e) => fail(e),
@@ -241,7 +266,19 @@ pub fn main() -> ExitCode {
             program_name,
             replay,
             salvage,
-        }) => run_interpreter(&common, program, program_name, replay, salvage),
+            repeat,
+            throttle_ms,
+        }) => run_interpreter_streaming(
+            &common,
+            program,
+            program_name,
+            replay,
+            salvage,
+            process::Streaming {
+                repeat,
+                throttle: throttle_ms.map(std::time::Duration::from_millis),
+            },
+        ),
         Command::Role(Role::Interpolator(args)) => match interpolator::cli::run(&args) {
             Ok(()) => ExitCode::SUCCESS,
             Err(e) => fail(e),

@@ -1,12 +1,18 @@
 //! `cnc run`: check the program, start the three processes (this same executable in each
 //! role), supervise them, and fold their summaries into `report.json`.
 //!
-//! If one process fails, the others are stopped at once: a control never keeps moving
-//! with a dead peer. The servo-sim starts first, then the interpolator, then the
-//! interpreter, so every consumer exists before its producer sends.
+//! If one process fails, the others stop too: a control never keeps moving with a dead
+//! peer. Each survivor notices a dead peer by itself (iceoryx2 liveness, within a few
+//! periods) and stops its own way: the interpolator decelerates along the path, the drives
+//! hold position. The launcher gives them [`SURVIVOR_GRACE`] to do so and to write their
+//! summaries, then asks any that are left to stop (SIGTERM), and kills what is still there
+//! after that. The report names a process that died and the cycle it died at. The
+//! servo-sim starts first, then the interpolator, then the interpreter, so every consumer
+//! exists before its producer sends.
 
 use crate::process::{self, Source};
 use crate::report::{self, Process};
+use serde::{Deserialize, Serialize};
 use shared::clock::ClockMode;
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, ExitCode, Stdio};
@@ -54,6 +60,47 @@ pub struct RunArgs {
     /// Do not write report.html at the end (see `cnc report`).
     #[arg(long)]
     pub no_report: bool,
+    /// Run the program N times in one stack (soak test): one stream of blocks whose
+    /// sequence numbers keep counting, with a rapid back to the start between runs when
+    /// the program ends elsewhere. report.json has each process's memory at start and end.
+    #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u32).range(1..))]
+    pub repeat: u32,
+    /// Test aid: the interpreter waits this many ms before each block (starves the
+    /// interpolator on purpose).
+    #[arg(long, hide = true)]
+    pub throttle_ms: Option<u64>,
+}
+
+/// How long the survivors of a failed process get to stop by themselves.
+pub const SURVIVOR_GRACE: Duration = Duration::from_secs(3);
+
+/// A process that died (killed by a signal from outside the stack), for the report.
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
+pub struct DeadProcess {
+    pub role: String,
+    pub pid: u32,
+    /// The signal, in words (`signal 9`).
+    pub exit: String,
+    /// The cycle it died at: for the servo-sim or the interpreter, the interpolator cycle
+    /// in which its death was noticed; for the interpolator, its last set-point (the last
+    /// cycle the drives answered).
+    pub cycle: Option<u64>,
+    /// How the cycle was found, in words.
+    pub detail: String,
+}
+
+/// A process's resident memory (VmRSS) as the launcher sampled it every 100 ms.
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
+pub struct ProcessMemory {
+    pub role: String,
+    pub pid: u32,
+    /// The first sample after the process had run for a second (its set-up done), or its
+    /// first sample if it ran for less.
+    pub start_kib: u64,
+    /// The last sample before it ended.
+    pub end_kib: u64,
+    pub max_kib: u64,
+    pub samples: u64,
 }
 
 /// `YYYYMMDDTHHMMSSZ` for a Unix time (UTC, proleptic Gregorian).
@@ -97,6 +144,54 @@ struct Role {
     name: &'static str,
     child: Child,
     exit: Option<std::process::ExitStatus>,
+    /// The launcher had to stop it (SIGTERM, then SIGKILL).
+    stopped: bool,
+    spawned: Instant,
+    memory: Option<ProcessMemory>,
+    start_settled: bool,
+}
+
+/// VmRSS of a live process in KiB, from /proc.
+fn rss_kib(pid: u32) -> Option<u64> {
+    let status = std::fs::read_to_string(format!("/proc/{pid}/status")).ok()?;
+    let line = status.lines().find(|l| l.starts_with("VmRSS:"))?;
+    line.split_whitespace().nth(1)?.parse().ok()
+}
+
+impl Role {
+    fn new(name: &'static str, child: Child) -> Role {
+        Role {
+            name,
+            child,
+            exit: None,
+            stopped: false,
+            spawned: Instant::now(),
+            memory: None,
+            start_settled: false,
+        }
+    }
+
+    fn sample_memory(&mut self) {
+        let Some(kib) = rss_kib(self.child.id()) else {
+            return;
+        };
+        let m = self.memory.get_or_insert(ProcessMemory {
+            role: self.name.into(),
+            pid: self.child.id(),
+            start_kib: kib,
+            end_kib: kib,
+            max_kib: kib,
+            samples: 0,
+        });
+        // The start figure is the first sample after set-up (iceoryx2, rings, mlock).
+        if !self.start_settled && self.spawned.elapsed() >= Duration::from_secs(1) {
+            self.start_settled = true;
+            m.start_kib = kib;
+        }
+        m.end_kib = kib;
+        m.max_kib = m.max_kib.max(kib);
+        m.samples += 1;
+    }
 }
 
 fn exit_text(s: Option<std::process::ExitStatus>) -> String {
@@ -137,22 +232,35 @@ fn run_inner(args: &RunArgs) -> Result<bool, String> {
     let src = Source::load(args.program.as_deref())?;
     let period_ns = args.period_us * 1000;
     // Bad input is rejected before any process starts, let alone any motion.
-    if let Err(diags) = process::compile(&src.text, &machine, period_ns) {
-        eprint!("{}", process::format_diagnostics(&src.name, &diags));
-        return Ok(false);
-    }
+    let blocks = match process::compile(&src.text, &machine, period_ns) {
+        Ok((_, blocks)) => blocks,
+        Err(diags) => {
+            eprint!("{}", process::format_diagnostics(&src.name, &diags));
+            return Ok(false);
+        }
+    };
     let dir = args.out.clone().unwrap_or_else(default_out_dir);
     std::fs::create_dir_all(&dir).map_err(|e| format!("{}: {e}", dir.display()))?;
     // The run directory keeps the exact program and machine it ran.
     let program_copy = dir.join("program.ngc");
     std::fs::write(&program_copy, &src.text)
         .map_err(|e| format!("{}: {e}", program_copy.display()))?;
-    let input = vec![
+    let mut input = vec![
         "--program".into(),
         program_copy.display().to_string(),
         "--program-name".into(),
         src.name.clone(),
+        "--repeat".into(),
+        args.repeat.to_string(),
     ];
+    if let Some(ms) = args.throttle_ms {
+        input.extend(["--throttle-ms".into(), ms.to_string()]);
+    }
+    // The length of the run for a progress bar, only where one is drawn.
+    let expected_cycles = progress_wanted().then(|| {
+        let all: Vec<_> = process::repeated(&blocks, args.repeat, &machine).collect();
+        expected_cycles(&all, &machine, period_ns)
+    });
     let stack = Stack {
         dir,
         machine,
@@ -160,6 +268,7 @@ fn run_inner(args: &RunArgs) -> Result<bool, String> {
         clock: args.clock,
         sched: args.sched,
         html: !args.no_report,
+        expected_cycles: expected_cycles.flatten(),
     };
     stack.launch(&src.name, input)
 }
@@ -175,6 +284,97 @@ pub struct Stack {
     /// Write report.html after report.json (after every process has ended, so it never
     /// touches a cycle).
     pub html: bool,
+    /// The run's length in cycles, for the progress bar (`None`: no bar).
+    pub expected_cycles: Option<u64>,
+}
+
+/// A progress bar is drawn only for a person watching: stderr a terminal, not CI.
+pub fn progress_wanted() -> bool {
+    use std::io::IsTerminal;
+    std::io::stderr().is_terminal() && std::env::var_os("CI").is_none()
+}
+
+/// The cycles a run of `blocks` takes: the interpolator's own engine, stepped in-process.
+pub fn expected_cycles(
+    blocks: &[shared::protocol::CommandBlock],
+    machine: &shared::Machine,
+    period_ns: u64,
+) -> Option<u64> {
+    crate::estimate::estimate(blocks, machine, period_ns)
+        .ok()
+        .map(|e| e.cycles)
+}
+
+/// Runs shorter than this get no progress bar (it would only flash).
+const PROGRESS_AFTER: Duration = Duration::from_secs(2);
+
+/// The run's progress from the interpolator's status (cycle numbers), drawn on stderr once
+/// the run has lasted [`PROGRESS_AFTER`].
+struct Progress {
+    total: u64,
+    started: Instant,
+    _node: iceoryx2::node::Node<iceoryx2::prelude::ipc::Service>,
+    sub: iceoryx2::port::subscriber::Subscriber<
+        iceoryx2::prelude::ipc::Service,
+        shared::protocol::Status,
+        (),
+    >,
+    cycle: u64,
+    /// When the first status came (the first cycle ran).
+    moving_since: Option<Instant>,
+    bar: Option<indicatif::ProgressBar>,
+}
+
+impl Progress {
+    fn new(prefix: &str, total: u64) -> Option<Progress> {
+        let svc = shared::protocol::Services::new(prefix);
+        let node = shared::ipc::node::<iceoryx2::prelude::ipc::Service>("launcher").ok()?;
+        let status = shared::ipc::status(&node, &svc).ok()?;
+        let sub = status.subscriber_builder().create().ok()?;
+        Some(Progress {
+            total,
+            started: Instant::now(),
+            _node: node,
+            sub,
+            cycle: 0,
+            moving_since: None,
+            bar: None,
+        })
+    }
+
+    fn update(&mut self) {
+        while let Ok(Some(s)) = self.sub.receive() {
+            self.cycle = s.cycle;
+            self.moving_since.get_or_insert_with(Instant::now);
+        }
+        if self.bar.is_none() && self.started.elapsed() >= PROGRESS_AFTER {
+            // The clock starts with the run, not with the bar.
+            let bar = indicatif::ProgressBar::new(self.total).with_elapsed(self.started.elapsed());
+            bar.set_style(
+                indicatif::ProgressStyle::with_template(
+                    "{elapsed_precise} [{bar:40}] {pos}/{len} cycles ({percent}%), {msg}",
+                )
+                .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar())
+                .progress_chars("=> "),
+            );
+            self.bar = Some(bar);
+        }
+        if let Some(bar) = &self.bar {
+            let done = self.cycle.min(self.total);
+            bar.set_position(done);
+            // Time left at the pace so far (the real clock's pace is the period's).
+            if let Some(t) = self.moving_since.filter(|_| done > 0) {
+                let left = t.elapsed().as_secs_f64() * (self.total - done) as f64 / done as f64;
+                bar.set_message(format!("{left:.0} s left"));
+            }
+        }
+    }
+
+    fn finish(self) {
+        if let Some(bar) = self.bar {
+            bar.finish_and_clear();
+        }
+    }
 }
 
 impl Stack {
@@ -193,6 +393,9 @@ impl Stack {
             .map(|d| d.subsec_nanos())
             .unwrap_or(0);
         let prefix = format!("cnc{}_{nanos}", std::process::id());
+        let mut progress = self
+            .expected_cycles
+            .and_then(|total| Progress::new(&prefix, total));
         let common = vec![
             "--prefix".to_string(),
             prefix,
@@ -211,11 +414,7 @@ impl Stack {
             let mut a = common.clone();
             a.extend(extra);
             let child = spawn(&exe, name, &a).map_err(|e| format!("starting the {name}: {e}"))?;
-            roles.push(Role {
-                name,
-                child,
-                exit: None,
-            });
+            roles.push(Role::new(name, child));
             Ok(())
         };
         let sched = match self.sched {
@@ -227,19 +426,37 @@ impl Stack {
             .and_then(|_| start("interpreter", input));
         let mut launcher_fault = started.err();
         if launcher_fault.is_none() {
-            launcher_fault = supervise(&mut roles);
+            launcher_fault = supervise(&mut roles, progress.as_mut());
         } else {
             stop_all(&mut roles);
+        }
+        if let Some(p) = progress {
+            p.finish();
         }
         let processes = roles
             .iter()
             .map(|r| Process {
                 role: r.name.into(),
                 pid: r.child.id(),
-                exit: exit_text(r.exit),
+                exit: if r.stopped {
+                    format!("{} (stopped by the launcher)", exit_text(r.exit))
+                } else {
+                    exit_text(r.exit)
+                },
             })
             .collect();
-        let rep = report::assemble(
+        // A process killed from outside is the cause; say which and at which cycle.
+        let dead = dead_process(dir, &roles);
+        if let Some(d) = &dead {
+            launcher_fault = Some(format!(
+                "{} failed ({}): died at cycle {}: {}",
+                d.role,
+                d.exit,
+                d.cycle.map_or("?".to_string(), |c| c.to_string()),
+                d.detail
+            ));
+        }
+        let mut rep = report::assemble(
             dir,
             program_name,
             self.clock,
@@ -247,9 +464,28 @@ impl Stack {
             processes,
             launcher_fault,
         );
+        rep.dead_process = dead;
+        rep.memory = roles.iter().filter_map(|r| r.memory.clone()).collect();
         rep.write(&dir.join("report.json"))
             .map_err(|e| format!("writing report.json: {e}"))?;
         print!("{}", rep.summary_text(dir));
+        if rep.starvations > 0 {
+            println!(
+                "  starvation   {} time(s) the interpolator ran out of blocks, stopped on the path and waited",
+                rep.starvations
+            );
+        }
+        if let Some(f) = &rep.fault_info {
+            println!(
+                "  stop         {} at cycle {} (line {}{}): decelerated from {:.1} mm/min, at rest in cycle {}",
+                f.kind,
+                f.cycle,
+                f.line,
+                f.axis.as_deref().map(|a| format!(", axis {a}")).unwrap_or_default(),
+                f.speed_at_fault_mm_per_min,
+                f.stopped_cycle
+            );
+        }
         if self.html {
             match crate::html::write(dir, None) {
                 Ok(page) => println!("  report page  {}", page.display()),
@@ -267,10 +503,64 @@ fn toml_of(m: &shared::Machine) -> String {
     )
 }
 
-/// Asks every live process to stop (SIGTERM: each holds position, writes its summary and
-/// exits), then kills whatever is still there after a grace period.
+/// The last cycle number in a CSV trace (its last complete line).
+fn last_cycle_in(path: &Path) -> Option<u64> {
+    let text = std::fs::read_to_string(path).ok()?;
+    let complete = &text[..text.rfind('\n')?];
+    complete.lines().last()?.split(',').next()?.parse().ok()
+}
+
+/// The process that was killed by a signal from outside (not by the launcher), if any,
+/// with the cycle it died at, from what the survivors wrote.
+fn dead_process(dir: &Path, roles: &[Role]) -> Option<DeadProcess> {
+    use std::os::unix::process::ExitStatusExt;
+    let r = roles
+        .iter()
+        .find(|r| !r.stopped && r.exit.is_some_and(|s| s.signal().is_some()))?;
+    let ipol: Option<interpolator::summary::Summary> =
+        std::fs::read_to_string(dir.join("interpolator.json"))
+            .ok()
+            .and_then(|t| serde_json::from_str(&t).ok());
+    let noticed = ipol
+        .as_ref()
+        .and_then(|s| s.fault_info.as_ref())
+        .filter(|f| f.kind == "peer_gone" && f.peer.as_deref() == Some(r.name));
+    let (cycle, detail) = match (r.name, noticed) {
+        ("interpolator", _) => {
+            let c = last_cycle_in(&dir.join("feedback.csv"))
+                .or_else(|| last_cycle_in(&dir.join("setpoints.csv")));
+            (c, "its last set-point the drives answered".to_string())
+        }
+        (_, Some(f)) => (
+            Some(f.cycle),
+            format!(
+                "the interpolator noticed in cycle {}{}, decelerated along the path and stood still in cycle {}",
+                f.cycle,
+                f.last_feedback_cycle
+                    .map(|c| format!(" (last drive answer: cycle {c})"))
+                    .unwrap_or_default(),
+                f.stopped_cycle
+            ),
+        ),
+        (_, None) => (
+            last_cycle_in(&dir.join("setpoints.csv")),
+            "the last set-point written".to_string(),
+        ),
+    };
+    Some(DeadProcess {
+        role: r.name.into(),
+        pid: r.child.id(),
+        exit: exit_text(r.exit),
+        cycle,
+        detail,
+    })
+}
+
+/// Asks every live process to stop (SIGTERM: each stops its own way, writes its summary
+/// and exits), then kills whatever is still there after a grace period.
 fn stop_all(roles: &mut [Role]) {
-    for r in roles.iter().filter(|r| r.exit.is_none()) {
+    for r in roles.iter_mut().filter(|r| r.exit.is_none()) {
+        r.stopped = true;
         // SAFETY: plain kill(2) on a child we started and have not reaped.
         unsafe { libc::kill(r.child.id() as libc::pid_t, libc::SIGTERM) };
     }
@@ -289,17 +579,30 @@ fn stop_all(roles: &mut [Role]) {
     }
 }
 
-/// Waits for all processes; the first failure stops the others. Returns the failure.
-fn supervise(roles: &mut [Role]) -> Option<String> {
+/// Waits for all processes; after the first failure the others get [`SURVIVOR_GRACE`] to
+/// stop by themselves, then are stopped. Returns the failure.
+fn supervise(roles: &mut [Role], mut progress: Option<&mut Progress>) -> Option<String> {
     let mut fault = None;
+    let mut failed_at: Option<Instant> = None;
     let mut last_exit: Option<Instant> = None;
+    let mut last_sample: Option<Instant> = None;
     loop {
+        if let Some(p) = progress.as_deref_mut() {
+            p.update();
+        }
+        if last_sample.is_none_or(|t| t.elapsed() >= Duration::from_millis(100)) {
+            last_sample = Some(Instant::now());
+            for r in roles.iter_mut().filter(|r| r.exit.is_none()) {
+                r.sample_memory();
+            }
+        }
         for r in roles.iter_mut().filter(|r| r.exit.is_none()) {
             if let Ok(Some(status)) = r.child.try_wait() {
                 r.exit = Some(status);
                 last_exit = Some(Instant::now());
                 if !status.success() && fault.is_none() {
                     fault = Some(format!("{} failed ({})", r.name, exit_text(Some(status))));
+                    failed_at = Some(Instant::now());
                 }
             }
         }
@@ -312,10 +615,11 @@ fn supervise(roles: &mut [Role]) -> Option<String> {
                 "interrupted by the operator (SIGINT/SIGTERM); all processes stopped".into(),
             );
         }
-        // A failure stops the rest; after a clean exit the others get a grace period to
-        // finish their part of the shutdown handshake.
+        // After a failure the survivors stop by themselves (they watch each other); after a
+        // clean exit the others get a grace period to finish the shutdown handshake.
         let overdue = last_exit.is_some_and(|t| t.elapsed() > Duration::from_secs(10));
-        if fault.is_some() || overdue {
+        let grace_over = failed_at.is_some_and(|t| t.elapsed() > SURVIVOR_GRACE);
+        if grace_over || overdue {
             if fault.is_none() {
                 fault = Some("a process did not finish after its peers had".into());
             }

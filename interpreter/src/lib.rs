@@ -15,7 +15,9 @@
 
 pub mod blocks;
 pub mod cli;
+pub mod contour;
 pub mod estimate;
+pub mod expr;
 pub mod html;
 pub mod launch;
 pub mod parse;

@@ -1,9 +1,12 @@
 //! Reading one line of RS274/NGC into words: case-insensitive, spaces allowed anywhere
-//! (outside comments), `( )` and `;` comments, `(MSG, …)`, block delete `/`, numbered and
-//! named parameters (`#12`, `#<name>`) as values and as `#n = value` assignments.
-//! Every error carries the 1-based column it was found at.
+//! (outside comments), `( )` and `;` comments, `(MSG, …)`, block delete `/`, and values
+//! as LinuxCNC reads them ([`crate::expr`]: numbers, `[ ]` expressions, functions,
+//! numbered and named parameters), in words and in `#n = value` assignments.
+//! Every error carries the 1-based column of the token that caused it.
 
 use std::collections::HashMap;
+
+use crate::expr::{at_function, param_ref, real_value, Cursor, MAX_NUMBERED};
 
 /// One problem in a program, at `line:col` (both 1-based).
 #[derive(Debug, Clone, PartialEq)]
@@ -28,18 +31,22 @@ pub enum Param {
     Named(String),
 }
 
-/// The parameter table.
+/// The parameter table: numbered `#1..#5399`, global named `#<_name>` and local named
+/// `#<name>` parameters. Locals live in one frame per subroutine call level (frame 0 is
+/// the main program), as in LinuxCNC.
 #[derive(Debug, Clone)]
 pub struct Params {
     numbered: Vec<f64>,
-    named: HashMap<String, f64>,
+    globals: HashMap<String, f64>,
+    locals: Vec<HashMap<String, f64>>,
 }
 
 impl Default for Params {
     fn default() -> Self {
         Params {
-            numbered: vec![0.0; 5400],
-            named: HashMap::new(),
+            numbered: vec![0.0; MAX_NUMBERED as usize + 1],
+            globals: HashMap::new(),
+            locals: vec![HashMap::new()],
         }
     }
 }
@@ -53,8 +60,43 @@ impl Params {
                 }
             }
             Param::Named(name) => {
-                self.named.insert(name.clone(), v);
+                let map = if name.starts_with('_') {
+                    &mut self.globals
+                } else {
+                    match self.locals.last_mut() {
+                        Some(frame) => frame,
+                        None => &mut self.globals,
+                    }
+                };
+                map.insert(name.clone(), v);
             }
+        }
+    }
+
+    /// A numbered parameter; unset ones (and numbers out of range) read 0, as in LinuxCNC.
+    pub fn numbered(&self, n: u32) -> f64 {
+        self.numbered.get(n as usize).copied().unwrap_or(0.0)
+    }
+
+    /// A named parameter (lower case, without spaces), or `None` when it was never set
+    /// in this scope.
+    pub fn named(&self, name: &str) -> Option<f64> {
+        if name.starts_with('_') {
+            self.globals.get(name).copied()
+        } else {
+            self.locals.last().and_then(|f| f.get(name)).copied()
+        }
+    }
+
+    /// Enters a subroutine: a fresh frame of local named parameters.
+    pub fn push_frame(&mut self) {
+        self.locals.push(HashMap::new());
+    }
+
+    /// Leaves a subroutine; the main program's frame is never dropped.
+    pub fn pop_frame(&mut self) {
+        if self.locals.len() > 1 {
+            self.locals.pop();
         }
     }
 }
@@ -67,136 +109,92 @@ pub struct Line {
     /// `(MSG, text)` comments, shown to the operator.
     pub messages: Vec<String>,
     pub block_delete: bool,
+    /// The line's O-word (`o100 call [1] [2]`), with its bracketed values read.
+    pub o_word: Option<OWord>,
 }
 
-struct Cursor<'a> {
-    chars: Vec<(char, u32)>,
-    pos: usize,
-    line: u32,
-    _src: &'a str,
+/// What an O-word line does (LinuxCNC's subroutines and control flow).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum OKind {
+    Sub,
+    EndSub,
+    Call,
+    Return,
+    If,
+    ElseIf,
+    Else,
+    EndIf,
+    Do,
+    While,
+    EndWhile,
+    Repeat,
+    EndRepeat,
+    Break,
+    Continue,
 }
 
-impl Cursor<'_> {
-    fn peek(&self) -> Option<(char, u32)> {
-        self.chars.get(self.pos).copied()
-    }
-    fn col(&self) -> u32 {
-        self.peek()
-            .map(|c| c.1)
-            .unwrap_or_else(|| self.chars.last().map(|c| c.1 + 1).unwrap_or(1))
-    }
-    fn err(&self, col: u32, message: impl Into<String>) -> Diagnostic {
-        Diagnostic {
-            line: self.line,
-            col,
-            message: message.into(),
-        }
-    }
+/// Keywords, each before any other it is a prefix of (`ELSEIF` before `ELSE`).
+const O_KEYWORDS: [(&str, OKind); 15] = [
+    ("ENDSUB", OKind::EndSub),
+    ("ENDWHILE", OKind::EndWhile),
+    ("ENDIF", OKind::EndIf),
+    ("ENDREPEAT", OKind::EndRepeat),
+    ("ELSEIF", OKind::ElseIf),
+    ("ELSE", OKind::Else),
+    ("SUB", OKind::Sub),
+    ("CALL", OKind::Call),
+    ("RETURN", OKind::Return),
+    ("IF", OKind::If),
+    ("DO", OKind::Do),
+    ("WHILE", OKind::While),
+    ("REPEAT", OKind::Repeat),
+    ("BREAK", OKind::Break),
+    ("CONTINUE", OKind::Continue),
+];
 
-    fn number(&mut self) -> Result<f64, Diagnostic> {
-        let start = self.col();
-        let mut text = String::new();
-        if let Some((c @ ('+' | '-'), _)) = self.peek() {
-            text.push(c);
-            self.pos += 1;
-        }
-        let mut digits = 0;
-        while let Some((c, _)) = self.peek() {
-            if c.is_ascii_digit() {
-                digits += 1;
-            } else if c != '.' {
-                break;
-            }
-            text.push(c);
-            self.pos += 1;
-        }
-        if digits == 0 {
-            return Err(self.err(start, "expected a number"));
-        }
-        text.parse::<f64>()
-            .map_err(|_| self.err(start, format!("`{text}` is not a number")))
-    }
+/// An O-word: its label (`100` or a lower-case `<name>`), keyword and bracketed values
+/// (call arguments, a condition, a repeat count, a return value).
+#[derive(Debug, Clone, PartialEq)]
+pub struct OWord {
+    pub label: String,
+    pub kind: OKind,
+    /// Column of the `O`.
+    pub col: u32,
+    pub args: Vec<f64>,
+}
 
-    fn param_ref(&mut self) -> Result<Param, Diagnostic> {
-        // after '#'
-        let col = self.col();
-        match self.peek() {
-            Some(('<', _)) => {
-                self.pos += 1;
-                let mut name = String::new();
-                loop {
-                    match self.peek() {
-                        Some(('>', _)) => {
-                            self.pos += 1;
-                            break;
-                        }
-                        Some((c, _)) => {
-                            name.push(c.to_ascii_lowercase());
-                            self.pos += 1;
-                        }
-                        None => {
-                            return Err(self.err(col, "named parameter is missing its closing `>`"))
-                        }
-                    }
-                }
-                if name.is_empty() {
-                    return Err(self.err(col, "empty parameter name `#<>`"));
-                }
-                Ok(Param::Named(name))
-            }
-            _ => {
-                let v = self.value_with(&Params::default(), true)?;
-                if v.fract() != 0.0 || !(1.0..=5399.0).contains(&v) {
-                    return Err(self.err(col, format!("parameter number {v} is outside #1..#5399")));
-                }
-                Ok(Param::Numbered(v as u32))
-            }
-        }
-    }
-
-    fn value(&mut self, params: &Params) -> Result<f64, Diagnostic> {
-        self.value_with(params, false)
-    }
-
-    fn value_with(&mut self, params: &Params, literal_only: bool) -> Result<f64, Diagnostic> {
-        let col = self.col();
-        match self.peek() {
-            Some(('#', _)) if !literal_only => {
-                self.pos += 1;
-                match self.param_ref()? {
-                    Param::Numbered(n) => {
-                        Ok(params.numbered.get(n as usize).copied().unwrap_or(0.0))
-                    }
-                    Param::Named(name) => params.named.get(&name).copied().ok_or_else(|| {
-                        self.err(col, format!("parameter #<{name}> is used before it is set"))
-                    }),
-                }
-            }
-            Some(('[', _)) => Err(self.err(col, "expressions in [ ] are not supported yet")),
-            _ => self.number(),
+impl OKind {
+    /// How many bracketed values the keyword takes, at least and at most.
+    fn arity(self) -> (usize, usize) {
+        match self {
+            OKind::Call => (0, 30),
+            OKind::If | OKind::ElseIf | OKind::While | OKind::Repeat => (1, 1),
+            OKind::EndSub | OKind::Return => (0, 1),
+            _ => (0, 0),
         }
     }
 }
 
-/// Reads one source line. `params` supplies the values of `#` references.
-pub fn read_line(text: &str, line: u32, params: &Params) -> Result<Line, Diagnostic> {
-    let mut out = Line::default();
+/// The characters of a line that carry meaning, with their columns, and its messages:
+/// comments taken out, whitespace dropped (LinuxCNC ignores it everywhere outside
+/// comments, even inside numbers and parameter names), letters upper-cased.
+fn significant(text: &str, line: u32, messages: &mut Vec<String>) -> Result<Cursor, Diagnostic> {
     let mut chars = Vec::new();
-    let mut it = text.char_indices().peekable();
+    let mut it = text.chars();
     let mut col = 0u32;
-    while let Some((_, c)) = it.next() {
+    while let Some(c) = it.next() {
         col += 1;
         match c {
             ';' => {
-                let rest: String = it.by_ref().map(|(_, c)| c).collect();
-                take_message(rest.trim(), &mut out.messages);
+                let rest: String = it.by_ref().collect();
+                take_message(rest.trim(), messages);
                 break;
             }
             '(' => {
                 let start = col;
                 let mut comment = String::new();
                 let mut closed = false;
-                for (_, c) in it.by_ref() {
+                for c in it.by_ref() {
                     col += 1;
                     if c == ')' {
                         closed = true;
@@ -218,31 +216,73 @@ pub fn read_line(text: &str, line: u32, params: &Params) -> Result<Line, Diagnos
                         message: "comment is not closed with `)`".into(),
                     });
                 }
-                take_message(comment.trim(), &mut out.messages);
+                take_message(comment.trim(), messages);
             }
             c if c.is_whitespace() => {}
             '%' if chars.is_empty() => {} // tape start/end marker
             c => chars.push((c.to_ascii_uppercase(), col)),
         }
     }
-    let mut cur = Cursor {
+    Ok(Cursor {
         chars,
         pos: 0,
         line,
-        _src: text,
-    };
-    if let Some(('/', _)) = cur.peek() {
+    })
+}
+
+/// Reads one source line. `params` supplies the values of `#` references; the line's own
+/// assignments are returned, not applied (LinuxCNC applies them after the whole line).
+pub fn read_line(text: &str, line: u32, params: &Params) -> Result<Line, Diagnostic> {
+    let mut out = Line::default();
+    let mut cur = significant(text, line, &mut out.messages)?;
+    if let Some('/') = cur.peek() {
         out.block_delete = true;
         cur.pos += 1;
     }
-    while let Some((c, col)) = cur.peek() {
+    while let Some(c) = cur.peek() {
+        let col = cur.col();
         cur.pos += 1;
         match c {
-            'A'..='Z' => {
-                let value = cur.value(params)?;
-                if !value.is_finite() {
-                    return Err(cur.err(col, format!("{c} word is not a finite number")));
+            'O' => {
+                if out.words.iter().any(|w| w.letter != 'N') || out.o_word.is_some() {
+                    return Err(cur.err(col, "an O-word must start its line (after N at most)"));
                 }
+                let mut o = o_head(&mut cur, col)?;
+                let (least, most) = o.kind.arity();
+                while let Some('[') = cur.peek() {
+                    if o.args.len() == most {
+                        return Err(cur.err(
+                            cur.col(),
+                            format!("too many values for O {:?} (at most {most})", o.kind),
+                        ));
+                    }
+                    o.args.push(real_value(&mut cur, params)?);
+                }
+                if let Some(c) = cur.peek() {
+                    return Err(cur.err(
+                        cur.col(),
+                        format!("`{c}` after an O-word: nothing but [values] may follow it"),
+                    ));
+                }
+                if o.args.len() < least {
+                    return Err(
+                        cur.err(cur.col(), format!("O {:?} needs its value in [ ]", o.kind))
+                    );
+                }
+                out.o_word = Some(o);
+            }
+            'A'..='Z' => {
+                // A letter right after a word letter is a function (`XSIN[30]`) only
+                // when it spells one; otherwise the word simply lacks its value.
+                let starts_value = match cur.peek() {
+                    None => false,
+                    Some('A'..='Z') => at_function(&cur),
+                    Some(_) => true,
+                };
+                if !starts_value {
+                    return Err(cur.err(col, format!("{c} word has no value")));
+                }
+                let value = real_value(&mut cur, params)?;
                 out.words.push(Word {
                     letter: c,
                     value,
@@ -250,18 +290,233 @@ pub fn read_line(text: &str, line: u32, params: &Params) -> Result<Line, Diagnos
                 });
             }
             '#' => {
-                let p = cur.param_ref()?;
+                let p = param_ref(&mut cur, params)?;
                 match cur.peek() {
-                    Some(('=', _)) => cur.pos += 1,
-                    _ => return Err(cur.err(cur.col(), "expected `=` after the parameter")),
+                    Some('=') => cur.pos += 1,
+                    _ => {
+                        return Err(cur.err(
+                            col,
+                            "parameter without `=`: a parameter alone is not a word",
+                        ))
+                    }
                 }
-                let v = cur.value(params)?;
+                let v = real_value(&mut cur, params)?;
                 out.assignments.push((p, v));
+            }
+            '[' => {
+                return Err(cur.err(
+                    col,
+                    "expression where a word is expected: give it a letter, as in X[1+2]",
+                ))
             }
             _ => return Err(cur.err(col, format!("unexpected `{c}`"))),
         }
     }
     Ok(out)
+}
+
+/// The label and keyword of an O-word whose `O` (at `col`) is consumed.
+fn o_head(cur: &mut Cursor, col: u32) -> Result<OWord, Diagnostic> {
+    let mut label = String::new();
+    if cur.peek() == Some('<') {
+        cur.pos += 1;
+        loop {
+            match cur.peek() {
+                Some('>') => break,
+                Some(c) => label.push(c.to_ascii_lowercase()),
+                None => return Err(cur.err(col, "O-word name is not closed with `>`")),
+            }
+            cur.pos += 1;
+        }
+        cur.pos += 1;
+        if label.is_empty() {
+            return Err(cur.err(col, "empty O-word name `o<>`"));
+        }
+        label = format!("<{label}>");
+    } else {
+        while let Some(c @ '0'..='9') = cur.peek() {
+            label.push(c);
+            cur.pos += 1;
+        }
+        if label.is_empty() {
+            return Err(cur.err(col, "O-word needs a number or a <name>"));
+        }
+        // `o0100` and `o100` are the same label.
+        label = match label.trim_start_matches('0') {
+            "" => "0".to_string(),
+            digits => digits.to_string(),
+        };
+    }
+    let at = cur.col();
+    let Some(&(text, kind)) = O_KEYWORDS.iter().find(|(k, _)| cur.at(k)) else {
+        return Err(cur.err(
+            at,
+            "O-word needs sub, endsub, call, return, if, elseif, else, endif, do, while, endwhile, repeat, endrepeat, break or continue",
+        ));
+    };
+    cur.pos += text.len();
+    Ok(OWord {
+        label,
+        kind,
+        col,
+        args: Vec::new(),
+    })
+}
+
+/// The O-word of a line, read without evaluating its values (to learn a program's
+/// structure before running it), or `None` for a line without one.
+pub fn o_word_of(text: &str, line: u32) -> Result<Option<OWord>, Diagnostic> {
+    let mut cur = significant(text, line, &mut Vec::new())?;
+    if let Some('/') = cur.peek() {
+        cur.pos += 1;
+    }
+    if cur.peek() == Some('N') {
+        cur.pos += 1;
+        while let Some('0'..='9' | '.') = cur.peek() {
+            cur.pos += 1;
+        }
+    }
+    if cur.peek() != Some('O') {
+        return Ok(None);
+    }
+    let col = cur.col();
+    cur.pos += 1;
+    o_head(&mut cur, col).map(Some)
+}
+
+/// How the O-word lines of a program connect, by 0-based line index.
+#[derive(Debug, Clone, Default)]
+pub struct Flow {
+    /// For each line: `if`/`elseif`/`else` → its next branch (`elseif`, `else` or `endif`);
+    /// `while`/`do`/`repeat` → the line closing the loop; the closing line (`endwhile`, the
+    /// `while` of a `do`, `endrepeat`), `break` and `continue` → the loop's head;
+    /// `sub` → its `endsub`.
+    pub link: Vec<Option<usize>>,
+    /// `while` lines that close a `do` loop rather than open a loop of their own.
+    pub closes_do: Vec<bool>,
+    /// Subroutine label → index of its `sub` line.
+    pub subs: HashMap<String, usize>,
+}
+
+/// Matches the O-words of a whole program (one per line, `None` for other lines) into
+/// blocks, as LinuxCNC requires: labels match, blocks nest, a label opens one block only.
+pub fn flow(o_words: &[Option<OWord>]) -> (Flow, Vec<Diagnostic>) {
+    struct Open<'a> {
+        kind: OKind,
+        label: &'a str,
+        at: usize,
+        branch: usize,
+        had_else: bool,
+    }
+    let n = o_words.len();
+    let mut f = Flow {
+        link: vec![None; n],
+        closes_do: vec![false; n],
+        subs: HashMap::new(),
+    };
+    let mut errors = Vec::new();
+    let mut open: Vec<Open> = Vec::new();
+    let mut used: HashMap<&str, usize> = HashMap::new();
+    for (i, o) in o_words.iter().enumerate() {
+        let Some(o) = o else { continue };
+        let err = |m: String| Diagnostic {
+            line: i as u32 + 1,
+            col: o.col,
+            message: m,
+        };
+        let name = format!("o{} {:?}", o.label, o.kind).to_lowercase();
+        let top = open.last_mut().filter(|t| t.label == o.label);
+        // LinuxCNC's break and continue leave or restart `while` and `do` loops only
+        // (rs274 2.9 refuses them in a `repeat`: "no matching while/do label").
+        let is_loop = |k: OKind| matches!(k, OKind::While | OKind::Do);
+        let opens_block = match o.kind {
+            OKind::While => !matches!(&top, Some(t) if t.kind == OKind::Do),
+            k => matches!(k, OKind::Sub | OKind::If | OKind::Do | OKind::Repeat),
+        };
+        if opens_block {
+            if let Some(first) = used.insert(o.label.as_str(), i) {
+                errors.push(err(format!(
+                    "duplicate O-word label o{}: already used on line {}",
+                    o.label,
+                    first + 1
+                )));
+                used.insert(o.label.as_str(), first);
+                continue;
+            }
+            if o.kind == OKind::Sub && !open.is_empty() {
+                errors.push(err(format!("{name} inside another block")));
+                continue;
+            }
+            open.push(Open {
+                kind: o.kind,
+                label: &o.label,
+                at: i,
+                branch: i,
+                had_else: false,
+            });
+            continue;
+        }
+        let closes = |k: OKind| match o.kind {
+            OKind::EndSub => k == OKind::Sub,
+            OKind::ElseIf | OKind::Else | OKind::EndIf => k == OKind::If,
+            OKind::While => k == OKind::Do,
+            OKind::EndWhile => k == OKind::While,
+            OKind::EndRepeat => k == OKind::Repeat,
+            _ => false,
+        };
+        match o.kind {
+            OKind::Call => {}
+            OKind::Return => {
+                if !open
+                    .iter()
+                    .any(|t| t.kind == OKind::Sub && t.label == o.label)
+                {
+                    errors.push(err(format!("{name} outside subroutine o{}", o.label)));
+                }
+            }
+            OKind::Break | OKind::Continue => {
+                let head = open
+                    .iter()
+                    .rev()
+                    .take_while(|t| t.kind != OKind::Sub)
+                    .find(|t| is_loop(t.kind) && t.label == o.label);
+                match head {
+                    Some(t) => f.link[i] = Some(t.at),
+                    None => errors.push(err(format!(
+                        "{name} outside a while or do loop o{} (LinuxCNC has no break or continue for repeat)",
+                        o.label
+                    ))),
+                }
+            }
+            _ => match top {
+                Some(t) if closes(t.kind) && !(t.had_else && o.kind != OKind::EndIf) => {
+                    f.link[t.branch] = Some(i);
+                    if matches!(o.kind, OKind::ElseIf | OKind::Else) {
+                        t.branch = i;
+                        t.had_else = o.kind == OKind::Else;
+                        continue;
+                    }
+                    if o.kind != OKind::EndIf {
+                        f.link[i] = Some(t.at);
+                    }
+                    f.closes_do[i] = o.kind == OKind::While;
+                    if o.kind == OKind::EndSub {
+                        f.subs.insert(o.label.clone(), t.at);
+                    }
+                    open.pop();
+                }
+                _ => errors.push(err(format!("{name} does not match an open block"))),
+            },
+        }
+    }
+    for t in open {
+        errors.push(Diagnostic {
+            line: t.at as u32 + 1,
+            col: o_words[t.at].as_ref().map_or(1, |o| o.col),
+            message: format!("o{} {:?} is never closed", t.label, t.kind).to_lowercase(),
+        });
+    }
+    (f, errors)
 }
 
 fn take_message(comment: &str, messages: &mut Vec<String>) {
@@ -316,10 +571,49 @@ mod tests {
         assert_eq!((e.line, e.col), (7, 8));
         let e = read_line("G1 (open", 3, &Params::default()).unwrap_err();
         assert_eq!((e.line, e.col), (3, 4));
-        let e = read_line("G1 X[1+2]", 1, &Params::default()).unwrap_err();
-        assert_eq!(e.col, 5);
+        let e = read_line("G1 X[1+2 Y1", 1, &Params::default()).unwrap_err();
+        assert_eq!(e.col, 10);
+        let e = read_line("G1 X Y1", 1, &Params::default()).unwrap_err();
+        assert_eq!((e.col, e.message.as_str()), (4, "X word has no value"));
         let e = read_line("F#<nope>", 1, &Params::default()).unwrap_err();
         assert!(e.message.contains("#<nope>"), "{}", e.message);
+    }
+
+    #[test]
+    fn o_words_and_their_structure() {
+        let o = |t: &str| o_word_of(t, 1).unwrap().unwrap();
+        assert_eq!(
+            (o("o0100 SUB").label, o("o0100 SUB").kind),
+            ("100".into(), OKind::Sub)
+        );
+        assert_eq!(o("N5 O<My Sub> call [1]").label, "<mysub>");
+        assert_eq!(o("o1 elseif [1]").kind, OKind::ElseIf);
+        assert_eq!(o_word_of("G1 X1", 1).unwrap(), None);
+        let l = read_line("o7 call [1] [2+3] [#1]", 1, &Params::default()).unwrap();
+        assert_eq!(l.o_word.unwrap().args, vec![1.0, 5.0, 0.0]);
+        let e = read_line("o7 if", 1, &Params::default()).unwrap_err();
+        assert_eq!(e.col, 6);
+        let e = read_line("G1 o7 if [1]", 1, &Params::default()).unwrap_err();
+        assert_eq!(e.col, 4);
+
+        let lines = [
+            "o1 if [1]",
+            "o1 elseif [2]",
+            "o1 else",
+            "o1 endif",
+            "o2 do",
+            "o2 while [1]",
+        ];
+        let words: Vec<_> = lines.iter().map(|t| o_word_of(t, 1).unwrap()).collect();
+        let (f, errors) = flow(&words);
+        assert!(errors.is_empty(), "{errors:?}");
+        assert_eq!(&f.link[..4], &[Some(1), Some(2), Some(3), None]);
+        assert_eq!(
+            (f.link[4], f.link[5], f.closes_do[5]),
+            (Some(5), Some(4), true)
+        );
+        let words = [o_word_of("o3 else", 1).unwrap()];
+        assert_eq!(flow(&words).1.len(), 1);
     }
 
     #[test]

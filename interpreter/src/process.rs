@@ -2,12 +2,12 @@
 //! and publish them, report.
 
 use crate::parse::Diagnostic;
-use crate::publish::{publish, Finish};
+use crate::publish::{publish, Finish, Pace};
 use crate::report::InterpreterSummary;
 use crate::{blocks, program};
 use iceoryx2::prelude::Service;
 use shared::cmdlog::CommandLog;
-use shared::protocol::{BlockKind, CommandBlock};
+use shared::protocol::{BlockKind, CommandBlock, FLAG_RAPID};
 use shared::Machine;
 use std::path::{Path, PathBuf};
 use std::time::Duration;
@@ -140,9 +140,87 @@ pub fn load_replay(path: &Path, salvage: bool) -> Result<Replay, String> {
     })
 }
 
+/// How a run streams its program beyond the plain case.
+#[derive(Debug, Clone, Copy)]
+pub struct Streaming {
+    /// Run the program this many times in one go (soak tests): one stream of blocks with
+    /// sequence numbers that keep counting, a rapid back to the start between repeats
+    /// when the program ends elsewhere, and one program end after the last repeat.
+    pub repeat: u32,
+    /// Test aid: wait this long before each block (a slow interpreter).
+    pub throttle: Option<Duration>,
+}
+
+impl Default for Streaming {
+    fn default() -> Self {
+        Streaming {
+            repeat: 1,
+            throttle: None,
+        }
+    }
+}
+
+/// A rapid (G0) straight move from `from` back to the machine's start, the origin, with a
+/// stop at both ends; `None` when `from` is the origin already.
+fn return_to_start(from: [f64; 3], rapid_mm_per_min: f64) -> Option<CommandBlock> {
+    let length = shared::path::norm(from);
+    if length < 1e-9 {
+        return None;
+    }
+    let mut b = CommandBlock::empty(BlockKind::Motion, 0, 0);
+    b.flags = FLAG_RAPID;
+    b.degree = 1;
+    b.n_ctrl = 2;
+    b.knots[..4].copy_from_slice(&[0.0, 0.0, 1.0, 1.0]);
+    b.ctrl[0] = [from[0], from[1], from[2], 1.0];
+    b.ctrl[1] = [0.0, 0.0, 0.0, 1.0];
+    b.feed_mm_per_min = rapid_mm_per_min;
+    b.length_mm = length;
+    Some(b)
+}
+
+/// The blocks of `repeat` runs of a compiled program as one stream, numbered 0, 1, 2, ...
+/// Lazy, so a soak of any length holds one copy of the program.
+pub fn repeated<'a>(
+    blocks: &'a [CommandBlock],
+    repeat: u32,
+    machine: &Machine,
+) -> impl Iterator<Item = CommandBlock> + 'a {
+    let (body, end) = match blocks.split_last() {
+        Some((last, body)) if last.kind == BlockKind::ProgramEnd as u32 => (body, Some(*last)),
+        _ => (blocks, None),
+    };
+    let end_pos = body
+        .iter()
+        .rev()
+        .find(|b| b.kind == BlockKind::Motion as u32)
+        .map(|b| shared::path::eval(b, shared::path::domain(b).1).p);
+    let back = end_pos.and_then(|p| return_to_start(p, machine.rapid_mm_per_min));
+    let repeat = repeat.max(1);
+    (0..repeat)
+        .flat_map(move |r| {
+            let between = if r + 1 < repeat { back } else { None };
+            body.iter().copied().chain(between)
+        })
+        .chain(end)
+        .enumerate()
+        .map(|(i, mut b)| {
+            b.seq = i as u64;
+            b
+        })
+}
+
 /// Runs the interpreter until the interpolator reports the end; writes `commands.log` and
 /// `interpreter.json`.
 pub fn run<S: Service>(cfg: &Config) -> Result<InterpreterSummary, String> {
+    run_streaming::<S>(cfg, Streaming::default())
+}
+
+/// [`run`], repeating or pacing the program as `streaming` says.
+pub fn run_streaming<S: Service>(
+    cfg: &Config,
+    streaming: Streaming,
+) -> Result<InterpreterSummary, String> {
     let mut salvaged = None;
     let (name, blocks, messages) = match &cfg.replay {
         Some(log) => {
@@ -170,23 +248,31 @@ pub fn run<S: Service>(cfg: &Config) -> Result<InterpreterSummary, String> {
     .map_err(|e| format!("creating commands.log: {e}"))?;
     let result = publish::<S>(
         &cfg.prefix,
-        &blocks,
+        repeated(&blocks, streaming.repeat, &cfg.machine),
         Some(&mut log),
         Duration::from_secs(20),
+        Pace {
+            throttle: streaming.throttle,
+        },
     );
     log.finish()
         .map_err(|e| format!("writing commands.log: {e}"))?;
-    let fault = match result {
-        Ok(Finish::Done) => None,
-        Ok(Finish::Fault) => Some("the interpolator stopped with a fault".to_string()),
-        Err(e) => Some(e.to_string()),
+    let (fault, sent) = match result {
+        Ok((Finish::Done, n)) => (None, n),
+        Ok((Finish::Fault, n)) => (Some("the interpolator stopped with a fault".to_string()), n),
+        Err(e) => (Some(e.to_string()), 0),
     };
     let summary = InterpreterSummary {
         outcome: if fault.is_some() { "fault" } else { "done" }.into(),
         fault,
         pid: std::process::id(),
         program: name,
-        blocks: blocks.len(),
+        // Every block sent (all repeats); the blocks of one run when nothing was sent.
+        blocks: if sent > 0 {
+            sent as usize
+        } else {
+            blocks.len()
+        },
         messages,
         salvaged,
     };

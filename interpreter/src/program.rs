@@ -4,8 +4,16 @@
 //!
 //! Every problem found is collected with its line and column; the whole program is read
 //! even after an error, so `cnc check` can report everything at once.
+//!
+//! Parameters are set after their whole line is read, as LinuxCNC does. O-word
+//! subroutines (`sub`/`endsub`/`call`/`return`) and control flow (`if`/`elseif`/`else`,
+//! `while`, `do … while`, `repeat`, `break`, `continue`) run within the one file: lines
+//! are read again, with the parameters of the moment, each time the flow reaches them.
 
-use crate::parse::{read_line, Diagnostic, Params, Word};
+mod flow;
+
+use crate::parse::{flow, o_word_of, read_line, Diagnostic, OWord, Params, Word};
+use flow::Runner;
 
 /// The plane of arcs and NURBS, by the axis normal to it.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -144,6 +152,11 @@ impl LineWords<'_> {
 }
 
 /// Reads and checks a whole program. All problems are returned, not only the first.
+///
+/// O-word subroutines and control flow run as LinuxCNC runs them, within this file:
+/// a `sub … endsub` is skipped where it stands and entered by `call`, conditions are
+/// evaluated when their line is reached, and a line is read again (with the parameters
+/// of that moment) each time the flow comes back to it.
 pub fn interpret(text: &str) -> Result<Program, Vec<Diagnostic>> {
     let mut st = State {
         pos: [0.0; 3],
@@ -160,22 +173,41 @@ pub fn interpret(text: &str) -> Result<Program, Vec<Diagnostic>> {
     let mut params = Params::default();
     let mut prog = Program::default();
     let mut errors = Vec::new();
-    let mut last_line = 0;
-    for (i, raw) in text.lines().enumerate() {
-        let line = i as u32 + 1;
-        last_line = line;
+    let lines: Vec<&str> = text.lines().collect();
+    let o_words: Vec<Option<OWord>> = lines
+        .iter()
+        .enumerate()
+        .map(|(i, raw)| o_word_of(raw, i as u32 + 1).unwrap_or(None))
+        .collect();
+    let (flow, flow_errors) = flow(&o_words);
+    errors.extend(flow_errors);
+    let mut run = Runner::new(o_words, flow);
+    let last_line = lines.len() as u32;
+    let mut pc = 0;
+    while pc < lines.len() {
+        let line = pc as u32 + 1;
         if st.ended {
             break; // LinuxCNC ignores everything after M2/M30.
         }
-        let parsed = match read_line(raw, line, &params) {
+        let here = pc;
+        pc += 1;
+        let parsed = match read_line(lines[here], line, &params) {
             Ok(l) => l,
             Err(d) => {
                 errors.push(d);
+                pc = run.unreadable(here);
                 continue;
             }
         };
         for m in &parsed.messages {
             prog.messages.push((line, m.clone()));
+        }
+        if let Some(o) = &parsed.o_word {
+            match run.step(here, o, &mut params, &mut errors) {
+                Some(next) => pc = next,
+                None => break,
+            }
+            continue;
         }
         if let Err(d) = execute(
             &mut st,
@@ -191,6 +223,9 @@ pub fn interpret(text: &str) -> Result<Program, Vec<Diagnostic>> {
             params.set(p, *v);
         }
     }
+    // A line read again and again (in a loop) reports its problem once.
+    let mut seen = std::collections::HashSet::new();
+    errors.retain(|d: &Diagnostic| seen.insert((d.line, d.col, d.message.clone())));
     if let Some(n) = &st.g62 {
         errors.push(Diagnostic {
             line: n.line,

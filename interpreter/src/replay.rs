@@ -89,6 +89,12 @@ fn replay_inner(args: &ReplayArgs) -> Result<bool, String> {
     if args.salvage {
         input.push("--salvage".into());
     }
+    let expected_cycles = if crate::launch::progress_wanted() {
+        let blocks = crate::process::load_replay(&log, args.salvage)?.blocks;
+        crate::launch::expected_cycles(&blocks, &machine, header.period_ns)
+    } else {
+        None
+    };
     let stack = Stack {
         dir,
         machine,
@@ -96,6 +102,7 @@ fn replay_inner(args: &ReplayArgs) -> Result<bool, String> {
         clock: args.clock,
         sched: args.sched,
         html: !args.no_report,
+        expected_cycles,
     };
     stack.launch(&header.program, input)
 }

@@ -49,6 +49,21 @@ pub struct Report {
     pub peak_feed_mm_per_min: f64,
     pub max_following_error_um: f64,
     pub max_following_error_axis_um: [f64; 3],
+    /// RMS following error per axis over every cycle; null when the servo-sim wrote no
+    /// summary.
+    pub rms_following_error_axis_um: Option<[f64; 3]>,
+    /// Largest contour error: distance from a measured position to the exact commanded
+    /// path (not to that cycle's set-point), over the cycles on feed moves (rapids left
+    /// out), computed after the run by [`crate::contour`]; null when not computed (no
+    /// command log or traces, or no feed move).
+    pub max_contour_error_um: Option<f64>,
+    /// Cycle and source line of the largest contour error.
+    pub max_contour_error_cycle: Option<u64>,
+    pub max_contour_error_line: Option<u32>,
+    pub rms_contour_error_um: Option<f64>,
+    /// For a closed circular path: roundness and best-fit circle of the measured
+    /// positions; null when the path has none.
+    pub roundness: Option<RoundnessFigures>,
     pub lost_setpoints: u64,
     pub blocks: usize,
     /// Replays of a damaged log (`--salvage`): what was wrong and what ran.
@@ -56,6 +71,54 @@ pub struct Report {
     pub sched: Option<interpolator::rt::sched::SchedReport>,
     pub miss_list: Vec<interpolator::summary::MissEntry>,
     pub processes: Vec<Process>,
+    /// Times the interpolator ran out of blocks mid-program and waited at a stop.
+    #[serde(default)]
+    pub starvations: u64,
+    /// The interpolator's fault in figures (kind, cycle, line, axis, peer, the stop).
+    #[serde(default)]
+    pub fault_info: Option<interpolator::summary::FaultInfo>,
+    /// A process killed from outside: which, and at which cycle.
+    #[serde(default)]
+    pub dead_process: Option<crate::launch::DeadProcess>,
+    /// Each process's resident memory at the start and end of the run.
+    #[serde(default)]
+    pub memory: Vec<crate::launch::ProcessMemory>,
+}
+
+/// The roundness of a closed circular path (see [`crate::contour`]).
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
+pub struct RoundnessFigures {
+    /// Max − min radius of the measured positions about their least-squares centre.
+    pub roundness_um: f64,
+    /// Working plane: "XY", "XZ" or "YZ".
+    pub plane: String,
+    /// Least-squares centre and radius of the measured positions.
+    pub centre_mm: [f64; 2],
+    pub radius_mm: f64,
+    /// Radius of the commanded circle.
+    pub commanded_radius_mm: f64,
+    /// `radius_mm − commanded_radius_mm` (negative: the circle came out small).
+    pub radius_error_um: f64,
+    /// Source lines of the circle's first and last block.
+    pub lines: [u32; 2],
+    /// Measured positions the figures come from.
+    pub samples: usize,
+}
+
+impl RoundnessFigures {
+    pub fn of(r: &crate::contour::Roundness) -> Self {
+        let name = ["X", "Y", "Z"];
+        RoundnessFigures {
+            roundness_um: r.roundness_um,
+            plane: format!("{}{}", name[r.axes.0], name[r.axes.1]),
+            centre_mm: r.centre_mm,
+            radius_mm: r.radius_mm,
+            commanded_radius_mm: r.commanded_radius_mm,
+            radius_error_um: r.radius_error_um(),
+            lines: [r.lines.0, r.lines.1],
+            samples: r.measured.len(),
+        }
+    }
 }
 
 fn read<T: for<'de> Deserialize<'de>>(path: &Path) -> Option<T> {
@@ -93,6 +156,9 @@ pub fn assemble(
     faults.dedup();
     let fault = (!faults.is_empty()).then(|| faults.join("; "));
     let i = ipol.as_ref();
+    // After every process has ended: the traces are complete and nothing runs in real time.
+    let contour = crate::contour::analyse_dir(dir).ok();
+    let worst = contour.as_ref().and_then(|c| c.max);
     Report {
         outcome: if fault.is_some() { "fault" } else { "done" }.into(),
         fault,
@@ -112,12 +178,25 @@ pub fn assemble(
         max_following_error_axis_um: servo
             .as_ref()
             .map_or([0.0; 3], |s| s.max_following_error_axis_um),
+        rms_following_error_axis_um: servo.as_ref().map(|s| s.rms_following_error_axis_um),
+        max_contour_error_um: worst.map(|w| w.um),
+        max_contour_error_cycle: worst.map(|w| w.cycle),
+        max_contour_error_line: worst.map(|w| w.line),
+        rms_contour_error_um: contour.as_ref().and_then(|c| c.rms_um),
+        roundness: contour
+            .as_ref()
+            .and_then(|c| c.roundness.as_ref().ok())
+            .map(RoundnessFigures::of),
         lost_setpoints: servo.as_ref().map_or(0, |s| s.lost_setpoints),
         blocks: interp.as_ref().map_or(0, |s| s.blocks),
         salvaged: interp.as_ref().and_then(|s| s.salvaged.clone()),
         sched: i.map(|s| s.sched.clone()),
         miss_list: i.map(|s| s.miss_list.clone()).unwrap_or_default(),
         processes,
+        starvations: i.map_or(0, |s| s.starvations),
+        fault_info: i.and_then(|s| s.fault_info.clone()),
+        dead_process: None,
+        memory: Vec::new(),
     }
 }
 
@@ -141,8 +220,16 @@ impl Report {
             ),
             _ => format!("not measured ({} clock)", self.clock),
         };
+        let contour = match (self.max_contour_error_um, &self.roundness) {
+            (Some(c), Some(r)) => format!(
+                "max contour error {c:.2} µm, roundness {:.2} µm",
+                r.roundness_um
+            ),
+            (Some(c), None) => format!("max contour error {c:.2} µm"),
+            _ => "contour error not computed".into(),
+        };
         let mut s = format!(
-            "{}: {}\n  program      {}\n  period       {} µs, {} cycles, {:.3} s machining ({} clock)\n  path         {:.3} mm, average feed {:.1} mm/min, peak {:.1} mm/min\n  servo        max following error {:.2} µm\n  timing       {timing}\n  run dir      {}\n",
+            "{}: {}\n  program      {}\n  period       {} µs, {} cycles, {:.3} s machining ({} clock)\n  path         {:.3} mm, average feed {:.1} mm/min, peak {:.1} mm/min\n  servo        max following error {:.2} µm, {contour}\n  timing       {timing}\n  run dir      {}\n",
             self.outcome,
             self.fault.as_deref().unwrap_or("program completed"),
             self.program,

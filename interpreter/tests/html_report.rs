@@ -177,15 +177,19 @@ fn circle_page_matches_report_and_has_a_roundness_plot() {
 }
 
 #[test]
-fn demo_and_linuxcnc_pages_have_no_roundness_plot() {
+fn demo_page_rounds_its_full_circle_and_a_linuxcnc_page_has_none() {
     let d = scratch("open");
     let demo = d.join("demo");
     run_sim(None, &demo);
     let page = html::render(&demo).unwrap();
     check_summary(&page, &report(&demo));
     check_plots(&page);
-    assert!(!page.contains("id=\"polar-plot\""));
-    assert!(page.contains("No roundness plot"));
+    // The demo's full circle (line 17, `G3 X30 Y20 I-10 J0`) gets the roundness plot.
+    assert!(page.contains("id=\"polar-plot\""));
+    assert!(
+        report(&demo)["roundness"].is_object(),
+        "report.json has the figure too"
+    );
     assert!(
         page.contains("XY plane (projection)"),
         "the demo also moves in Z"

@@ -1,7 +1,14 @@
 //! One linear axis: a cascaded position loop (P, gain Kv) and velocity loop (PI) driving a
-//! rigid mass with viscous and Coulomb friction, a force limit and a quantised encoder.
-//! Integrated with semi-implicit Euler in fixed sub-steps, so the result depends only on
-//! the set-points (deterministic: the same set-points give bit-identical feedback).
+//! rigid mass (motor inertia reflected to the axis plus load) with viscous and Coulomb
+//! friction, a force limit and a quantised encoder, with velocity and acceleration
+//! feed-forward. Integrated with semi-implicit Euler in fixed sub-steps, so the result
+//! depends only on the set-points (deterministic: the same set-points give bit-identical
+//! feedback).
+//!
+//! The feed-forward values are held over the period, as the set-point gives them: the
+//! interpolator's velocity is the period's chord over the period, which is exactly the slope
+//! of the linear position interpolation the drive makes within the period, so holding it
+//! keeps position command and velocity feed-forward consistent.
 
 use shared::machine::Servo;
 
@@ -28,7 +35,7 @@ impl Axis {
 
     /// Measured position: what the encoder reports.
     pub fn measured_mm(&self, p: &Servo) -> f64 {
-        (self.x_mm / p.encoder_mm).round() * p.encoder_mm
+        (self.x_mm / p.encoder_resolution_mm).round() * p.encoder_resolution_mm
     }
 
     /// Advances one interpolation period of `dt_s` towards the set-point `cmd_mm`, with
@@ -37,6 +44,7 @@ impl Axis {
         let n = p.substeps.max(1);
         let h = dt_s / n as f64;
         let ti_s = p.vel_ti_ms * 1e-3;
+        let mass_kg = p.total_mass_kg();
         self.saturated = false;
         for i in 1..=n {
             // The drive interpolates the set-point linearly across the period.
@@ -45,7 +53,7 @@ impl Axis {
             let v_cmd = p.kv_per_s * (cmd - self.measured_mm(p)) + p.vel_ff * vel_ff;
             let ev = v_cmd - self.v_mm_per_s;
             let mut force = p.vel_kp_n_per_mm_s * (ev + self.integral / ti_s)
-                + p.acc_ff * p.mass_kg * acc_ff * 1e-3;
+                + p.acc_ff * mass_kg * acc_ff * 1e-3;
             if force.abs() > p.force_limit_n {
                 force = force.signum() * p.force_limit_n;
                 self.saturated = true;
@@ -61,7 +69,7 @@ impl Axis {
                 continue;
             }
             // F = m·a with a in mm/s²: a = F / m · 1000.
-            let v_new = self.v_mm_per_s + net / p.mass_kg * 1e3 * h;
+            let v_new = self.v_mm_per_s + net / mass_kg * 1e3 * h;
             // Friction cannot reverse the motion within a step.
             self.v_mm_per_s = if self.v_mm_per_s != 0.0
                 && v_new.signum() != self.v_mm_per_s.signum()
@@ -101,7 +109,7 @@ mod tests {
             ax.step(&p, 1e-3, 1.0, 0.0, 0.0);
         }
         assert!(
-            (ax.measured_mm(&p) - 1.0).abs() <= 2.0 * p.encoder_mm,
+            (ax.measured_mm(&p) - 1.0).abs() <= 2.0 * p.encoder_resolution_mm,
             "x = {}",
             ax.x_mm
         );
@@ -120,6 +128,36 @@ mod tests {
         // Without feed-forward a P position loop lags by v/Kv = 50/50 = 1 mm at steady state.
         assert!((e_no - 1.0).abs() < 0.1, "lag without FF {e_no}");
         assert!(e_ff < e_no / 10.0, "with FF {e_ff} vs without {e_no}");
+    }
+
+    /// Without feed-forward and with a velocity loop far faster than Kv, the position loop
+    /// is the first-order lag `Kv / (s + Kv)`: a sine of angular frequency ω comes out
+    /// with amplitude `Kv / √(Kv² + ω²)` (closed form) once the start has died out.
+    #[test]
+    fn without_feed_forward_the_position_loop_is_a_first_order_lag() {
+        let p = Servo {
+            vel_ff: 0.0,
+            acc_ff: 0.0,
+            coulomb_n: 0.0,
+            encoder_resolution_mm: 1e-7,
+            ..Servo::default()
+        };
+        assert!(p.velocity_bandwidth_rad_per_s() >= 40.0 * p.kv_per_s);
+        let (amp, w, dt) = (10.0, 20.0, 1e-3);
+        let mut ax = Axis::at(0.0);
+        let mut peak = 0.0f64;
+        for k in 1..=3000 {
+            let t = k as f64 * dt;
+            ax.step(&p, dt, amp * (w * t).sin(), 0.0, 0.0);
+            if t > 1.0 {
+                peak = peak.max(ax.x_mm.abs());
+            }
+        }
+        let expected = amp * p.kv_per_s / (p.kv_per_s.powi(2) + w * w).sqrt();
+        assert!(
+            (peak - expected).abs() < 0.005 * amp,
+            "peak {peak} mm, first-order lag gives {expected} mm"
+        );
     }
 
     #[test]

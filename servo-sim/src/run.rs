@@ -39,6 +39,9 @@ pub struct Summary {
     pub lost_setpoints: u64,
     pub max_following_error_um: f64,
     pub max_following_error_axis_um: [f64; 3],
+    /// Root mean square of the following error over every set-point, per axis.
+    #[serde(default)]
+    pub rms_following_error_axis_um: [f64; 3],
     pub saturated_cycles: u64,
     pub trace_dropped: u64,
 }
@@ -69,6 +72,10 @@ pub struct Drives {
     pub lost: u64,
     pub saturated_cycles: u64,
     pub max_ferr_mm: [f64; 3],
+    /// Sum of the squared following errors and the number of set-points summed, for the
+    /// RMS.
+    sum_sq_ferr_mm2: [f64; 3],
+    ferr_samples: u64,
 }
 
 impl Drives {
@@ -81,7 +88,15 @@ impl Drives {
             lost: 0,
             saturated_cycles: 0,
             max_ferr_mm: [0.0; 3],
+            sum_sq_ferr_mm2: [0.0; 3],
+            ferr_samples: 0,
         }
+    }
+
+    /// RMS following error per axis so far, mm.
+    pub fn rms_ferr_mm(&self) -> [f64; 3] {
+        let n = self.ferr_samples.max(1) as f64;
+        self.sum_sq_ferr_mm2.map(|s| (s / n).sqrt())
     }
 
     /// Steps every axis through one set-point and returns the feedback for it.
@@ -109,10 +124,12 @@ impl Drives {
             fb.pos_mm[i] = x;
             fb.ferr_mm[i] = sp.pos_mm[i] - x;
             self.max_ferr_mm[i] = self.max_ferr_mm[i].max(fb.ferr_mm[i].abs());
+            self.sum_sq_ferr_mm2[i] += fb.ferr_mm[i] * fb.ferr_mm[i];
             if ax.saturated {
                 fb.drive_state = DRIVE_SATURATED;
             }
         }
+        self.ferr_samples += 1;
         if fb.drive_state == DRIVE_SATURATED {
             self.saturated_cycles += 1;
         }
@@ -159,6 +176,13 @@ pub fn run<S: Service>(cfg: &Config) -> Result<Summary, IpcError> {
     let mut fault: Option<String> = None;
     let mut count = 0u64;
     let mut last_seen = Instant::now();
+    let mut last_cycle: Option<u64> = None;
+    // A silent interpolator may be dead, and iceoryx2 knows for sure (the kernel released
+    // its liveness lock): asked after 5 periods of silence, at most once a period. Only a
+    // dead one is acted on this early; a live but stalled one gets `idle_timeout`, since
+    // this VM's scheduling stalls alone can reach several periods.
+    let period = Duration::from_nanos(cfg.period_ns);
+    let mut last_check = Instant::now();
     let mut done = false;
     while !done {
         if sim {
@@ -172,11 +196,12 @@ pub fn run<S: Service>(cfg: &Config) -> Result<Summary, IpcError> {
                 },
             );
         } else {
-            let _ = listener.timed_wait(|_| {}, Duration::from_millis(50));
+            let _ = listener.timed_wait(|_| {}, period);
         }
         while let Ok(Some(sample)) = sp_sub.receive() {
             let sp = *sample.payload();
             last_seen = Instant::now();
+            last_cycle = Some(sp.cycle);
             if let Err(e) = sp.validate() {
                 // A set-point we cannot trust: hold position, report, stop.
                 fault = Some(format!("bad set-point: {e}"));
@@ -206,6 +231,18 @@ pub fn run<S: Service>(cfg: &Config) -> Result<Summary, IpcError> {
             ));
             done = true;
         }
+        if !done && count > 0 && last_seen.elapsed() >= 5 * period && last_check.elapsed() >= period
+        {
+            last_check = Instant::now();
+            let _ = setpoints.try_cleanup_dead_nodes();
+            if setpoints.dynamic_config().number_of_publishers() == 0 {
+                fault = Some(format!(
+                    "the interpolator is gone (its process ended or died) after set-point cycle {}; drives hold position",
+                    last_cycle.unwrap_or(0)
+                ));
+                done = true;
+            }
+        }
         let limit = if count == 0 {
             cfg.start_timeout
         } else {
@@ -230,6 +267,7 @@ pub fn run<S: Service>(cfg: &Config) -> Result<Summary, IpcError> {
         lost_setpoints: drives.lost,
         max_following_error_um: max_axis.iter().fold(0.0, |a: f64, b| a.max(*b)),
         max_following_error_axis_um: max_axis,
+        rms_following_error_axis_um: drives.rms_ferr_mm().map(|e| e * 1e3),
         saturated_cycles: drives.saturated_cycles,
         trace_dropped,
     };

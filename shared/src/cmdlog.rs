@@ -24,8 +24,8 @@
 //! | 4 | CRC-32C of the payload |
 //! | m | the block's bytes, exactly as written into shared memory |
 //!
-//! The interpreter appends a record as each block is delivered, then flushes and syncs
-//! at the end. A reader stops at the first record that is truncated, has a wrong length
+//! The interpreter appends a record as each block is delivered, handing it to the kernel
+//! at once (so a killed interpreter loses nothing it sent), and syncs at the end. A reader stops at the first record that is truncated, has a wrong length
 //! or checksum, or holds a block that fails validation, and names its record number and
 //! byte offset; everything before it is intact and can be salvaged.
 
@@ -116,6 +116,7 @@ impl CommandLog {
         let crc = crc32c(&h);
         h.extend_from_slice(&crc.to_le_bytes());
         out.write_all(&h)?;
+        out.flush()?;
         Ok(CommandLog { out })
     }
 
@@ -123,7 +124,9 @@ impl CommandLog {
         let payload = bytes(b);
         self.out.write_all(&(BLOCK_SIZE as u32).to_le_bytes())?;
         self.out.write_all(&crc32c(payload).to_le_bytes())?;
-        self.out.write_all(payload)
+        self.out.write_all(payload)?;
+        // Handed to the kernel at once: a killed interpreter loses no block it sent.
+        self.out.flush()
     }
 
     /// Flushes and syncs to disk.

@@ -14,6 +14,7 @@
 //! end); a *span* is one knot interval of a curve; a *cycle* is one interpolation period,
 //! producing one *set-point*; a *miss* is a cycle that finished after its deadline.
 
+pub mod alloc_count;
 pub mod clock;
 pub mod cmdlog;
 pub mod ipc;

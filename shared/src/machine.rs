@@ -37,50 +37,93 @@ impl Default for Machine {
     }
 }
 
-/// One model for each of the three linear axes: a cascaded position (P) and velocity (PI)
-/// loop over a rigid mass with viscous and Coulomb friction, a force limit and a
-/// quantised encoder.
+/// The axis model: one for each of the three linear axes. A cascaded position loop (P,
+/// gain Kv) and velocity loop (PI) over a rigid mass (motor inertia reflected to the axis
+/// plus the load) with viscous and Coulomb friction, a drive force (torque/current) limit
+/// and a quantised encoder, with velocity and acceleration feed-forward from the
+/// set-points.
+///
+/// Units are in the names. Forces are at the axis: a motor torque `T` (N·m) on a ball
+/// screw of lead `p` (mm per revolution) gives `F = T · 2π / (p / 1000)` N, and a rotor
+/// inertia `J` (kg·m²) behaves like a mass `J · (2π / (p / 1000))²` kg on the axis.
+///
+/// The velocity loop's bandwidth is about `vel_kp_n_per_mm_s · 1000 / (motor_inertia_kg +
+/// load_kg)` rad/s (2000 rad/s, 320 Hz, by default): 40 times the position loop's Kv, so
+/// the position loop behaves as the textbook first-order lag `Kv / (s + Kv)`.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct Servo {
-    /// Position loop gain Kv in 1/s.
+    /// Position loop gain Kv in 1/s (velocity command per mm of following error, mm/s per
+    /// mm). Without feed-forward the steady lag at speed `v` is `v / Kv`.
     pub kv_per_s: f64,
-    /// Velocity loop proportional gain in N/(mm/s).
+    /// Velocity loop proportional gain, in N of drive force per mm/s of velocity error.
     pub vel_kp_n_per_mm_s: f64,
-    /// Velocity loop integral time in ms.
+    /// Velocity loop integral (reset) time in ms: the integral part adds `vel_kp` times the
+    /// velocity error integrated over this time.
     pub vel_ti_ms: f64,
-    /// Moving mass of the axis (motor inertia reflected to the axis plus load) in kg.
-    pub mass_kg: f64,
-    /// Viscous friction in N/(mm/s).
+    /// Motor rotor (and screw, coupling) inertia reflected to the axis, as an equivalent
+    /// mass in kg: `J · (2π / lead)²` with `J` in kg·m² and the lead in m.
+    pub motor_inertia_kg: f64,
+    /// Moving load in kg: table, saddle, fixture and part.
+    pub load_kg: f64,
+    /// Viscous friction in N per mm/s.
     pub viscous_n_per_mm_s: f64,
-    /// Coulomb friction in N.
+    /// Coulomb (dry) friction in N, against the direction of motion; also the stiction
+    /// force the drive must exceed to start from rest.
     pub coulomb_n: f64,
-    /// Drive force limit in N.
+    /// Drive force limit in N: the motor's torque (current) limit seen at the axis.
     pub force_limit_n: f64,
-    /// Encoder resolution in mm.
-    pub encoder_mm: f64,
-    /// Velocity feed-forward gain (0 off, 1 full).
+    /// Encoder resolution in mm: the measured position is the true one rounded to it.
+    #[serde(alias = "encoder_mm")]
+    pub encoder_resolution_mm: f64,
+    /// Velocity feed-forward gain, 0 to 1: 0 = off, 1 = on (the set-point's velocity is
+    /// added to the position loop's velocity command).
     pub vel_ff: f64,
-    /// Acceleration feed-forward gain (0 off, 1 full).
+    /// Acceleration feed-forward gain, 0 to 1: 0 = off, 1 = on (mass × the set-point's
+    /// acceleration is added to the velocity loop's force command).
     pub acc_ff: f64,
-    /// Simulation sub-steps per interpolation period.
+    /// Simulation sub-steps per interpolation period (the loops and the mechanics are
+    /// integrated at period / substeps).
     pub substeps: u32,
+    /// Older machine files: the whole moving mass in kg. When present it replaces
+    /// `motor_inertia_kg + load_kg`; new files leave it out.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub mass_kg: Option<f64>,
+}
+
+impl Servo {
+    /// The moving mass the drive accelerates, kg.
+    pub fn total_mass_kg(&self) -> f64 {
+        self.mass_kg.unwrap_or(self.motor_inertia_kg + self.load_kg)
+    }
+
+    /// The velocity loop's bandwidth in rad/s: `vel_kp / mass` (its proportional part over
+    /// a rigid mass).
+    pub fn velocity_bandwidth_rad_per_s(&self) -> f64 {
+        self.vel_kp_n_per_mm_s * 1e3 / self.total_mass_kg()
+    }
 }
 
 impl Default for Servo {
+    /// A stiff, well-tuned axis: Kv 50 1/s, a 2000 rad/s PI velocity loop (critically
+    /// damped: `vel_ti = 4 / bandwidth`), 50 kg moving, 20 N dry friction. With both
+    /// feed-forwards on it keeps a 20 mm circle at F3000 within 1 µm (the dry friction's
+    /// quadrant glitches dominate: with `vel_kp` 20 and `vel_ti` 10 ms they reach 11 µm).
     fn default() -> Self {
         Servo {
             kv_per_s: 50.0,
-            vel_kp_n_per_mm_s: 20.0,
-            vel_ti_ms: 10.0,
-            mass_kg: 50.0,
+            vel_kp_n_per_mm_s: 100.0,
+            vel_ti_ms: 2.0,
+            motor_inertia_kg: 20.0,
+            load_kg: 30.0,
             viscous_n_per_mm_s: 0.05,
             coulomb_n: 20.0,
             force_limit_n: 5_000.0,
-            encoder_mm: 0.000_1,
+            encoder_resolution_mm: 0.000_1,
             vel_ff: 1.0,
             acc_ff: 1.0,
             substeps: 10,
+            mass_kg: None,
         }
     }
 }
@@ -106,13 +149,34 @@ impl Machine {
             ("servo.kv_per_s", s.kv_per_s),
             ("servo.vel_kp_n_per_mm_s", s.vel_kp_n_per_mm_s),
             ("servo.vel_ti_ms", s.vel_ti_ms),
-            ("servo.mass_kg", s.mass_kg),
             ("servo.force_limit_n", s.force_limit_n),
-            ("servo.encoder_mm", s.encoder_mm),
+            ("servo.encoder_resolution_mm", s.encoder_resolution_mm),
+            (
+                "servo motor_inertia_kg + load_kg (or mass_kg)",
+                s.total_mass_kg(),
+            ),
         ];
         for (name, v) in named {
             if !v.is_finite() || v <= 0.0 {
                 return Err(format!("{name} must be a positive number, got {v}"));
+            }
+        }
+        let non_negative = [
+            ("servo.motor_inertia_kg", s.motor_inertia_kg),
+            ("servo.load_kg", s.load_kg),
+            ("servo.viscous_n_per_mm_s", s.viscous_n_per_mm_s),
+            ("servo.coulomb_n", s.coulomb_n),
+        ];
+        for (name, v) in non_negative {
+            if !v.is_finite() || v < 0.0 {
+                return Err(format!("{name} must be zero or positive, got {v}"));
+            }
+        }
+        for (name, v) in [("servo.vel_ff", s.vel_ff), ("servo.acc_ff", s.acc_ff)] {
+            if !(0.0..=1.0).contains(&v) {
+                return Err(format!(
+                    "{name} is a feed-forward gain from 0 (off) to 1 (on), got {v}"
+                ));
             }
         }
         if s.substeps == 0 {
@@ -121,9 +185,33 @@ impl Machine {
         Ok(())
     }
 
-    /// The default machine file, as TOML.
+    /// The default machine file, as TOML, each key with a comment giving its meaning and
+    /// unit (what `cnc machine` prints).
     pub fn default_toml() -> String {
-        Machine::default().to_toml()
+        let mut out = String::from(
+            "# cnc machine file: every key is optional (missing keys take these defaults).\n",
+        );
+        let mut section = "";
+        for line in Machine::default().to_toml().lines() {
+            if line.starts_with('[') {
+                section = line.trim_matches(|c| c == '[' || c == ']');
+                out.push('\n');
+            }
+            let key = line.split('=').next().unwrap_or("").trim();
+            if let Some((_, doc)) = KEY_DOCS.iter().find(|(k, _)| {
+                k.split_once('.')
+                    .map_or(section.is_empty() && *k == key, |(s, k)| {
+                        s == section && k == key
+                    })
+            }) {
+                out.push_str("# ");
+                out.push_str(doc);
+                out.push('\n');
+            }
+            out.push_str(line);
+            out.push('\n');
+        }
+        out
     }
 
     /// Fingerprint of this machine (FNV-1a of its canonical TOML): what a command log
@@ -138,6 +226,67 @@ impl Machine {
     }
 }
 
+/// One comment per key of the default machine file.
+const KEY_DOCS: &[(&str, &str)] = &[
+    (
+        "rapid_mm_per_min",
+        "rapid (G0) traverse rate along the path, mm/min",
+    ),
+    (
+        "max_feed_mm_per_min",
+        "highest programmable feed (larger F words are clamped), mm/min",
+    ),
+    (
+        "path_acc_mm_per_s2",
+        "path acceleration of the feed profile and curvature limit, mm/s²",
+    ),
+    (
+        "chord_tolerance_mm",
+        "largest deviation of a set-point chord from the curve, mm",
+    ),
+    (
+        "corner_angle_deg",
+        "corners sharper than this are taken with an exact stop, degrees",
+    ),
+    (
+        "max_following_error_mm",
+        "following error that stops the machine with a fault, mm",
+    ),
+    (
+        "servo.kv_per_s",
+        "position loop gain Kv, 1/s (mm/s of velocity command per mm of error)",
+    ),
+    (
+        "servo.vel_kp_n_per_mm_s",
+        "velocity loop proportional gain, N per mm/s",
+    ),
+    ("servo.vel_ti_ms", "velocity loop integral time, ms"),
+    (
+        "servo.motor_inertia_kg",
+        "motor (+ screw) inertia reflected to the axis, J·(2π/lead)², kg",
+    ),
+    ("servo.load_kg", "moving load (table, fixture, part), kg"),
+    ("servo.viscous_n_per_mm_s", "viscous friction, N per mm/s"),
+    ("servo.coulomb_n", "Coulomb (dry) friction and stiction, N"),
+    (
+        "servo.force_limit_n",
+        "drive force limit at the axis (motor torque/current limit), N",
+    ),
+    ("servo.encoder_resolution_mm", "encoder resolution, mm"),
+    (
+        "servo.vel_ff",
+        "velocity feed-forward gain: 0 = off, 1 = on",
+    ),
+    (
+        "servo.acc_ff",
+        "acceleration feed-forward gain: 0 = off, 1 = on",
+    ),
+    (
+        "servo.substeps",
+        "simulation sub-steps per interpolation period",
+    ),
+];
+
 /// Loads the machine file at `path`, or the default machine when there is none. The error
 /// names the file.
 pub fn load(path: Option<&std::path::Path>) -> Result<Machine, String> {
@@ -147,5 +296,36 @@ pub fn load(path: Option<&std::path::Path>) -> Result<Machine, String> {
             let text = std::fs::read_to_string(p).map_err(|e| format!("{}: {e}", p.display()))?;
             Machine::from_toml(&text).map_err(|e| format!("{}: {e}", p.display()))
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn default_file_is_documented_and_reads_back_as_the_default() {
+        let text = Machine::default_toml();
+        assert_eq!(Machine::from_toml(&text).unwrap(), Machine::default());
+        for (key, _) in KEY_DOCS {
+            let name = key.rsplit('.').next().unwrap();
+            assert!(text.contains(&format!("\n{name} = ")), "{key} missing");
+        }
+        assert_eq!(text.matches("\n# ").count(), KEY_DOCS.len(), "{text}");
+    }
+
+    #[test]
+    fn older_servo_names_still_load() {
+        let m = Machine::from_toml("[servo]\nmass_kg = 80.0\nencoder_mm = 0.001\n").unwrap();
+        assert_eq!(m.servo.total_mass_kg(), 80.0);
+        assert_eq!(m.servo.encoder_resolution_mm, 0.001);
+        assert_eq!(Machine::default().servo.total_mass_kg(), 50.0);
+    }
+
+    #[test]
+    fn feed_forward_gains_are_between_0_and_1() {
+        let e = Machine::from_toml("[servo]\nvel_ff = 1.5\n").unwrap_err();
+        assert!(e.contains("servo.vel_ff"), "{e}");
+        assert!(Machine::from_toml("[servo]\nvel_ff = 0.0\nacc_ff = 0.5\n").is_ok());
     }
 }

@@ -169,18 +169,37 @@ impl CommandBlock {
                     };
                     return Err(ProtocolError::Curve { seq: self.seq, err });
                 }
+                // Name the very number that is not finite (the curve check only says that
+                // one is).
+                let not_finite = |field: &'static str, index: usize| ProtocolError::NotFinite {
+                    seq: self.seq,
+                    field,
+                    index: index as u32,
+                };
+                if let Some(i) = self.knots().iter().position(|k| !k.is_finite()) {
+                    return Err(not_finite("knots", i));
+                }
+                if let Some(i) = self
+                    .ctrl()
+                    .iter()
+                    .position(|c| c.iter().any(|v| !v.is_finite()))
+                {
+                    return Err(not_finite("ctrl", i));
+                }
                 nurbs::validate(degree, self.knots(), self.ctrl(), MAX_CTRL)
                     .map_err(|err| ProtocolError::Curve { seq: self.seq, err })?;
                 let feeds = [
-                    self.feed_mm_per_min,
-                    self.start_feed_mm_per_min,
-                    self.end_feed_mm_per_min,
+                    ("feed_mm_per_min", self.feed_mm_per_min),
+                    ("start_feed_mm_per_min", self.start_feed_mm_per_min),
+                    ("end_feed_mm_per_min", self.end_feed_mm_per_min),
                 ];
-                if feeds.iter().any(|f| !f.is_finite() || *f < 0.0) || self.feed_mm_per_min <= 0.0 {
-                    return Err(ProtocolError::BadField {
-                        seq: self.seq,
-                        field: "feed",
-                    });
+                for (field, f) in feeds {
+                    if !f.is_finite() || f < 0.0 || (field == "feed_mm_per_min" && f <= 0.0) {
+                        return Err(ProtocolError::BadField {
+                            seq: self.seq,
+                            field,
+                        });
+                    }
                 }
                 if !self.length_mm.is_finite() || self.length_mm < 0.0 {
                     return Err(ProtocolError::BadField {
@@ -369,6 +388,12 @@ pub enum ProtocolError {
         seq: u64,
         field: &'static str,
     },
+    /// `field[index]` is NaN or infinite.
+    NotFinite {
+        seq: u64,
+        field: &'static str,
+        index: u32,
+    },
     /// Blocks must arrive as 0, 1, 2, ...
     OutOfSequence {
         expected: u64,
@@ -382,13 +407,18 @@ impl core::fmt::Display for ProtocolError {
             ProtocolError::Version { got } => {
                 write!(
                     f,
-                    "protocol version {got} received, this build speaks {PROTOCOL_VERSION}"
+                    "protocol: version {got} received, this build speaks {PROTOCOL_VERSION}"
                 )
             }
             ProtocolError::UnknownKind { seq, code } => {
-                write!(f, "block {seq}: unknown block kind {code}")
+                write!(f, "block {seq}: kind: unknown block kind {code}")
             }
-            ProtocolError::Curve { seq, err } => write!(f, "block {seq}: {err}"),
+            ProtocolError::Curve { seq, err } => {
+                write!(f, "block {seq}: {}: {err}", curve_field(&err))
+            }
+            ProtocolError::NotFinite { seq, field, index } => {
+                write!(f, "block {seq}: {field}[{index}]: not a finite number")
+            }
             ProtocolError::BadField { seq, field } => {
                 write!(f, "block/cycle {seq}: invalid {field}")
             }
@@ -399,6 +429,22 @@ impl core::fmt::Display for ProtocolError {
                 )
             }
         }
+    }
+}
+
+/// The block field a curve error is about, so a report names it.
+fn curve_field(err: &CurveError) -> &'static str {
+    match err {
+        CurveError::DegreeOutOfRange { .. } => "degree",
+        CurveError::TooFewControlPoints { .. } | CurveError::TooManyControlPoints { .. } => {
+            "n_ctrl"
+        }
+        CurveError::KnotCount { .. }
+        | CurveError::KnotsDecrease { .. }
+        | CurveError::NotClamped
+        | CurveError::EmptyDomain => "knots",
+        CurveError::WeightNotPositive { .. } => "ctrl (weight)",
+        CurveError::NotFinite => "knots or ctrl",
     }
 }
 

@@ -3,28 +3,9 @@
 //! ahead) and a million surface evaluations (both pass settings, zig-zag and random
 //! points), after construction.
 
+use shared::alloc_count::{arm, count, Counting};
 use shared::nurbs::fast::FastCurve;
 use shared::nurbs::surface::{FastSurface, Passes, SurfaceData};
-use std::alloc::{GlobalAlloc, Layout, System};
-use std::sync::atomic::{AtomicUsize, Ordering};
-
-struct Counting;
-
-static ALLOCS: AtomicUsize = AtomicUsize::new(0);
-
-unsafe impl GlobalAlloc for Counting {
-    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
-        ALLOCS.fetch_add(1, Ordering::Relaxed);
-        unsafe { System.alloc(layout) }
-    }
-    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
-        unsafe { System.dealloc(ptr, layout) }
-    }
-    unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
-        ALLOCS.fetch_add(1, Ordering::Relaxed);
-        unsafe { System.realloc(ptr, layout, new_size) }
-    }
-}
 
 #[global_allocator]
 static GLOBAL: Counting = Counting;
@@ -45,7 +26,6 @@ fn lcg(state: &mut u64) -> f64 {
     (*state >> 11) as f64 / (1u64 << 53) as f64
 }
 
-// One test only: the counter is global, so nothing may run beside the measured loops.
 #[test]
 fn a_million_evaluations_allocate_nothing() {
     let n = 20;
@@ -90,7 +70,8 @@ fn a_million_evaluations_allocate_nothing() {
         FastSurface::with_passes(&data, Passes::AlongV).expect("valid surface"),
     ];
 
-    let before = ALLOCS.load(Ordering::Relaxed);
+    let before = count();
+    arm(true);
     let mut acc = 0.0;
     let mut rng = 1u64;
     let per_curve = 1_000_000 / curves.len() + 1;
@@ -117,7 +98,8 @@ fn a_million_evaluations_allocate_nothing() {
             acc += e.p[0] + e.du[1] + e.dv[2] + e.normal[2];
         }
     }
-    let allocs = ALLOCS.load(Ordering::Relaxed) - before;
+    arm(false);
+    let allocs = count() - before;
     assert!(acc.is_finite());
     assert_eq!(allocs, 0, "{allocs} allocations in 2 million evaluations");
 }

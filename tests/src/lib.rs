@@ -83,3 +83,59 @@ pub fn circle_errors(rows: &[&Vec<f64>], center: [f64; 2], r: f64) -> (f64, f64)
     }
     (radial, sagitta)
 }
+
+/// The `cnc role …` processes a `cnc run` (pid `launcher`) has started, as (role, pid),
+/// read from /proc (the launcher's children and their command lines).
+pub fn role_pids(launcher: u32) -> Vec<(String, u32)> {
+    let children = std::fs::read_to_string(format!("/proc/{launcher}/task/{launcher}/children"))
+        .unwrap_or_default();
+    children
+        .split_whitespace()
+        .filter_map(|p| p.parse::<u32>().ok())
+        .filter_map(|pid| {
+            let cmd = std::fs::read(format!("/proc/{pid}/cmdline")).ok()?;
+            let args: Vec<String> = cmd
+                .split(|b| *b == 0)
+                .map(|a| String::from_utf8_lossy(a).into_owned())
+                .collect();
+            let i = args.iter().position(|a| a == "role")?;
+            Some((args.get(i + 1)?.clone(), pid))
+        })
+        .collect()
+}
+
+/// Polls `ready` every 5 ms until it holds; panics with `what` after `timeout`.
+pub fn wait_until(what: &str, timeout: std::time::Duration, mut ready: impl FnMut() -> bool) {
+    let t = std::time::Instant::now();
+    while !ready() {
+        assert!(t.elapsed() < timeout, "timed out waiting for {what}");
+        std::thread::sleep(std::time::Duration::from_millis(5));
+    }
+}
+
+/// Lines of a CSV file that ends with a newline and whose every line has the header's
+/// number of fields: nothing half-written. Returns the data rows.
+pub fn complete_csv(path: &Path) -> Vec<Vec<f64>> {
+    let text = std::fs::read_to_string(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+    assert!(
+        text.ends_with('\n'),
+        "{}: last line incomplete",
+        path.display()
+    );
+    let mut lines = text.lines();
+    let fields = lines.next().expect("a header").split(',').count();
+    lines
+        .enumerate()
+        .map(|(i, l)| {
+            let row: Vec<f64> = l
+                .split(',')
+                .map(|v| {
+                    v.parse::<f64>()
+                        .unwrap_or_else(|_| panic!("{}:{}: `{l}`", path.display(), i + 2))
+                })
+                .collect();
+            assert_eq!(row.len(), fields, "{}:{}: `{l}`", path.display(), i + 2);
+            row
+        })
+        .collect()
+}

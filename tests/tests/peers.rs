@@ -46,7 +46,7 @@ fn every_linuxcnc_program_checks_clean_and_runs() {
         }
         let out = runs.join(&name);
         let run = Command::new(cnc_exe())
-            .args(["run", "--clock", "sim", "--out"])
+            .args(["run", "--clock", "sim", "--no-report", "--out"])
             .arg(&out)
             .arg(prog)
             .output()
@@ -68,7 +68,7 @@ fn every_linuxcnc_program_checks_clean_and_runs() {
         // The command log replays to the very same set-points and feedback.
         let again = runs.join(format!("{name}.replay"));
         let replay = Command::new(cnc_exe())
-            .args(["replay", "--clock", "sim", "--out"])
+            .args(["replay", "--clock", "sim", "--no-report", "--out"])
             .arg(&again)
             .arg(&out)
             .output()

@@ -163,3 +163,150 @@ fn corrupt_block_is_a_fault_not_a_panic() {
         Err(Fault::Protocol(_))
     ));
 }
+
+/// Path speed of each tick, from the set-points themselves.
+fn steps(ticks: &[Tick]) -> Vec<f64> {
+    ticks
+        .windows(2)
+        .map(|w| dist(w[0].pos_mm, w[1].pos_mm))
+        .collect()
+}
+
+#[test]
+fn controlled_stop_decelerates_along_the_path_to_rest() {
+    let mut e = Engine::new(limits(), [0.0; 3]);
+    let mut src = Blocks(
+        vec![
+            line(0, [0.0; 3], [300.0, 300.0, 0.0], 3000.0, 0.0, 0.0),
+            CommandBlock::empty(BlockKind::ProgramEnd, 1, 2),
+        ],
+        0,
+    );
+    let mut ticks = vec![];
+    for _ in 0..100 {
+        ticks.push(e.tick(&mut src).unwrap());
+    }
+    let v0 = e.speed_mm_per_s();
+    assert!((v0 - 50.0).abs() < 1e-9, "at feed before the stop: {v0}");
+    e.stop();
+    let mut n = 0;
+    while !e.at_rest() {
+        ticks.push(e.tick(&mut src).unwrap());
+        n += 1;
+        assert!(n < 1000, "the stop never ends");
+    }
+    // 50 mm/s at 2000 mm/s² is 25 ms: 25 cycles, the last one standing still.
+    assert_eq!(n, 25);
+    let tail = &ticks[99..];
+    let d = steps(tail);
+    for w in d.windows(2) {
+        assert!(w[1] < w[0], "speed falls every cycle: {w:?}");
+        assert!(
+            (w[0] - w[1] - 0.002).abs() < 1e-9,
+            "by a·T² = 0.002 mm: {w:?}"
+        );
+    }
+    assert_eq!(*d.last().unwrap(), 0.0);
+    for t in tail {
+        assert!(
+            (t.pos_mm[0] - t.pos_mm[1]).abs() < 1e-9,
+            "on the path: {t:?}"
+        );
+    }
+    // Nothing more is taken from the source: the program end was never reached.
+    assert!(tail.iter().all(|t| t.state == TickState::Running));
+    assert_eq!(e.blocks_received(), 2, "the look-ahead had the end already");
+    let rest = e.position();
+    for _ in 0..5 {
+        assert_eq!(e.tick(&mut src).unwrap().pos_mm, rest, "stays at rest");
+    }
+}
+
+#[test]
+fn controlled_stop_crosses_into_the_block_in_hand() {
+    let mut e = Engine::new(limits(), [0.0; 3]);
+    let mut src = Blocks(
+        vec![
+            line(0, [0.0; 3], [10.0, 0.0, 0.0], 3000.0, 0.0, 3000.0),
+            line(1, [10.0, 0.0, 0.0], [20.0, 0.0, 0.0], 3000.0, 3000.0, 0.0),
+            CommandBlock::empty(BlockKind::ProgramEnd, 2, 3),
+        ],
+        0,
+    );
+    // Run until 0.2 mm before the junction, at full feed, then stop.
+    while e.position()[0] < 9.8 {
+        e.tick(&mut src).unwrap();
+    }
+    e.stop();
+    let mut last = e.position();
+    while !e.at_rest() {
+        let t = e.tick(&mut src).unwrap();
+        assert!(t.pos_mm[0] >= last[0] && t.pos_mm[1] == 0.0);
+        last = t.pos_mm;
+    }
+    assert!(last[0] > 10.0, "stopped past the junction at {last:?}");
+    assert!(last[0] < 20.0);
+}
+
+#[test]
+fn bad_block_mid_run_is_an_error_before_anything_moves() {
+    let mut bad = line(1, [5.0, 0.0, 0.0], [6.0, 0.0, 0.0], 3000.0, 0.0, 0.0);
+    bad.ctrl[1][3] = 0.0;
+    let mut e = Engine::new(limits(), [0.0; 3]);
+    let mut src = Blocks(
+        vec![line(0, [0.0; 3], [5.0, 0.0, 0.0], 3000.0, 0.0, 3000.0), bad],
+        0,
+    );
+    let first = e.tick(&mut src).unwrap();
+    let second = e.tick(&mut src);
+    assert!(
+        matches!(
+            second,
+            Err(Fault::Protocol(ProtocolError::Curve { seq: 1, .. }))
+        ),
+        "{second:?}"
+    );
+    assert_eq!(e.position(), first.pos_mm, "the failed tick did not move");
+    e.stop();
+    let mut prev = first.pos_mm;
+    let mut n = 0;
+    while !e.at_rest() {
+        let t = e.tick(&mut src).unwrap();
+        assert!(t.pos_mm[0] >= prev[0] && t.pos_mm[0] <= 5.0);
+        prev = t.pos_mm;
+        n += 1;
+        assert!(n < 100);
+    }
+}
+
+#[test]
+fn starvations_are_counted_once_per_stop_and_the_engine_resumes() {
+    let mut e = Engine::new(limits(), [0.0; 3]);
+    let mut src = Blocks(
+        vec![line(0, [0.0; 3], [2.0, 0.0, 0.0], 3000.0, 0.0, 3000.0)],
+        0,
+    );
+    let mut ticks = vec![];
+    for _ in 0..200 {
+        ticks.push(e.tick(&mut src).unwrap());
+    }
+    assert_eq!(ticks.last().unwrap().state, TickState::Starved);
+    assert_eq!(
+        ticks.last().unwrap().pos_mm,
+        [2.0, 0.0, 0.0],
+        "waits on the path"
+    );
+    assert_eq!(e.starvations(), 1);
+    src.0
+        .push(line(1, [2.0, 0.0, 0.0], [4.0, 0.0, 0.0], 3000.0, 0.0, 0.0));
+    src.0.push(CommandBlock::empty(BlockKind::ProgramEnd, 2, 3));
+    loop {
+        let t = e.tick(&mut src).unwrap();
+        if t.state == TickState::Done {
+            assert_eq!(t.pos_mm, [4.0, 0.0, 0.0]);
+            break;
+        }
+        assert_eq!(t.state, TickState::Running, "resumed");
+    }
+    assert_eq!(e.starvations(), 1);
+}

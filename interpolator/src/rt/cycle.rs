@@ -8,10 +8,17 @@
 //! starts as soon as the drives' feedback for cycle k is in, and a block that is late
 //! from the interpreter is waited for rather than run short of. Cycle k is still stamped
 //! `k·period`, so the set-points are the same as under the real clock.
+//!
+//! Faults (a dead or silent peer, excess following error, a bad block, a stop request)
+//! never freeze the set-point: the engine makes a controlled stop along the path, the
+//! loop keeps publishing until it is at rest, and that last set-point ends the run. Peer
+//! deaths come from [`PeerWatch`] (iceoryx2 liveness, off the cycle); a drive that stays
+//! silent while alive is caught by the feedback watchdog below.
 
 use crate::engine::{BlockSource, Engine, Fault, Limits, TickState};
 use crate::rt::sched::{self, SchedMode, SchedReport};
-use crate::summary::{FeedStats, Summary};
+use crate::rt::watch::PeerWatch;
+use crate::summary::{FaultInfo, FaultRecord, FeedStats, Summary};
 use crate::timing::Timing;
 use iceoryx2::port::subscriber::Subscriber;
 use iceoryx2::prelude::*;
@@ -42,6 +49,28 @@ pub struct Config {
 /// wake-up event, and how long a peer may stay silent before it is taken for dead.
 const SIM_SPIN_NS: u64 = 200_000;
 const SIM_TIMEOUT_NS: u64 = 5_000_000_000;
+
+/// Source lines of the most recent cycles, so a fault found in feedback (which answers an
+/// earlier cycle) names the line that cycle ran.
+const LINE_RING: usize = 256;
+
+/// Real clock: the feedback watchdog's limit in cycles. A dead servo-sim is found by
+/// [`PeerWatch`] within a period or two; this limit is only for a drive that is alive but
+/// silent, and it must ride out the multi-millisecond stalls of a busy VM (measured tails
+/// of 2 to 29 ms, `../shared/notes/iceoryx2.md` §5): 100 ms, and never fewer than 5 cycles.
+pub fn feedback_lag_limit(period_ns: u64) -> u64 {
+    (100_000_000 / period_ns.max(1)).max(5)
+}
+
+/// How often [`PeerWatch`] wakes without an event. A death wakes it at once (pidfd), so
+/// this only paces its look at the port counts (a peer that left cleanly) and, where no
+/// pidfd could be had, its iceoryx2 dead-node checks: one peer per wake-up, about 55 µs of
+/// CPU each in a release build, so faster polling would take a noticeable share of a
+/// core. Measured: a killed servo-sim is noticed 1 to 5 cycles after its last answer at
+/// 1 ms (the kernel's own tear-down of the process takes 1 to 3.5 ms of that).
+pub fn watch_interval(_period_ns: u64) -> Duration {
+    Duration::from_millis(1)
+}
 
 /// Why a run could not even produce a report.
 #[derive(Debug)]
@@ -97,6 +126,8 @@ struct Source<'a, S: Service> {
     sub: &'a Subscriber<S, CommandBlock, ()>,
     first: Option<CommandBlock>,
     wait: bool,
+    /// A dead interpreter sends nothing more: stop waiting for it.
+    watch: &'a PeerWatch,
 }
 
 impl<S: Service> BlockSource for Source<'_, S> {
@@ -113,9 +144,13 @@ impl<S: Service> BlockSource for Source<'_, S> {
             got.is_some()
         };
         if self.wait {
-            spin_then_block(SIM_SPIN_NS, SIM_TIMEOUT_NS, take, |_| {
-                std::thread::sleep(Duration::from_micros(50))
-            });
+            let watch = self.watch;
+            spin_then_block(
+                SIM_SPIN_NS,
+                SIM_TIMEOUT_NS,
+                || take() || watch.gone().is_some(),
+                |_| std::thread::sleep(Duration::from_micros(50)),
+            );
         } else {
             take();
         }
@@ -152,9 +187,15 @@ impl Answers {
         sub: &Subscriber<S, Feedback, ()>,
         engine: &Engine,
         fault: &mut Option<Fault>,
+        lines: &[u32; LINE_RING],
     ) {
         while let Ok(Some(fb)) = sub.receive() {
-            if let Err(f) = engine.on_feedback(&fb) {
+            if let Err(mut f) = engine.on_feedback(&fb) {
+                if let Fault::FollowingError { cycle, line, .. } = &mut f {
+                    if let Some(l) = lines.get((*cycle % LINE_RING as u64) as usize) {
+                        *line = *l;
+                    }
+                }
                 fault.get_or_insert(f);
             }
             self.last_cycle = Some(fb.cycle);
@@ -226,10 +267,14 @@ pub fn run<S: Service>(cfg: &Config) -> Result<Summary, RunError> {
         max_following_error_mm: cfg.machine.max_following_error_mm,
     };
     let mut engine = Engine::new(lim, [0.0; 3]);
+    // Both peers are connected now (the servo subscribed, the interpreter sent a block):
+    // from here on, a port that leaves or a node that dies is a fault.
+    let watch = PeerWatch::start::<S>(&cfg.prefix, watch_interval(cfg.period_ns))?;
     let mut src = Source {
         sub: &block_sub,
         first,
         wait: sim,
+        watch: &watch,
     };
     let mut trace = TraceWriter::create(
         &cfg.out_dir.join("setpoints.csv"),
@@ -247,23 +292,24 @@ pub fn run<S: Service>(cfg: &Config) -> Result<Summary, RunError> {
     }
 
     let mut fault: Option<Fault> = None;
+    let mut info: Option<FaultRecord> = None;
     let mut answers = Answers::default();
-    // Real clock: the drives answer within the period; a long silence means the
-    // servo-sim is dead or stalled. The floor rides out the hypervisor stalls of a
-    // few ms these machines show.
-    let lag_limit = (100_000_000 / cfg.period_ns).max(5);
+    let mut lines = [0u32; LINE_RING];
+    // Under the simulated clock: once the drives are gone or silent, stop waiting for them.
+    let mut servo_lost = false;
+    let lag_limit = feedback_lag_limit(cfg.period_ns);
     let t0 = now_ns() + cfg.period_ns;
     let mut cycle: u64 = 0;
     loop {
         let release = t0 + cycle * cfg.period_ns;
         if sim {
-            if cycle > 0 {
+            if cycle > 0 && !servo_lost {
                 let answered = spin_then_block(
                     SIM_SPIN_NS,
                     SIM_TIMEOUT_NS,
                     || {
-                        answers.drain(&fb_sub, &engine, &mut fault);
-                        answers.has(cycle - 1)
+                        answers.drain(&fb_sub, &engine, &mut fault, &lines);
+                        answers.has(cycle - 1) || watch.servo_gone()
                     },
                     |d| {
                         let _ = fb_listener.timed_wait(|_| {}, d);
@@ -271,6 +317,7 @@ pub fn run<S: Service>(cfg: &Config) -> Result<Summary, RunError> {
                 );
                 if !answered {
                     fault.get_or_insert(Fault::PeerSilent { cycle: cycle - 1 });
+                    servo_lost = true;
                 }
             }
         } else {
@@ -279,25 +326,43 @@ pub fn run<S: Service>(cfg: &Config) -> Result<Summary, RunError> {
         let wake = now_ns();
 
         // inputs → faults
-        answers.drain(&fb_sub, &engine, &mut fault);
+        answers.drain(&fb_sub, &engine, &mut fault, &lines);
         if shared::stop::requested() {
             fault.get_or_insert(Fault::StopRequested);
         }
+        if let Some(peer) = watch.gone() {
+            fault.get_or_insert(Fault::PeerGone { peer, cycle });
+        }
+        servo_lost |= watch.servo_gone();
         if !sim && cycle > lag_limit && !answers.has(cycle - lag_limit) {
             fault.get_or_insert(Fault::PeerSilent {
                 cycle: cycle - lag_limit,
             });
         }
-        // command
-        let tick = match fault {
-            None => engine.tick(&mut src),
-            Some(f) => Err(f),
+        // command: a fault turns the run into a controlled stop along the path
+        if let Some(f) = fault {
+            if !engine.stopping() {
+                info = Some(FaultRecord::at(f, cycle, &engine, answers.last_cycle));
+                engine.stop();
+            }
+        }
+        let tick = match engine.tick(&mut src) {
+            Err(f) => {
+                // A bad block: nothing moved; stop from where the last cycle left off.
+                fault.get_or_insert(f);
+                if !engine.stopping() {
+                    info = Some(FaultRecord::at(f, cycle, &engine, answers.last_cycle));
+                    engine.stop();
+                }
+                engine.tick(&mut src)
+            }
+            ok => ok,
         };
         let computed = now_ns();
         let (sp, state) = match tick {
             Ok(t) => {
                 feed.add(&t, cfg.period_ns);
-                let last = t.state == TickState::Done;
+                let last = t.state == TickState::Done || engine.at_rest();
                 let sp = Setpoint {
                     protocol: PROTOCOL_VERSION,
                     flags: if last { SETPOINT_LAST } else { 0 },
@@ -310,15 +375,16 @@ pub fn run<S: Service>(cfg: &Config) -> Result<Summary, RunError> {
                     vel_mm_per_s: t.vel_mm_per_s,
                     acc_mm_per_s2: t.acc_mm_per_s2,
                 };
-                let state = match t.state {
-                    TickState::Running => RunState::Running,
-                    TickState::Starved => RunState::Starved,
-                    TickState::Done => RunState::Done,
+                let state = match (fault.is_some(), t.state) {
+                    (true, _) => RunState::Fault,
+                    (false, TickState::Running) => RunState::Running,
+                    (false, TickState::Starved) => RunState::Starved,
+                    (false, TickState::Done) => RunState::Done,
                 };
                 (sp, state)
             }
             Err(f) => {
-                // Stop where we are: hold the last commanded position.
+                // Cannot even stop along the path: hold the last commanded position.
                 fault.get_or_insert(f);
                 let sp = Setpoint {
                     protocol: PROTOCOL_VERSION,
@@ -331,6 +397,9 @@ pub fn run<S: Service>(cfg: &Config) -> Result<Summary, RunError> {
                 (sp, RunState::Fault)
             }
         };
+        if let Some(l) = lines.get_mut((cycle % LINE_RING as u64) as usize) {
+            *l = sp.source_line;
+        }
         // outputs
         if let Ok(s) = sp_pub.loan_uninit() {
             let _ = s.write_payload(sp).send();
@@ -369,16 +438,18 @@ pub fn run<S: Service>(cfg: &Config) -> Result<Summary, RunError> {
         cycle += 1;
     }
 
-    // Let the drives answer the last set-point, so the report covers every cycle.
+    // Let the drives answer the last set-point, so the report covers every cycle (unless
+    // they are gone).
     let _ = wait_for("final feedback", Duration::from_secs(2), || {
-        answers.drain(&fb_sub, &engine, &mut fault);
-        answers.has(cycle)
+        answers.drain(&fb_sub, &engine, &mut fault, &lines);
+        answers.has(cycle) || watch.servo_gone()
     });
     // Stay until the interpreter has seen the final status and left (it keeps the blocks'
     // memory alive until then), so neither side sees the other vanish mid-handshake.
     let _ = wait_for("the interpreter to leave", Duration::from_secs(2), || {
         blocks.dynamic_config().number_of_publishers() == 0
     });
+    drop(watch);
     let dropped = trace.dropped();
     trace.finish()?;
     let summary = Summary::new(
@@ -390,6 +461,10 @@ pub fn run<S: Service>(cfg: &Config) -> Result<Summary, RunError> {
         sched_report,
         dropped,
         answers.max_ferr_mm,
+    )
+    .with_faults(
+        info.map(|r| FaultInfo::new(&r, cycle)),
+        engine.starvations(),
     );
     summary.write(&cfg.out_dir.join("interpolator.json"))?;
     Ok(summary)

@@ -63,6 +63,15 @@ pub struct Report {
     pub peak_feed_mm_per_min: Option<f64>,
     pub max_following_error_um: Option<f64>,
     pub max_following_error_axis_um: Option<[f64; 3]>,
+    /// The servo and contour figures below are newer than the others: a report without
+    /// them is not a problem, they show as not available.
+    pub rms_following_error_axis_um: Option<[f64; 3]>,
+    pub max_contour_error_um: Option<f64>,
+    pub max_contour_error_cycle: Option<u64>,
+    pub max_contour_error_line: Option<u64>,
+    pub rms_contour_error_um: Option<f64>,
+    pub roundness_um: Option<f64>,
+    pub roundness_radius_error_um: Option<f64>,
     pub lost_setpoints: Option<u64>,
     pub blocks: Option<u64>,
     pub sched: Option<Sched>,
@@ -422,14 +431,20 @@ fn load_report(path: &Path, problems: &mut Vec<String>) -> Option<Report> {
         avg_feed_mm_per_min: f.get("avg_feed_mm_per_min", Value::as_f64),
         peak_feed_mm_per_min: f.get("peak_feed_mm_per_min", Value::as_f64),
         max_following_error_um: f.get("max_following_error_um", Value::as_f64),
-        max_following_error_axis_um: f.get("max_following_error_axis_um", |x| {
-            let a = x.as_array()?;
-            Some([
-                a.first()?.as_f64()?,
-                a.get(1)?.as_f64()?,
-                a.get(2)?.as_f64()?,
-            ])
-        }),
+        max_following_error_axis_um: f.get("max_following_error_axis_um", triple),
+        rms_following_error_axis_um: v.get("rms_following_error_axis_um").and_then(triple),
+        max_contour_error_um: v.get("max_contour_error_um").and_then(Value::as_f64),
+        max_contour_error_cycle: v.get("max_contour_error_cycle").and_then(Value::as_u64),
+        max_contour_error_line: v.get("max_contour_error_line").and_then(Value::as_u64),
+        rms_contour_error_um: v.get("rms_contour_error_um").and_then(Value::as_f64),
+        roundness_um: v
+            .get("roundness")
+            .and_then(|r| r.get("roundness_um"))
+            .and_then(Value::as_f64),
+        roundness_radius_error_um: v
+            .get("roundness")
+            .and_then(|r| r.get("radius_error_um"))
+            .and_then(Value::as_f64),
         lost_setpoints: f.get("lost_setpoints", Value::as_u64),
         blocks: f.get("blocks", Value::as_u64),
         sched: f.get("sched", |x| {
@@ -471,6 +486,15 @@ fn load_report(path: &Path, problems: &mut Vec<String>) -> Option<Report> {
         ));
     }
     Some(r)
+}
+
+fn triple(x: &Value) -> Option<[f64; 3]> {
+    let a = x.as_array()?;
+    Some([
+        a.first()?.as_f64()?,
+        a.get(1)?.as_f64()?,
+        a.get(2)?.as_f64()?,
+    ])
 }
 
 fn pct(x: &Value) -> Option<Pct> {

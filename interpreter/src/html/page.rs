@@ -39,8 +39,9 @@ pub fn page(run: &Run) -> String {
     let mut body = String::new();
     path::section(run, &mut body);
     series::motion(run, &mut body);
-    let max_contour = series::errors(run, &mut body);
-    polar::section(run, &mut body);
+    let contour = contour_of(run);
+    let max_contour = series::errors(run, contour.as_ref(), &mut body);
+    polar::section(contour.as_ref(), &mut body);
     timing::section(run, &mut body);
 
     let program = run
@@ -66,6 +67,26 @@ pub fn page(run: &Run) -> String {
     out.push_str(&body);
     out.push_str("<p class=\"note\">Made by <code>cnc report</code>. Plots reduce the data to the minimum and maximum per pixel column, so no single-cycle spike is lost; the figures in the summary are those of report.json.</p></main></body></html>\n");
     out
+}
+
+/// Contour error and roundness of the run, measured here from the same files as
+/// `report.json`'s (so the plots and the summary agree); `None` without the traces or the
+/// command log.
+fn contour_of(run: &Run) -> Option<crate::contour::Contour> {
+    let (sp, fb) = (run.setpoints.as_ref()?, run.feedback.as_ref()?);
+    if run.blocks.is_empty() {
+        return None;
+    }
+    Some(crate::contour::analyse(
+        &run.blocks,
+        &crate::contour::Traces {
+            sp_cycle: &sp.cycle,
+            sp_pos_mm: &sp.pos_mm,
+            sp_line: &sp.line,
+            fb_cycle: &fb.cycle,
+            fb_pos_mm: &fb.pos_mm,
+        },
+    ))
 }
 
 fn row(out: &mut String, key: &str, name: &str, value: &str) {
@@ -177,9 +198,50 @@ fn summary(run: &Run, max_contour: Option<f64>, out: &mut String) {
     );
     row(
         out,
+        "rms_following_error_axis_um",
+        "RMS following error",
+        &r.rms_following_error_axis_um.map_or_else(
+            || "not recorded".into(),
+            |a| format!("X {:.2}, Y {:.2}, Z {:.2} µm", a[0], a[1], a[2]),
+        ),
+    );
+    let contour = match (r.max_contour_error_um, max_contour) {
+        (Some(v), _) => {
+            let at = match (r.max_contour_error_cycle, r.max_contour_error_line) {
+                (Some(c), Some(l)) => format!(" at cycle {c}, line {l}"),
+                _ => String::new(),
+            };
+            format!("{v:.2} µm{at}")
+        }
+        (None, Some(v)) => format!("{v:.2} µm (computed here; not in report.json)"),
+        (None, None) => "not available".into(),
+    };
+    row(
+        out,
         "max_contour_error_um",
-        "max contour error (computed here)",
-        &max_contour.map_or_else(|| "not available".into(), |v| format!("{v:.2} µm")),
+        "max contour error (distance to the commanded path)",
+        &contour,
+    );
+    row(
+        out,
+        "rms_contour_error_um",
+        "RMS contour error",
+        &r.rms_contour_error_um
+            .map_or_else(|| "not available".into(), |v| format!("{v:.2} µm")),
+    );
+    row(
+        out,
+        "roundness",
+        "roundness (closed circle)",
+        &r.roundness_um.map_or_else(
+            || "no closed circular path".into(),
+            |v| {
+                let err = r
+                    .roundness_radius_error_um
+                    .map_or(String::new(), |e| format!(", radius error {e:+.2} µm"));
+                format!("{v:.2} µm{err}")
+            },
+        ),
     );
     row(
         out,

@@ -9,6 +9,7 @@
 
 use super::data::Run;
 use super::svg::{num, pad_range, y_extent, Chart, Reducer, Style, AXES, LIMIT, SOLID};
+use crate::contour::Contour;
 use shared::path::norm;
 use std::collections::HashMap;
 use std::fmt::Write;
@@ -161,9 +162,10 @@ pub fn motion(run: &Run, out: &mut String) {
     out.push_str("<p class=\"note\">The machine file sets no jerk limit: the profile is acceleration-limited, so jerk peaks where the acceleration switches (corners, ramps, exact stops). Each pixel column shows the minimum and maximum of the cycles in it, so no single-cycle spike is hidden.</p></section>");
 }
 
-/// Following error per axis and the contour error (its part normal to the path).
-/// Returns the largest contour error in µm, when it could be computed.
-pub fn errors(run: &Run, out: &mut String) -> Option<f64> {
+/// Following error per axis and the contour error (distance from the measured position to
+/// the exact commanded path, from [`crate::contour`]). Returns the largest contour error in
+/// µm, when it could be computed.
+pub fn errors(run: &Run, contour: Option<&Contour>, out: &mut String) -> Option<f64> {
     out.push_str("<section id=\"errors\"><h2>Following and contour error</h2>");
     let Some(fb) = &run.feedback else {
         out.push_str("<p class=\"missing\">Not drawn: feedback.csv is missing or unusable (see the problems above).</p></section>");
@@ -173,10 +175,9 @@ pub fn errors(run: &Run, out: &mut String) -> Option<f64> {
     let cols = chart("x", "", "", tr, (0.0, 1.0)).plot_w();
     let period = run.period_s();
     let mut axes = [0; 3].map(|_| Reducer::new(tr.0, tr.1, cols));
-    let mut contour = Reducer::new(tr.0, tr.1, cols);
-    let sp = run.setpoints.as_ref();
-    let mut max_contour = 0.0f64;
+    let mut creduce = Reducer::new(tr.0, tr.1, cols);
     let mut prev: Option<u64> = None;
+    let mut contour_prev = false;
     for i in 0..fb.cycle.len() {
         let cyc = fb.cycle[i];
         let t = cyc as f64 * period;
@@ -184,25 +185,30 @@ pub fn errors(run: &Run, out: &mut String) -> Option<f64> {
             for r in axes.iter_mut() {
                 r.gap();
             }
-            contour.gap();
         }
         prev = Some(cyc);
         let e = fb.ferr_um[i].map(f64::from);
         for (r, v) in axes.iter_mut().zip(e) {
             r.push(t, v);
         }
-        if let Some(tan) = sp.and_then(|s| tangent(s, i, cyc)) {
-            let along = e[0] * tan[0] + e[1] * tan[1] + e[2] * tan[2];
-            let n = norm([0, 1, 2].map(|j| e[j] - along * tan[j]));
-            max_contour = max_contour.max(n);
-            contour.push(t, n);
+        // Cycles on rapids have no contour error: a gap in its line.
+        match contour.and_then(|c| c.error_um.get(i).copied().flatten()) {
+            Some(n) => {
+                creduce.push(t, n);
+                contour_prev = true;
+            }
+            None if contour_prev => {
+                creduce.gap();
+                contour_prev = false;
+            }
+            None => {}
         }
     }
     let axes = axes.map(Reducer::finish);
-    let contour = contour.finish();
+    let cline = creduce.finish();
     let mut lo = f64::INFINITY;
     let mut hi = f64::NEG_INFINITY;
-    for s in axes.iter().chain([&contour]) {
+    for s in axes.iter().chain([&cline]) {
         let (a, b) = y_extent(s);
         lo = lo.min(a);
         hi = hi.max(b);
@@ -218,38 +224,33 @@ pub fn errors(run: &Run, out: &mut String) -> Option<f64> {
     for (k, s) in axes.iter().enumerate() {
         draw(&c, s, &AXES[k], out);
     }
-    draw(&c, &contour, &AXES[3], out);
+    draw(&c, &cline, &AXES[3], out);
     c.close(
         out,
         &[
             ("X", AXES[0]),
             ("Y", AXES[1]),
             ("Z", AXES[2]),
-            ("contour error (normal to the path)", AXES[3]),
+            ("contour error (distance to the path)", AXES[3]),
         ],
     );
+    let max = contour.and_then(|c| c.max);
+    let worst = match max {
+        Some(w) => format!(
+            "Largest contour error: <b id=\"max-contour\">{:.2} µm</b> at cycle {} (line {}{}).",
+            w.um,
+            w.cycle,
+            w.line,
+            match run.source(w.line) {
+                "" => String::new(),
+                src => format!(": <code>{}</code>", super::svg::esc(src)),
+            }
+        ),
+        None => "No contour error: it needs commands.log, setpoints.csv and a feed move.".into(),
+    };
     let _ = write!(
         out,
-        "<p class=\"note\">Contour error is estimated as the part of the following-error vector normal to the commanded direction of motion (set-point differences); it is the error that shows on the part. Largest contour error: <b id=\"max-contour\">{:.2} µm</b>.{}</p></section>",
-        max_contour,
-        if sp.is_none() { " (Not available: setpoints.csv is unusable.)" } else { "" }
+        "<p class=\"note\">Contour error is the distance from each measured position to the exact commanded path (the closest point on the curves of commands.log near that cycle's set-point), not to the set-point: lagging along the path is following error, leaving the path is contour error, the error that shows on the part. Cycles on rapids (G0) are left out. {worst}</p></section>"
     );
-    sp.map(|_| max_contour)
-}
-
-/// Unit direction of motion at cycle `cyc` from the set-points, `fb_index` being the hint
-/// where the same cycle usually sits (both files hold one row per cycle).
-fn tangent(sp: &super::data::Setpoints, fb_index: usize, cyc: u64) -> Option<[f64; 3]> {
-    let i = if sp.cycle.get(fb_index) == Some(&cyc) {
-        fb_index
-    } else {
-        sp.cycle.binary_search(&cyc).ok()?
-    };
-    let j = i.checked_sub(1)?;
-    if sp.cycle[j] + 1 != cyc {
-        return None;
-    }
-    let d = [0, 1, 2].map(|k| sp.pos_mm[i][k] - sp.pos_mm[j][k]);
-    let n = norm(d);
-    (n > 1e-9).then(|| d.map(|v| v / n))
+    max.map(|w| w.um)
 }

@@ -1,0 +1,895 @@
+//! Contour error and roundness, measured after the run (never in the cycle) from the exact
+//! commanded path (`commands.log`) and the measured positions (`feedback.csv`).
+//!
+//! * **Contour error** of a feedback sample: the distance from the measured position to
+//!   the commanded path, i.e. to the closest point of the exact curves, not to the
+//!   set-point of that cycle (a tool that lags along the path makes a following error but
+//!   no contour error). The search looks at the blocks near the one the cycle's set-point
+//!   lies on (a window of path length `3·|following error| + 0.1 mm` behind it and
+//!   `|following error| + 0.1 mm` ahead, at least one block each way), skips blocks whose
+//!   control-point box (a NURBS lies in the hull of its control points) is farther than
+//!   the best distance found, samples each remaining block and refines the closest point by
+//!   Newton's method on the exact curve, `(C(u) − p)·C'(u) = 0`.
+//! * **Rapids**: rapid (G0) blocks are part of the path the distance is measured to (the
+//!   tool is on them), but cycles whose set-point lies on a rapid are left out of the
+//!   contour figures: G0 is not a cut and has no contour tolerance.
+//! * **Roundness**, for a closed curve: among the feed blocks between two rapids, the
+//!   longest run of consecutive blocks that ends where it starts (within 1 µm) and is one
+//!   circle (an exact least-squares circle fits its curve within 2 % of the radius and it
+//!   turns once around the centre). The measured positions of the cycles whose set-points
+//!   lie on those blocks are fitted with the least-squares circle in its plane (geometric
+//!   fit: Σ (rᵢ − R)² smallest, started from Kåsa's algebraic fit); roundness is
+//!   max − min of their radii about that centre, as a roundness instrument or ballbar
+//!   reports it. The fitted radius minus the commanded one is the size error, which
+//!   without feed-forward is the textbook `v² / (2·R·Kv²)`.
+
+use shared::path::{domain, eval, norm};
+use shared::protocol::{BlockKind, CommandBlock, FLAG_RAPID};
+use std::f64::consts::PI;
+
+/// The run's traces, as columns (both in cycle order).
+#[derive(Debug, Clone, Copy)]
+pub struct Traces<'a> {
+    pub sp_cycle: &'a [u64],
+    pub sp_pos_mm: &'a [[f64; 3]],
+    pub sp_line: &'a [u32],
+    pub fb_cycle: &'a [u64],
+    pub fb_pos_mm: &'a [[f64; 3]],
+}
+
+/// The worst contour error and where it happened.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Worst {
+    pub um: f64,
+    pub cycle: u64,
+    pub line: u32,
+}
+
+/// Roundness of the closed circular part of the path.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Roundness {
+    /// The working plane's axes (0 = X, 1 = Y, 2 = Z).
+    pub axes: (usize, usize),
+    /// Least-squares centre and radius of the measured positions.
+    pub centre_mm: [f64; 2],
+    pub radius_mm: f64,
+    /// Centre and radius of the exact commanded curve (least squares over its points).
+    pub commanded_centre_mm: [f64; 2],
+    pub commanded_radius_mm: f64,
+    /// Max − min radius of the measured positions about `centre_mm`.
+    pub roundness_um: f64,
+    /// Max − min radius of the commanded set-points about the commanded centre: the
+    /// interpolation's own chord error, the floor of what the drives can show.
+    pub commanded_roundness_um: f64,
+    /// Source lines of the first and last block of the circle.
+    pub lines: (u32, u32),
+    /// `(angle about the centre in rad, radius − radius_mm in µm)` per measured sample.
+    pub measured: Vec<(f64, f64)>,
+    /// The same for the commanded set-points of those cycles.
+    pub commanded: Vec<(f64, f64)>,
+}
+
+impl Roundness {
+    /// Fitted measured radius minus commanded radius, µm (negative: the circle came out
+    /// small).
+    pub fn radius_error_um(&self) -> f64 {
+        (self.radius_mm - self.commanded_radius_mm) * 1e3
+    }
+}
+
+/// Everything measured.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Contour {
+    /// Contour error per feedback row in µm; `None` where it is not counted (no set-point
+    /// for that cycle, set-point on a rapid, or no path).
+    pub error_um: Vec<Option<f64>>,
+    pub max: Option<Worst>,
+    pub rms_um: Option<f64>,
+    /// The roundness, or why the path has none.
+    pub roundness: Result<Roundness, String>,
+}
+
+/// One motion block with what the search needs, precomputed.
+struct Seg<'a> {
+    b: &'a CommandBlock,
+    u0: f64,
+    u1: f64,
+    lo: [f64; 3],
+    hi: [f64; 3],
+    len_mm: f64,
+    rapid: bool,
+    /// Samples for the coarse search.
+    n: usize,
+}
+
+impl<'a> Seg<'a> {
+    fn new(b: &'a CommandBlock) -> Self {
+        let (u0, u1) = domain(b);
+        let mut lo = [f64::INFINITY; 3];
+        let mut hi = [f64::NEG_INFINITY; 3];
+        for c in b.ctrl() {
+            for k in 0..3 {
+                lo[k] = lo[k].min(c[k]);
+                hi[k] = hi[k].max(c[k]);
+            }
+        }
+        if b.helix.axis != shared::protocol::NO_AXIS {
+            // The axial motion of a helix is not in the control points.
+            let a = (b.helix.axis as usize).min(2);
+            lo[a] = f64::NEG_INFINITY;
+            hi[a] = f64::INFINITY;
+        }
+        let len_mm = if b.length_mm > 0.0 {
+            b.length_mm
+        } else {
+            shared::path::length(b)
+        };
+        Seg {
+            b,
+            u0,
+            u1,
+            lo,
+            hi,
+            len_mm,
+            rapid: b.flags & FLAG_RAPID != 0,
+            n: (4 * b.ctrl().len()).clamp(16, 256),
+        }
+    }
+
+    /// Lower bound of the distance from `p` to the curve (its control-point box).
+    fn bound(&self, p: [f64; 3]) -> f64 {
+        let d = [0, 1, 2].map(|k| (self.lo[k] - p[k]).max(p[k] - self.hi[k]).max(0.0));
+        norm(d)
+    }
+
+    fn dist(&self, u: f64, p: [f64; 3]) -> f64 {
+        let c = eval(self.b, u).p;
+        norm([c[0] - p[0], c[1] - p[1], c[2] - p[2]])
+    }
+
+    /// Closest point of the block to `p`: `(distance, u)`.
+    fn closest(&self, p: [f64; 3]) -> (f64, f64) {
+        let (u0, u1) = (self.u0, self.u1);
+        if u1 <= u0 {
+            return (self.dist(u0, p), u0);
+        }
+        let step = (u1 - u0) / self.n as f64;
+        let at = |i: usize| {
+            if i == self.n {
+                u1
+            } else {
+                u0 + step * i as f64
+            }
+        };
+        let d: Vec<f64> = (0..=self.n).map(|i| self.dist(at(i), p)).collect();
+        // Refine from every sampled local minimum, not only the smallest sample: on a
+        // curve that comes back near itself (a closed NURBS) the nearest sample can sit in
+        // the wrong basin.
+        let mut best = (f64::INFINITY, u0);
+        for i in 0..=self.n {
+            let left = i == 0 || d[i] <= d[i - 1];
+            let right = i == self.n || d[i] <= d[i + 1];
+            if left && right {
+                let a = at(i.saturating_sub(1));
+                let b = at((i + 1).min(self.n));
+                let r = self.refine(p, (d[i], at(i)), a, b);
+                if r.0 < best.0 {
+                    best = r;
+                }
+            }
+        }
+        best
+    }
+
+    /// Newton's method on `g(u) = (C(u) − p)·C'(u)` inside `[a, b]`, from `start`; keeps
+    /// the best point seen, so it never does worse than its start.
+    fn refine(&self, p: [f64; 3], start: (f64, f64), a: f64, b: f64) -> (f64, f64) {
+        let mut best = start;
+        let mut u = start.1;
+        for _ in 0..30 {
+            let e = eval(self.b, u);
+            let r = [e.p[0] - p[0], e.p[1] - p[1], e.p[2] - p[2]];
+            let g = dot(r, e.d1);
+            let dg = dot(e.d1, e.d1) + dot(r, e.d2);
+            if dg <= 0.0 || !dg.is_finite() {
+                break;
+            }
+            let next = (u - g / dg).clamp(a, b);
+            let d = self.dist(next, p);
+            if d < best.0 {
+                best = (d, next);
+            }
+            if (next - u).abs() <= 1e-15 * (1.0 + u.abs()) {
+                break;
+            }
+            u = next;
+        }
+        best
+    }
+
+    fn start(&self) -> [f64; 3] {
+        eval(self.b, self.u0).p
+    }
+
+    fn end(&self) -> [f64; 3] {
+        eval(self.b, self.u1).p
+    }
+}
+
+fn dot(a: [f64; 3], b: [f64; 3]) -> f64 {
+    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+}
+
+fn dist3(a: [f64; 3], b: [f64; 3]) -> f64 {
+    norm([a[0] - b[0], a[1] - b[1], a[2] - b[2]])
+}
+
+/// How far a set-point may be from a block and still count as on it, mm (set-points are
+/// evaluated on the exact curve; this only absorbs rounding).
+const ON_PATH_MM: f64 = 1e-6;
+
+/// Measures the run. `blocks` are the validated command blocks in sending order.
+pub fn analyse(blocks: &[CommandBlock], t: &Traces) -> Contour {
+    let segs: Vec<Seg> = blocks
+        .iter()
+        .filter(|b| b.kind() == Some(BlockKind::Motion) && b.n_ctrl > 0)
+        .map(Seg::new)
+        .collect();
+    let n_fb = t.fb_cycle.len();
+    let mut error_um = vec![None; n_fb];
+    // The motion block of each feedback row's set-point (None: no set-point that cycle).
+    let mut seg_of: Vec<Option<usize>> = vec![None; n_fb];
+    let mut worst: Option<Worst> = None;
+    let (mut sum_sq, mut count) = (0.0f64, 0u64);
+    let mut cursor = 0usize;
+    let mut sp_i = 0usize;
+    if !segs.is_empty() {
+        for (i, (&cyc, &p)) in t.fb_cycle.iter().zip(t.fb_pos_mm).enumerate() {
+            while sp_i < t.sp_cycle.len() && t.sp_cycle[sp_i] < cyc {
+                sp_i += 1;
+            }
+            if t.sp_cycle.get(sp_i) != Some(&cyc) {
+                continue;
+            }
+            let (s, line) = (t.sp_pos_mm[sp_i], t.sp_line[sp_i]);
+            cursor = locate(&segs, cursor, s, line);
+            seg_of[i] = Some(cursor);
+            if segs[cursor].rapid {
+                continue;
+            }
+            let d = distance(&segs, cursor, p, dist3(p, s));
+            let um = d * 1e3;
+            error_um[i] = Some(um);
+            sum_sq += um * um;
+            count += 1;
+            if worst.is_none_or(|w| um > w.um) {
+                worst = Some(Worst {
+                    um,
+                    cycle: cyc,
+                    line,
+                });
+            }
+        }
+    }
+    let roundness = roundness(&segs, &seg_of, t);
+    Contour {
+        error_um,
+        max: worst,
+        rms_um: (count > 0).then(|| (sum_sq / count as f64).sqrt()),
+        roundness,
+    }
+}
+
+/// The block the set-point `s` (from source line `line`) lies on, searching forward from
+/// `cursor` (set-points only move forward along the path); `cursor` when none is found
+/// nearby (a dwell, or a set-point off the logged path).
+fn locate(segs: &[Seg], cursor: usize, s: [f64; 3], line: u32) -> usize {
+    let on = |j: usize| {
+        let g = &segs[j];
+        g.bound(s) <= ON_PATH_MM && g.closest(s).0 <= ON_PATH_MM
+    };
+    let same_line = segs[cursor].b.source_line == line;
+    if same_line && on(cursor) {
+        return cursor;
+    }
+    let end = segs.len().min(cursor + 65);
+    if let Some(j) = (cursor + 1..end).find(|&j| segs[j].b.source_line == line && on(j)) {
+        return j;
+    }
+    // Not on a block ahead: the first block of its line ahead, if any.
+    (cursor..end)
+        .find(|&j| segs[j].b.source_line == line)
+        .unwrap_or(cursor)
+}
+
+/// Distance from `p` to the path near block `at`, for a sample whose following error is
+/// `ferr_mm`.
+fn distance(segs: &[Seg], at: usize, p: [f64; 3], ferr_mm: f64) -> f64 {
+    let back = 3.0 * ferr_mm + 0.1;
+    let ahead = ferr_mm + 0.1;
+    let mut lo = at;
+    let mut run = 0.0;
+    while lo > 0 && (lo == at || run < back) {
+        lo -= 1;
+        run += segs[lo].len_mm;
+    }
+    let mut hi = at;
+    let mut run = 0.0;
+    while hi + 1 < segs.len() && (hi == at || run < ahead) {
+        hi += 1;
+        run += segs[hi].len_mm;
+    }
+    let mut best = f64::INFINITY;
+    // The set-point's own block first: it usually holds the answer and tightens the bound.
+    for j in std::iter::once(at).chain((lo..=hi).filter(|&j| j != at)) {
+        let g = &segs[j];
+        if g.bound(p) < best {
+            best = best.min(g.closest(p).0);
+        }
+    }
+    best
+}
+
+/// The roundness of the longest closed circular run of feed blocks, or why there is none.
+fn roundness(segs: &[Seg], seg_of: &[Option<usize>], t: &Traces) -> Result<Roundness, String> {
+    let (first, last) = closed_run(segs).ok_or_else(|| {
+        "no run of feed moves ends where it starts (a closed curve between rapids)".to_string()
+    })?;
+    let mut pts: Vec<[f64; 3]> = Vec::new();
+    for g in &segs[first..=last] {
+        let n = 64;
+        for i in 0..n {
+            pts.push(eval(g.b, g.u0 + (g.u1 - g.u0) * i as f64 / n as f64).p);
+        }
+    }
+    let axes = plane(&pts);
+    let flat: Vec<[f64; 2]> = pts.iter().map(|p| [p[axes.0], p[axes.1]]).collect();
+    let (cc, cr) = fit_circle(&flat).ok_or("no circle fits the closed path")?;
+    let off = flat
+        .iter()
+        .map(|p| (radius(*p, cc) - cr).abs())
+        .fold(0.0, f64::max);
+    if off > 0.02 * cr {
+        return Err(format!(
+            "the closed path is not a circle (it leaves the best-fit circle by {off:.3} mm)"
+        ));
+    }
+    if turned(&flat, cc).abs() < 2.0 * PI * 0.98 {
+        return Err("the closed path does not go once around a centre".into());
+    }
+    let mut meas: Vec<[f64; 2]> = Vec::new();
+    let mut cmd: Vec<[f64; 2]> = Vec::new();
+    let mut sp_i = 0usize;
+    for (i, s) in seg_of.iter().enumerate() {
+        if !s.is_some_and(|j| (first..=last).contains(&j)) {
+            continue;
+        }
+        let cyc = t.fb_cycle[i];
+        while sp_i < t.sp_cycle.len() && t.sp_cycle[sp_i] < cyc {
+            sp_i += 1;
+        }
+        let p = t.fb_pos_mm[i];
+        meas.push([p[axes.0], p[axes.1]]);
+        if let Some(s) = t.sp_pos_mm.get(sp_i) {
+            cmd.push([s[axes.0], s[axes.1]]);
+        }
+    }
+    if meas.len() < 16 {
+        return Err(format!(
+            "only {} measured positions on the circle",
+            meas.len()
+        ));
+    }
+    let (centre, r) = fit_circle(&meas).ok_or("no circle fits the measured positions")?;
+    let dev = |p: &[f64; 2]| {
+        (
+            (p[1] - centre[1]).atan2(p[0] - centre[0]),
+            (radius(*p, centre) - r) * 1e3,
+        )
+    };
+    let measured: Vec<(f64, f64)> = meas.iter().map(dev).collect();
+    let commanded: Vec<(f64, f64)> = cmd.iter().map(dev).collect();
+    let about_commanded: Vec<(f64, f64)> = cmd
+        .iter()
+        .map(|p| (0.0, (radius(*p, cc) - cr) * 1e3))
+        .collect();
+    Ok(Roundness {
+        axes,
+        centre_mm: centre,
+        radius_mm: r,
+        commanded_centre_mm: cc,
+        commanded_radius_mm: cr,
+        roundness_um: spread(&measured),
+        commanded_roundness_um: spread(&about_commanded),
+        lines: (segs[first].b.source_line, segs[last].b.source_line),
+        measured,
+        commanded,
+    })
+}
+
+/// The run directory's traces, owned (what [`Traces`] borrows).
+#[derive(Debug, Clone, Default)]
+pub struct OwnedTraces {
+    pub sp_cycle: Vec<u64>,
+    pub sp_pos_mm: Vec<[f64; 3]>,
+    pub sp_line: Vec<u32>,
+    pub fb_cycle: Vec<u64>,
+    pub fb_pos_mm: Vec<[f64; 3]>,
+}
+
+impl OwnedTraces {
+    pub fn traces(&self) -> Traces<'_> {
+        Traces {
+            sp_cycle: &self.sp_cycle,
+            sp_pos_mm: &self.sp_pos_mm,
+            sp_line: &self.sp_line,
+            fb_cycle: &self.fb_cycle,
+            fb_pos_mm: &self.fb_pos_mm,
+        }
+    }
+}
+
+/// Measures the run in `dir` from `commands.log`, `setpoints.csv` and `feedback.csv`; the
+/// error names the file that is missing or unreadable. Reads up to the first damaged row
+/// of a CSV file (a run cut short still gives the figures of what it did).
+pub fn analyse_dir(dir: &std::path::Path) -> Result<Contour, String> {
+    let log = shared::cmdlog::read(&dir.join("commands.log"))?;
+    let blocks: Vec<CommandBlock> = log
+        .blocks
+        .into_iter()
+        .filter(|b| b.validate().is_ok())
+        .collect();
+    let mut t = OwnedTraces::default();
+    read_csv(
+        &dir.join("setpoints.csv"),
+        &["cycle", "x_mm", "y_mm", "z_mm", "line"],
+        |r| {
+            t.sp_cycle.push(r[0] as u64);
+            t.sp_pos_mm.push([r[1], r[2], r[3]]);
+            t.sp_line.push(r[4] as u32);
+        },
+    )?;
+    read_csv(
+        &dir.join("feedback.csv"),
+        &["cycle", "x_mm", "y_mm", "z_mm"],
+        |r| {
+            t.fb_cycle.push(r[0] as u64);
+            t.fb_pos_mm.push([r[1], r[2], r[3]]);
+        },
+    )?;
+    Ok(analyse(&blocks, &t.traces()))
+}
+
+/// Calls `row` with the named columns of each row of a CSV file, up to the first row that
+/// does not parse.
+fn read_csv(
+    path: &std::path::Path,
+    want: &[&str],
+    mut row: impl FnMut(&[f64]),
+) -> Result<(), String> {
+    use std::io::BufRead;
+    let name = path.display();
+    let f = std::fs::File::open(path).map_err(|e| format!("{name}: {e}"))?;
+    let mut lines = std::io::BufReader::new(f).lines();
+    let header = lines
+        .next()
+        .ok_or_else(|| format!("{name}: empty"))?
+        .map_err(|e| format!("{name}: {e}"))?;
+    let cols: Vec<&str> = header.trim().split(',').collect();
+    let idx: Vec<usize> = want
+        .iter()
+        .map(|w| {
+            cols.iter()
+                .position(|c| c == w)
+                .ok_or_else(|| format!("{name}: no column `{w}`"))
+        })
+        .collect::<Result<_, _>>()?;
+    let mut vals = vec![0.0; want.len()];
+    for l in lines {
+        let Ok(l) = l else { break };
+        let mut n = 0;
+        let mut ok = true;
+        for (c, cell) in l.trim().split(',').enumerate() {
+            n += 1;
+            if let Some(k) = idx.iter().position(|&i| i == c) {
+                match cell.parse::<f64>() {
+                    Ok(x) if x.is_finite() => vals[k] = x,
+                    _ => ok = false,
+                }
+            }
+        }
+        if !ok || n != cols.len() {
+            break;
+        }
+        row(&vals);
+    }
+    Ok(())
+}
+
+/// Max − min of the deviations, µm (0 for none).
+pub fn spread(v: &[(f64, f64)]) -> f64 {
+    let (lo, hi) = v
+        .iter()
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), p| {
+            (a.min(p.1), b.max(p.1))
+        });
+    if hi >= lo {
+        hi - lo
+    } else {
+        0.0
+    }
+}
+
+/// The longest (by path length) run of consecutive feed blocks, with no rapid inside, that
+/// ends within 1 µm of where it starts: `(first, last)` indices into `segs`.
+fn closed_run(segs: &[Seg]) -> Option<(usize, usize)> {
+    const CLOSED_MM: f64 = 0.001;
+    // Beyond this many blocks only whole runs between rapids are tried (the search is
+    // quadratic in the run length).
+    const EXHAUSTIVE: usize = 4000;
+    let ends: Vec<([f64; 3], [f64; 3])> = segs.iter().map(|g| (g.start(), g.end())).collect();
+    let mut best: Option<(f64, usize, usize)> = None;
+    let mut i = 0;
+    while i < segs.len() {
+        if segs[i].rapid {
+            i += 1;
+            continue;
+        }
+        let mut j = i;
+        while j + 1 < segs.len() && !segs[j + 1].rapid {
+            j += 1;
+        }
+        let (a, b) = (i, j);
+        let mut consider = |s: usize, e: usize| {
+            let len: f64 = segs[s..=e].iter().map(|g| g.len_mm).sum();
+            if len > 0.0
+                && dist3(ends[e].1, ends[s].0) <= CLOSED_MM
+                && best.is_none_or(|(l, _, _)| len > l)
+            {
+                best = Some((len, s, e));
+            }
+        };
+        if b - a < EXHAUSTIVE {
+            for s in a..=b {
+                if let Some(e) = (s..=b)
+                    .rev()
+                    .find(|&e| dist3(ends[e].1, ends[s].0) <= CLOSED_MM)
+                {
+                    consider(s, e);
+                }
+            }
+        } else {
+            consider(a, b);
+        }
+        i = j + 1;
+    }
+    best.map(|(_, s, e)| (s, e))
+}
+
+/// The two axes with the largest extent (in axis order): the working plane.
+fn plane(pts: &[[f64; 3]]) -> (usize, usize) {
+    let mut ext = [(f64::INFINITY, f64::NEG_INFINITY); 3];
+    for p in pts {
+        for k in 0..3 {
+            ext[k] = (ext[k].0.min(p[k]), ext[k].1.max(p[k]));
+        }
+    }
+    let e = |k: usize| ext[k].1 - ext[k].0;
+    // The axis with the smallest extent is the plane's normal; X before Y before Z on ties.
+    let normal = (0..3)
+        .rev()
+        .min_by(|a, b| {
+            e(*a)
+                .partial_cmp(&e(*b))
+                .unwrap_or(std::cmp::Ordering::Equal)
+        })
+        .unwrap_or(2);
+    match normal {
+        0 => (1, 2),
+        1 => (0, 2),
+        _ => (0, 1),
+    }
+}
+
+fn radius(p: [f64; 2], c: [f64; 2]) -> f64 {
+    (p[0] - c[0]).hypot(p[1] - c[1])
+}
+
+/// Signed angle swept about `c` along `pts`, rad.
+fn turned(pts: &[[f64; 2]], c: [f64; 2]) -> f64 {
+    let ang = |p: &[f64; 2]| (p[1] - c[1]).atan2(p[0] - c[0]);
+    let mut sum = 0.0;
+    for w in pts.windows(2) {
+        let mut d = ang(&w[1]) - ang(&w[0]);
+        if d > PI {
+            d -= 2.0 * PI;
+        } else if d < -PI {
+            d += 2.0 * PI;
+        }
+        sum += d;
+    }
+    sum
+}
+
+/// The least-squares circle through `pts`: centre and radius minimising Σ (|pᵢ − c| − r)²
+/// (Gauss–Newton from Kåsa's algebraic fit, in coordinates relative to the mean so the
+/// normal equations stay well conditioned). `None` for fewer than three points or points
+/// on a line.
+pub fn fit_circle(pts: &[[f64; 2]]) -> Option<([f64; 2], f64)> {
+    if pts.len() < 3 {
+        return None;
+    }
+    let n = pts.len() as f64;
+    let m = pts
+        .iter()
+        .fold([0.0, 0.0], |s, p| [s[0] + p[0] / n, s[1] + p[1] / n]);
+    let rel: Vec<[f64; 2]> = pts.iter().map(|p| [p[0] - m[0], p[1] - m[1]]).collect();
+    // Kåsa: minimise Σ (x² + y² + D x + E y + F)².
+    let mut a = [[0.0f64; 3]; 3];
+    let mut rhs = [0.0f64; 3];
+    for p in &rel {
+        let row = [p[0], p[1], 1.0];
+        let z = -(p[0] * p[0] + p[1] * p[1]);
+        for i in 0..3 {
+            for j in 0..3 {
+                a[i][j] += row[i] * row[j];
+            }
+            rhs[i] += row[i] * z;
+        }
+    }
+    let [d, e, f] = solve3(a, rhs)?;
+    let mut c = [-d / 2.0, -e / 2.0];
+    let r2 = c[0] * c[0] + c[1] * c[1] - f;
+    if !(r2 > 0.0 && r2.is_finite()) {
+        return None;
+    }
+    let mut r = r2.sqrt();
+    // Gauss–Newton on the geometric residuals rᵢ = |pᵢ − c| − r.
+    for _ in 0..20 {
+        let mut jtj = [[0.0f64; 3]; 3];
+        let mut jtr = [0.0f64; 3];
+        for p in &rel {
+            let (dx, dy) = (p[0] - c[0], p[1] - c[1]);
+            let di = dx.hypot(dy);
+            if di == 0.0 {
+                continue;
+            }
+            let jrow = [-dx / di, -dy / di, -1.0];
+            let res = di - r;
+            for i in 0..3 {
+                for j in 0..3 {
+                    jtj[i][j] += jrow[i] * jrow[j];
+                }
+                jtr[i] -= jrow[i] * res;
+            }
+        }
+        let Some(step) = solve3(jtj, jtr) else {
+            break;
+        };
+        c = [c[0] + step[0], c[1] + step[1]];
+        r += step[2];
+        if step.iter().all(|s| s.abs() <= 1e-13 * (1.0 + r)) {
+            break;
+        }
+    }
+    (r > 0.0 && r.is_finite() && c.iter().all(|v| v.is_finite()))
+        .then(|| ([c[0] + m[0], c[1] + m[1]], r))
+}
+
+/// Cramer's rule; `None` when singular.
+fn solve3(a: [[f64; 3]; 3], b: [f64; 3]) -> Option<[f64; 3]> {
+    let det = |m: [[f64; 3]; 3]| {
+        m[0][0] * (m[1][1] * m[2][2] - m[1][2] * m[2][1])
+            - m[0][1] * (m[1][0] * m[2][2] - m[1][2] * m[2][0])
+            + m[0][2] * (m[1][0] * m[2][1] - m[1][1] * m[2][0])
+    };
+    let d = det(a);
+    if d.abs() < 1e-300 || !d.is_finite() {
+        return None;
+    }
+    let mut x = [0.0; 3];
+    for (k, xk) in x.iter_mut().enumerate() {
+        let mut m = a;
+        for i in 0..3 {
+            m[i][k] = b[i];
+        }
+        *xk = det(m) / d;
+    }
+    Some(x)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use shared::Machine;
+
+    fn blocks_of(program: &str) -> Vec<CommandBlock> {
+        let prog = crate::program::interpret(program).expect("a good program");
+        let mut b = crate::blocks::build(&prog.moves, &Machine::default());
+        crate::blocks::plan(&mut b, &Machine::default(), 1_000_000);
+        b
+    }
+
+    /// Set-points along the blocks' exact curves (`per_block` per motion block) with their
+    /// source lines.
+    fn setpoints(blocks: &[CommandBlock], per_block: usize) -> (Vec<[f64; 3]>, Vec<u32>) {
+        let mut pos = Vec::new();
+        let mut line = Vec::new();
+        for b in blocks
+            .iter()
+            .filter(|b| b.kind() == Some(BlockKind::Motion))
+        {
+            let (u0, u1) = domain(b);
+            for i in 1..=per_block {
+                pos.push(eval(b, u0 + (u1 - u0) * i as f64 / per_block as f64).p);
+                line.push(b.source_line);
+            }
+        }
+        (pos, line)
+    }
+
+    #[test]
+    fn circle_fit_finds_the_centre_of_a_lobed_profile() {
+        // r(θ) = R + δ·cos 3θ about (3, −2): the least-squares centre is (3, −2), the
+        // radius R, and max − min radius 2δ (closed form: cos 3θ is orthogonal to
+        // 1, cos θ and sin θ over a full turn).
+        let (c, r, delta) = ([3.0, -2.0], 10.0, 0.002);
+        let pts: Vec<[f64; 2]> = (0..720)
+            .map(|i| {
+                let t = i as f64 * PI / 360.0;
+                let rr = r + delta * (3.0 * t).cos();
+                [c[0] + rr * t.cos(), c[1] + rr * t.sin()]
+            })
+            .collect();
+        let (fc, fr) = fit_circle(&pts).unwrap();
+        assert!(
+            (fc[0] - c[0]).abs() < 1e-9 && (fc[1] - c[1]).abs() < 1e-9,
+            "{fc:?}"
+        );
+        assert!((fr - r).abs() < 1e-9, "{fr}");
+        assert!(fit_circle(&[[0.0, 0.0], [1.0, 1.0], [2.0, 2.0]]).is_none());
+    }
+
+    /// A full circle of radius 10 about (10, 0) in XY; the measured positions lag the
+    /// set-points along the circle by 0.3 mm of arc and sit off it radially by
+    /// `d(θ) = d0 + d1·cos 3θ`. Closed forms: contour error |d| (the distance from a point
+    /// at radius R + d to a circle of radius R), not the 0.3 mm following error; roundness
+    /// 2·d1 about the centre; radius error d0.
+    #[test]
+    fn contour_error_and_roundness_of_a_circle_match_the_closed_form() {
+        let blocks = blocks_of("G21 G17 G90\nG2 X0 Y0 I10 J0 F3000\nM2\n");
+        let (c, r) = ([10.0, 0.0], 10.0);
+        // Set-points evenly spaced in angle (clockwise from the start at the origin), so
+        // the closed forms of a full turn hold.
+        let n = 1440;
+        let sp: Vec<[f64; 3]> = (1..=n)
+            .map(|k| {
+                let t = PI - 2.0 * PI * k as f64 / n as f64;
+                [c[0] + r * t.cos(), c[1] + r * t.sin(), 0.0]
+            })
+            .collect();
+        let line = vec![2; n];
+        // They lie on the logged curve (to rounding), as the interpolator's do.
+        let (on, _) = setpoints(&blocks, 7);
+        for p in on {
+            assert!(((p[0] - c[0]).hypot(p[1] - c[1]) - r).abs() < 1e-12);
+        }
+        let (d0, d1, lag) = (-0.004, 0.0015, 0.3 / r);
+        let d = |t: f64| d0 + d1 * (3.0 * t).cos();
+        let fb: Vec<[f64; 3]> = sp
+            .iter()
+            .map(|p| {
+                // The circle runs clockwise: lagging is a larger angle.
+                let t = (p[1] - c[1]).atan2(p[0] - c[0]) + lag;
+                let rr = r + d(t);
+                [c[0] + rr * t.cos(), c[1] + rr * t.sin(), 0.0]
+            })
+            .collect();
+        let cycles: Vec<u64> = (0..sp.len() as u64).collect();
+        let out = analyse(
+            &blocks,
+            &Traces {
+                sp_cycle: &cycles,
+                sp_pos_mm: &sp,
+                sp_line: &line,
+                fb_cycle: &cycles,
+                fb_pos_mm: &fb,
+            },
+        );
+        for (i, e) in out.error_um.iter().enumerate() {
+            let p = fb[i];
+            let t = (p[1] - c[1]).atan2(p[0] - c[0]);
+            let want = d(t).abs() * 1e3;
+            let got = e.expect("every cycle is on a feed move");
+            assert!(
+                (got - want).abs() < 1e-6,
+                "cycle {i}: {got} µm, want {want} µm"
+            );
+        }
+        let worst = out.max.unwrap();
+        assert!(
+            ((worst.um - (d0.abs() + d1) * 1e3).abs()) < 1e-3,
+            "{worst:?}"
+        );
+        assert_eq!(worst.line, 2);
+        let rd = out.roundness.expect("a full circle");
+        assert_eq!(rd.axes, (0, 1));
+        assert!(
+            (rd.roundness_um - 2.0 * d1 * 1e3).abs() < 0.01,
+            "{}",
+            rd.roundness_um
+        );
+        assert!(
+            (rd.radius_error_um() - d0 * 1e3).abs() < 0.01,
+            "{}",
+            rd.radius_error_um()
+        );
+        assert!((rd.commanded_radius_mm - r).abs() < 1e-9);
+        assert!(
+            rd.commanded_roundness_um < 1e-6,
+            "{}",
+            rd.commanded_roundness_um
+        );
+        assert!((rd.centre_mm[0] - c[0]).abs() < 1e-5 && rd.centre_mm[1].abs() < 1e-5);
+    }
+
+    /// A closed NURBS (the demo's, from (0, 0) back to (0, 0)): a point on it near its
+    /// end is at distance 0, although the nearest coarse sample is its start.
+    #[test]
+    fn point_near_the_end_of_a_closed_nurbs_is_on_it() {
+        let blocks = blocks_of(
+            "G21 G17 G90\nG5.2 P1 L3 F2000\nX0 Y10 P1\nX20 Y20 P1\nX20 Y0 P1\nX0 Y0 P2\nG5.3\nM2\n",
+        );
+        let b = blocks
+            .iter()
+            .find(|b| b.kind() == Some(BlockKind::Motion))
+            .unwrap();
+        let (u0, u1) = domain(b);
+        let on = eval(b, u0 + 0.99 * (u1 - u0)).p;
+        let cycles = [0u64];
+        let out = analyse(
+            &blocks,
+            &Traces {
+                sp_cycle: &cycles,
+                sp_pos_mm: &[on],
+                sp_line: &[b.source_line],
+                fb_cycle: &cycles,
+                fb_pos_mm: &[on],
+            },
+        );
+        assert!(out.max.unwrap().um < 1e-6, "{:?}", out.max);
+    }
+
+    /// A square: closed but no circle, so no roundness; a point beyond a corner is as far
+    /// as the corner (√2·a), a point beside an edge as far as its offset.
+    #[test]
+    fn square_has_no_roundness_and_corner_distances_are_exact() {
+        let blocks = blocks_of("G21 G17 G90\nG0 X0 Y0\nG1 X10 F1000\nG1 Y10\nG1 X0\nG1 Y0\nM2\n");
+        let sp = vec![[10.0, 0.0, 0.0], [10.0, 5.0, 0.0], [10.0, 10.0, 0.0]];
+        let line = vec![3, 4, 4];
+        let a = 0.002;
+        let fb = vec![
+            [10.0 + a, -a, 0.0],
+            [10.0 - a, 5.0, 0.0],
+            [10.0, 10.0 + a, 0.0],
+        ];
+        let cycles = [0u64, 1, 2];
+        let out = analyse(
+            &blocks,
+            &Traces {
+                sp_cycle: &cycles,
+                sp_pos_mm: &sp,
+                sp_line: &line,
+                fb_cycle: &cycles,
+                fb_pos_mm: &fb,
+            },
+        );
+        let e: Vec<f64> = out.error_um.iter().map(|e| e.unwrap()).collect();
+        let want = [a * 2f64.sqrt() * 1e3, a * 1e3, a * 1e3];
+        for (g, w) in e.iter().zip(want) {
+            assert!((g - w).abs() < 1e-6, "{e:?} vs {want:?}");
+        }
+        let why = out.roundness.unwrap_err();
+        assert!(why.contains("not a circle"), "{why}");
+    }
+}

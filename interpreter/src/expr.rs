@@ -1,0 +1,547 @@
+//! Values in RS274/NGC as LinuxCNC reads them: numbers, parameters (`#12`, `##1`,
+//! `#[1+2]`, `#<name>`), unary signs, functions (`SIN[30]`, `ATAN[1]/[2]`,
+//! `EXISTS[#<name>]`) and `[ ]` expressions with binary operators.
+//!
+//! The vocabulary follows LinuxCNC's rs274ngc:
+//! * a *real value* is a number, a parameter, a signed real value, a function call or a
+//!   bracketed expression; it may stand wherever a number may (word values, parameter
+//!   numbers, assignments, function arguments);
+//! * binary operators bind, from tightest to loosest: `**`; `* / MOD`; `+ -`;
+//!   `EQ NE GT GE LT LE`; `AND OR XOR`, all left to right (`2**3**2` is 64);
+//! * a sign belongs to the value it stands before (`-2**2` is 4);
+//! * angles are in degrees, in and out;
+//! * `EQ`/`NE` compare with LinuxCNC's tolerance of 0.0001, the other comparisons exactly;
+//! * every operation that yields NaN or infinity is an error.
+//!
+//! Reading and evaluating happen in one pass, left to right, so the first error met is
+//! the one reported, at the column of the token that caused it.
+
+use crate::parse::{Diagnostic, Param, Params};
+
+/// Deepest nesting of brackets, signs and indirections (`##…`) in one value. LinuxCNC
+/// has fixed-size stacks too; here the limit keeps a hostile line from overflowing ours.
+const MAX_DEPTH: u32 = 64;
+
+/// LinuxCNC's `TOLERANCE_EQUAL`: how close two values must be for `EQ`.
+const TOLERANCE_EQUAL: f64 = 0.0001;
+
+/// How far from a whole number a value may be and still count as an integer
+/// (a parameter number), as LinuxCNC's `read_integer_value`.
+const TOLERANCE_INTEGER: f64 = 0.0001;
+
+/// Highest numbered parameter a program may read or set.
+pub const MAX_NUMBERED: u32 = 5399;
+
+/// The characters of one line with their 1-based columns: comments and whitespace
+/// removed, letters upper-cased (LinuxCNC's `close_and_downcase`, in upper case).
+pub(crate) struct Cursor {
+    pub chars: Vec<(char, u32)>,
+    pub pos: usize,
+    pub line: u32,
+}
+
+impl Cursor {
+    pub fn peek(&self) -> Option<char> {
+        self.chars.get(self.pos).map(|c| c.0)
+    }
+
+    /// Column of the next character, or one past the last at the end of the line.
+    pub fn col(&self) -> u32 {
+        match self.chars.get(self.pos) {
+            Some(c) => c.1,
+            None => self.chars.last().map_or(1, |c| c.1 + 1),
+        }
+    }
+
+    pub fn err(&self, col: u32, message: impl Into<String>) -> Diagnostic {
+        Diagnostic {
+            line: self.line,
+            col,
+            message: message.into(),
+        }
+    }
+
+    /// Whether the rest of the line starts with `word` (upper case).
+    pub fn at(&self, word: &str) -> bool {
+        let mut i = self.pos;
+        for w in word.chars() {
+            match self.chars.get(i) {
+                Some((c, _)) if *c == w => i += 1,
+                _ => return false,
+            }
+        }
+        true
+    }
+
+    /// Consumes `c` or says what was found instead.
+    pub fn expect(&mut self, c: char, what: &str) -> Result<(), Diagnostic> {
+        match self.peek() {
+            Some(found) if found == c => {
+                self.pos += 1;
+                Ok(())
+            }
+            Some(found) => Err(self.err(self.col(), format!("expected {what}, found `{found}`"))),
+            None => Err(self.err(
+                self.col(),
+                format!("expected {what}, found the end of the line"),
+            )),
+        }
+    }
+}
+
+#[derive(Debug, Clone, Copy, PartialEq)]
+enum BinOp {
+    Pow,
+    Mul,
+    Div,
+    Mod,
+    Add,
+    Sub,
+    Eq,
+    Ne,
+    Gt,
+    Ge,
+    Lt,
+    Le,
+    And,
+    Or,
+    Xor,
+}
+
+/// Spellings, longest first where one is a prefix of another (`**` before `*`).
+const BINARY: [(&str, BinOp); 15] = [
+    ("**", BinOp::Pow),
+    ("*", BinOp::Mul),
+    ("/", BinOp::Div),
+    ("MOD", BinOp::Mod),
+    ("+", BinOp::Add),
+    ("-", BinOp::Sub),
+    ("EQ", BinOp::Eq),
+    ("NE", BinOp::Ne),
+    ("GT", BinOp::Gt),
+    ("GE", BinOp::Ge),
+    ("LT", BinOp::Lt),
+    ("LE", BinOp::Le),
+    ("AND", BinOp::And),
+    ("OR", BinOp::Or),
+    ("XOR", BinOp::Xor),
+];
+
+impl BinOp {
+    fn precedence(self) -> u8 {
+        match self {
+            BinOp::Pow => 4,
+            BinOp::Mul | BinOp::Div | BinOp::Mod => 3,
+            BinOp::Add | BinOp::Sub => 2,
+            BinOp::Eq | BinOp::Ne | BinOp::Gt | BinOp::Ge | BinOp::Lt | BinOp::Le => 1,
+            BinOp::And | BinOp::Or | BinOp::Xor => 0,
+        }
+    }
+
+    fn apply(self, a: f64, b: f64) -> Result<f64, &'static str> {
+        let truth = |t: bool| if t { 1.0 } else { 0.0 };
+        let v = match self {
+            BinOp::Pow => {
+                if a < 0.0 && b.fract() != 0.0 {
+                    return Err("Attempt to raise negative to non integer power");
+                }
+                a.powf(b)
+            }
+            BinOp::Mul => a * b,
+            BinOp::Div => {
+                if b == 0.0 {
+                    return Err("Attempt to divide by zero");
+                }
+                a / b
+            }
+            BinOp::Mod => {
+                // C's fmod, then moved into [0, |b|) as LinuxCNC does.
+                let r = a % b;
+                if r < 0.0 {
+                    r + b.abs()
+                } else {
+                    r
+                }
+            }
+            BinOp::Add => a + b,
+            BinOp::Sub => a - b,
+            BinOp::Eq => truth((a - b).abs() < TOLERANCE_EQUAL),
+            BinOp::Ne => truth((a - b).abs() >= TOLERANCE_EQUAL),
+            BinOp::Gt => truth(a > b),
+            BinOp::Ge => truth(a >= b),
+            BinOp::Lt => truth(a < b),
+            BinOp::Le => truth(a <= b),
+            BinOp::And => truth(a != 0.0 && b != 0.0),
+            BinOp::Or => truth(a != 0.0 || b != 0.0),
+            BinOp::Xor => truth((a != 0.0) != (b != 0.0)),
+        };
+        finite(v)
+    }
+}
+
+#[derive(Debug, Clone, Copy, PartialEq)]
+enum Func {
+    Abs,
+    Acos,
+    Asin,
+    Atan,
+    Cos,
+    Exists,
+    Exp,
+    Fix,
+    Fup,
+    Ln,
+    Round,
+    Sin,
+    Sqrt,
+    Tan,
+}
+
+/// Function names; none is a prefix of another, so matching by prefix is unambiguous.
+const FUNCTIONS: [(&str, Func); 14] = [
+    ("ABS", Func::Abs),
+    ("ACOS", Func::Acos),
+    ("ASIN", Func::Asin),
+    ("ATAN", Func::Atan),
+    ("COS", Func::Cos),
+    ("EXISTS", Func::Exists),
+    ("EXP", Func::Exp),
+    ("FIX", Func::Fix),
+    ("FUP", Func::Fup),
+    ("LN", Func::Ln),
+    ("ROUND", Func::Round),
+    ("SIN", Func::Sin),
+    ("SQRT", Func::Sqrt),
+    ("TAN", Func::Tan),
+];
+
+impl Func {
+    fn apply(self, x: f64) -> Result<f64, &'static str> {
+        let v = match self {
+            Func::Abs => x.abs(),
+            Func::Acos => {
+                if !(-1.0..=1.0).contains(&x) {
+                    return Err("Argument to acos out of range");
+                }
+                x.acos().to_degrees()
+            }
+            Func::Asin => {
+                if !(-1.0..=1.0).contains(&x) {
+                    return Err("Argument to asin out of range");
+                }
+                x.asin().to_degrees()
+            }
+            Func::Cos => x.to_radians().cos(),
+            Func::Exp => x.exp(),
+            Func::Fix => x.floor(),
+            Func::Fup => x.ceil(),
+            Func::Ln => {
+                if x <= 0.0 {
+                    return Err("Zero or negative argument to ln");
+                }
+                x.ln()
+            }
+            // Half away from zero, like C's round and LinuxCNC.
+            Func::Round => x.round(),
+            Func::Sin => x.to_radians().sin(),
+            Func::Sqrt => {
+                if x < 0.0 {
+                    return Err("Negative argument to sqrt");
+                }
+                x.sqrt()
+            }
+            Func::Tan => x.to_radians().tan(),
+            // Both have their own syntax and are handled by the reader.
+            Func::Atan | Func::Exists => x,
+        };
+        finite(v)
+    }
+}
+
+fn finite(v: f64) -> Result<f64, &'static str> {
+    if v.is_nan() {
+        Err("Calculation resulted in 'not a number'")
+    } else if v.is_infinite() {
+        Err("Calculation resulted in 'infinity'")
+    } else {
+        Ok(v)
+    }
+}
+
+/// Reads one real value at the cursor and returns what it is worth.
+pub(crate) fn real_value(cur: &mut Cursor, params: &Params) -> Result<f64, Diagnostic> {
+    value(cur, params, 0)
+}
+
+/// Reads the parameter after a `#` (already consumed): `#<name>` or a real value that
+/// must be a whole number in `1..=5399`.
+pub(crate) fn param_ref(cur: &mut Cursor, params: &Params) -> Result<Param, Diagnostic> {
+    param(cur, params, 0)
+}
+
+fn value(cur: &mut Cursor, params: &Params, depth: u32) -> Result<f64, Diagnostic> {
+    let col = cur.col();
+    if depth > MAX_DEPTH {
+        return Err(cur.err(
+            col,
+            format!("value nested more than {MAX_DEPTH} deep (brackets, signs or #)"),
+        ));
+    }
+    match cur.peek() {
+        None => Err(cur.err(col, "expected a value, found the end of the line")),
+        Some('[') => {
+            cur.pos += 1;
+            bracketed(cur, params, col, depth + 1)
+        }
+        Some('#') => {
+            cur.pos += 1;
+            match param(cur, params, depth + 1)? {
+                Param::Numbered(n) => Ok(params.numbered(n)),
+                Param::Named(name) => params
+                    .named(&name)
+                    .ok_or_else(|| cur.err(col, format!("Named parameter #<{name}> not defined"))),
+            }
+        }
+        Some('-') => {
+            cur.pos += 1;
+            Ok(-value(cur, params, depth + 1)?)
+        }
+        Some('+') => {
+            cur.pos += 1;
+            value(cur, params, depth + 1)
+        }
+        Some('A'..='Z') => function(cur, params, depth + 1),
+        Some('0'..='9' | '.') => number(cur),
+        Some(c) => Err(cur.err(col, format!("expected a value, found `{c}`"))),
+    }
+}
+
+/// The rest of a `[ … ]` whose `[` (at `open_col`) is consumed.
+fn bracketed(
+    cur: &mut Cursor,
+    params: &Params,
+    open_col: u32,
+    depth: u32,
+) -> Result<f64, Diagnostic> {
+    let v = binary(cur, params, 0, depth)?;
+    match cur.peek() {
+        Some(']') => {
+            cur.pos += 1;
+            Ok(v)
+        }
+        Some(c) => Err(cur.err(
+            cur.col(),
+            format!("expected an operator or `]`, found `{c}`"),
+        )),
+        None => Err(cur.err(
+            open_col,
+            "`[` is not closed with `]` before the end of the line",
+        )),
+    }
+}
+
+/// Precedence climbing: operands and operators until one binds looser than `min`.
+fn binary(cur: &mut Cursor, params: &Params, min: u8, depth: u32) -> Result<f64, Diagnostic> {
+    let mut lhs = value(cur, params, depth)?;
+    loop {
+        let Some(&(text, op)) = BINARY.iter().find(|(text, _)| cur.at(text)) else {
+            return Ok(lhs);
+        };
+        if op.precedence() < min {
+            return Ok(lhs);
+        }
+        let col = cur.col();
+        cur.pos += text.len();
+        let rhs = binary(cur, params, op.precedence() + 1, depth)?;
+        lhs = op.apply(lhs, rhs).map_err(|m| cur.err(col, m))?;
+    }
+}
+
+/// Whether a function name starts at the cursor.
+pub(crate) fn at_function(cur: &Cursor) -> bool {
+    FUNCTIONS.iter().any(|(name, _)| cur.at(name))
+}
+
+fn function(cur: &mut Cursor, params: &Params, depth: u32) -> Result<f64, Diagnostic> {
+    let col = cur.col();
+    let Some(&(name, f)) = FUNCTIONS.iter().find(|(name, _)| cur.at(name)) else {
+        let word: String = cur.chars[cur.pos..]
+            .iter()
+            .map(|c| c.0)
+            .take_while(char::is_ascii_uppercase)
+            .collect();
+        return Err(cur.err(col, format!("unknown function or value `{word}`")));
+    };
+    cur.pos += name.len();
+    let open = cur.col();
+    if cur.peek() != Some('[') {
+        return Err(cur.err(open, format!("`[` missing after {name}")));
+    }
+    cur.pos += 1;
+    match f {
+        Func::Exists => {
+            cur.expect('#', "`#` parameter in EXISTS[ ]")?;
+            let p = param(cur, params, depth + 1)?;
+            cur.expect(']', "`]` closing EXISTS[")?;
+            Ok(match p {
+                Param::Numbered(_) => 1.0,
+                Param::Named(name) => {
+                    if params.named(&name).is_some() {
+                        1.0
+                    } else {
+                        0.0
+                    }
+                }
+            })
+        }
+        Func::Atan => {
+            let y = bracketed(cur, params, open, depth + 1)?;
+            if cur.peek() != Some('/') {
+                return Err(cur.err(cur.col(), "ATAN needs two arguments: ATAN[y]/[x]"));
+            }
+            cur.pos += 1;
+            let open_x = cur.col();
+            if cur.peek() != Some('[') {
+                return Err(cur.err(open_x, "`[` missing after the slash of ATAN[y]/[x]"));
+            }
+            cur.pos += 1;
+            let x = bracketed(cur, params, open_x, depth + 1)?;
+            Ok(y.atan2(x).to_degrees())
+        }
+        _ => {
+            let x = bracketed(cur, params, open, depth + 1)?;
+            f.apply(x).map_err(|m| cur.err(col, m))
+        }
+    }
+}
+
+fn param(cur: &mut Cursor, params: &Params, depth: u32) -> Result<Param, Diagnostic> {
+    let col = cur.col();
+    if cur.peek() != Some('<') {
+        let v = value(cur, params, depth)?;
+        let n = whole(v)
+            .ok_or_else(|| cur.err(col, format!("parameter number {v} is not a whole number")))?;
+        if !(1.0..=MAX_NUMBERED as f64).contains(&n) {
+            return Err(cur.err(
+                col,
+                format!("parameter number {n} is outside #1..#{MAX_NUMBERED}"),
+            ));
+        }
+        return Ok(Param::Numbered(n as u32));
+    }
+    cur.pos += 1;
+    let mut name = String::new();
+    loop {
+        match cur.peek() {
+            Some('>') => {
+                cur.pos += 1;
+                break;
+            }
+            Some(c) => {
+                name.push(c.to_ascii_lowercase());
+                cur.pos += 1;
+            }
+            None => return Err(cur.err(col, "named parameter is not closed with `>`")),
+        }
+    }
+    if name.is_empty() {
+        return Err(cur.err(col, "empty parameter name `#<>`"));
+    }
+    Ok(Param::Named(name))
+}
+
+/// The whole number `v` stands for, within LinuxCNC's tolerance, or `None`.
+pub(crate) fn whole(v: f64) -> Option<f64> {
+    let f = v.floor();
+    let d = v - f;
+    if d > 1.0 - TOLERANCE_INTEGER {
+        Some(f + 1.0)
+    } else if d > TOLERANCE_INTEGER {
+        None
+    } else {
+        Some(f)
+    }
+}
+
+fn number(cur: &mut Cursor) -> Result<f64, Diagnostic> {
+    let col = cur.col();
+    let mut text = String::new();
+    let mut digits = 0;
+    while let Some(c @ ('0'..='9' | '.')) = cur.peek() {
+        digits += usize::from(c != '.');
+        text.push(c);
+        cur.pos += 1;
+    }
+    if digits == 0 {
+        return Err(cur.err(col, format!("`{text}` is not a number")));
+    }
+    match text.parse::<f64>() {
+        Ok(v) if v.is_finite() => Ok(v),
+        Ok(_) => Err(cur.err(col, "number is too large")),
+        Err(_) => Err(cur.err(col, format!("`{text}` is not a number"))),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn cursor(text: &str) -> Cursor {
+        Cursor {
+            chars: text
+                .chars()
+                .zip(1..)
+                .filter(|(c, _)| !c.is_whitespace())
+                .map(|(c, col)| (c.to_ascii_uppercase(), col))
+                .collect(),
+            pos: 0,
+            line: 1,
+        }
+    }
+
+    fn eval(text: &str) -> f64 {
+        let mut cur = cursor(text);
+        let v = real_value(&mut cur, &Params::default()).unwrap_or_else(|e| panic!("{e:?}"));
+        assert_eq!(cur.pos, cur.chars.len(), "{text} not read to its end");
+        v
+    }
+
+    fn fail(text: &str) -> (u32, String) {
+        let e = real_value(&mut cursor(text), &Params::default()).unwrap_err();
+        (e.col, e.message)
+    }
+
+    #[test]
+    fn precedence_and_association() {
+        assert_eq!(eval("[1 + 2 * 3]"), 7.0);
+        assert_eq!(eval("[2 ** 3 ** 2]"), 64.0);
+        assert_eq!(eval("[10 - 4 - 3]"), 3.0);
+        assert_eq!(eval("[3 - 2 - 1 + 4 / 2 / 2]"), 1.0);
+        assert_eq!(eval("[10 MOD 3 ** 2]"), 1.0);
+        assert_eq!(eval("[5 GT 3 + 4]"), 0.0);
+        assert_eq!(eval("[1 OR 0 AND 0]"), 0.0);
+        assert_eq!(eval("[-2 ** 2]"), 4.0);
+        assert_eq!(eval("--2"), 2.0);
+        assert_eq!(eval("-+2"), -2.0);
+    }
+
+    #[test]
+    fn tolerances() {
+        assert_eq!(eval("[1 EQ 1.00009]"), 1.0);
+        assert_eq!(eval("[1 EQ 1.001]"), 0.0);
+        assert_eq!(eval("[1 LT 1.00001]"), 1.0);
+        assert_eq!(whole(1.00001), Some(1.0));
+        assert_eq!(whole(0.99995), Some(1.0));
+        assert_eq!(whole(1.0002), None);
+    }
+
+    #[test]
+    fn error_columns() {
+        assert_eq!(fail("[1/0]"), (3, "Attempt to divide by zero".into()));
+        assert_eq!(fail("[1 + SQRT[-1]]").0, 6);
+        assert_eq!(fail("[1 + 2").0, 1);
+        assert_eq!(fail("[1 + 2 F").0, 8);
+        assert_eq!(fail("[FOO[1]]").0, 2);
+        assert_eq!(fail(&"[".repeat(1000)).0, 66);
+    }
+}

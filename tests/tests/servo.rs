@@ -1,0 +1,148 @@
+//! The servo simulation end to end: the real three processes (`cnc run --clock sim`) on the
+//! 20 mm circle at F3000, the contour error and roundness of `report.json` checked against
+//! closed forms computed here from the same machine file.
+//!
+//! "The 20 mm circle" is a circle of 20 mm diameter (radius 10 mm), cut as one full G2
+//! from the machine's start position, so no approach move spoils it.
+
+use serde_json::Value;
+use shared::Machine;
+use std::path::Path;
+use std::process::Command;
+use tests::{cnc_exe, report, temp_dir};
+
+const RADIUS_MM: f64 = 10.0;
+const FEED_MM_PER_MIN: f64 = 3000.0;
+
+/// Runs the circle on `machine` (TOML text; `None`: the built-in machine) and returns the
+/// run directory and its report.
+fn run_circle(tag: &str, machine: Option<&str>) -> (std::path::PathBuf, Value) {
+    let dir = temp_dir(tag);
+    let prog = dir.join("circle20.ngc");
+    std::fs::write(
+        &prog,
+        format!("G21 G17 G90\nG2 X0 Y0 I{RADIUS_MM} J0 F{FEED_MM_PER_MIN}\nM2\n"),
+    )
+    .unwrap();
+    let mut cmd = Command::new(cnc_exe());
+    cmd.arg("run").arg(&prog).args(["--clock", "sim", "--out"]);
+    cmd.arg(dir.join("run"));
+    if let Some(text) = machine {
+        let file = dir.join("machine.toml");
+        std::fs::write(&file, text).unwrap();
+        cmd.arg("--machine").arg(file);
+    }
+    let out = cmd.output().unwrap();
+    assert!(
+        out.status.success(),
+        "cnc run failed:\n{}\n{}",
+        String::from_utf8_lossy(&out.stdout),
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let run = dir.join("run");
+    let rep = report(&run);
+    assert_eq!(rep["outcome"], "done", "{rep:#}");
+    (run, rep)
+}
+
+fn f(v: &Value, key: &str) -> f64 {
+    v[key]
+        .as_f64()
+        .unwrap_or_else(|| panic!("{key} is not a number: {v:#}"))
+}
+
+/// The summary cell of report.html that shows `key`.
+fn cell(dir: &Path, key: &str) -> String {
+    let page = std::fs::read_to_string(dir.join("report.html")).unwrap();
+    let tag = format!("data-key=\"{key}\">");
+    let at = page.find(&tag).unwrap_or_else(|| panic!("no cell {key}")) + tag.len();
+    let end = page[at..].find("</td>").unwrap() + at;
+    page[at..end].to_string()
+}
+
+#[test]
+fn circle_with_feed_forward_stays_within_1_um_of_the_path() {
+    let (dir, rep) = run_circle("servo-ff", None);
+    let contour = f(&rep, "max_contour_error_um");
+    println!(
+        "FF on: max contour error {contour:.3} µm (cycle {}, line {}), RMS {:.3} µm, roundness {:#}",
+        rep["max_contour_error_cycle"],
+        rep["max_contour_error_line"],
+        f(&rep, "rms_contour_error_um"),
+        rep["roundness"]
+    );
+    assert!(contour < 1.0, "max contour error {contour} µm");
+    // Measured, not a default: the dry friction leaves a trace at the quadrants.
+    assert!(contour > 0.01, "max contour error {contour} µm");
+    assert_eq!(rep["max_contour_error_line"], 2);
+    let r = &rep["roundness"];
+    assert_eq!(r["plane"], "XY");
+    assert_eq!(r["lines"], serde_json::json!([2, 2]));
+    assert!(
+        (f(r, "commanded_radius_mm") - RADIUS_MM).abs() < 1e-9,
+        "{r:#}"
+    );
+    assert!(f(r, "roundness_um") < 2.0 * contour, "{r:#}");
+    assert!(f(r, "radius_error_um").abs() < contour, "{r:#}");
+    // Following error: max and RMS per axis, RMS below max, Z never moved.
+    let max = rep["max_following_error_axis_um"].as_array().unwrap();
+    let rms = rep["rms_following_error_axis_um"].as_array().unwrap();
+    for k in 0..2 {
+        let (m, q) = (max[k].as_f64().unwrap(), rms[k].as_f64().unwrap());
+        assert!(q > 0.0 && q < m, "axis {k}: rms {q} max {m}");
+    }
+    assert_eq!(rms[2].as_f64(), Some(0.0));
+    // The page shows report.json's figures.
+    assert_eq!(
+        cell(&dir, "max_contour_error_um"),
+        format!(
+            "{contour:.2} µm at cycle {}, line 2",
+            rep["max_contour_error_cycle"]
+        )
+    );
+    assert!(cell(&dir, "roundness").starts_with(&format!("{:.2} µm", f(r, "roundness_um"))));
+}
+
+/// Without feed-forward, and with a velocity loop far faster than the position loop, each
+/// axis is the first-order lag `Kv / (s + Kv)`; on a circle of radius R at speed v
+/// (ω = v/R) the tool runs on a circle smaller by `R·(1 − Kv/√(Kv² + ω²)) ≈ v²/(2·R·Kv²)`,
+/// lagging by `v/Kv` along it.
+#[test]
+fn circle_without_feed_forward_shrinks_by_the_textbook_radial_error() {
+    let text =
+        "# the built-in machine with both feed-forwards off\n[servo]\nvel_ff = 0.0\nacc_ff = 0.0\n";
+    let machine = Machine::from_toml(text).unwrap();
+    let s = &machine.servo;
+    assert!(
+        s.velocity_bandwidth_rad_per_s() >= 20.0 * s.kv_per_s,
+        "the closed form needs a velocity loop much faster than Kv"
+    );
+    let v = FEED_MM_PER_MIN / 60.0;
+    let expected_um = v * v / (2.0 * RADIUS_MM * s.kv_per_s * s.kv_per_s) * 1e3;
+    let lag_um = v / s.kv_per_s * 1e3;
+
+    let (_, rep) = run_circle("servo-noff", Some(text));
+    let r = &rep["roundness"];
+    let contour = f(&rep, "max_contour_error_um");
+    println!(
+        "FF off: v²/(2·R·Kv²) = {expected_um:.3} µm; max contour error {contour:.3} µm, roundness {:.3} µm, radius error {:.3} µm; max following error {:.1} µm vs v/Kv {lag_um:.1} µm",
+        f(r, "roundness_um"),
+        f(r, "radius_error_um"),
+        f(&rep, "max_following_error_um"),
+    );
+    let within = |what: &str, got: f64| {
+        assert!(
+            (got - expected_um).abs() <= 0.1 * expected_um,
+            "{what} {got:.3} µm, v²/(2·R·Kv²) = {expected_um:.3} µm"
+        );
+    };
+    within("radius error (inward)", -f(r, "radius_error_um"));
+    within("roundness", f(r, "roundness_um"));
+    within("max contour error", contour);
+    // The lag along the path is the following error, not contour error.
+    let ferr = f(&rep, "max_following_error_um");
+    assert!(
+        (ferr - lag_um).abs() <= 0.05 * lag_um,
+        "max following error {ferr} µm, v/Kv = {lag_um} µm"
+    );
+}
