@@ -60,6 +60,12 @@ pub struct RunArgs {
     /// Do not write report.html at the end (see `cnc report`).
     #[arg(long)]
     pub no_report: bool,
+    /// Who paces the drives: `lockstep` (default: one drive step per set-point,
+    /// deterministic, what replay reproduces) or `own` (the servo-sim keeps its own period
+    /// like real drives; a late or missing set-point is held, and the report counts the
+    /// held ticks). `own` needs `--clock real`.
+    #[arg(long, value_enum, default_value_t = servo_sim::run::ServoClock::Lockstep)]
+    pub servo_clock: servo_sim::run::ServoClock,
     /// Run the program N times in one stack (soak test): one stream of blocks whose
     /// sequence numbers keep counting, with a rapid back to the start between runs when
     /// the program ends elsewhere. report.json has each process's memory at start and end.
@@ -228,6 +234,12 @@ pub fn run(args: &RunArgs) -> ExitCode {
 }
 
 fn run_inner(args: &RunArgs) -> Result<bool, String> {
+    if args.servo_clock == servo_sim::run::ServoClock::Own && args.clock == ClockMode::Sim {
+        return Err(
+            "--servo-clock own needs --clock real: under the simulated clock no set-point is ever late"
+                .into(),
+        );
+    }
     let machine = shared::machine::load(args.machine.as_deref())?;
     let src = Source::load(args.program.as_deref())?;
     let period_ns = args.period_us * 1000;
@@ -269,6 +281,7 @@ fn run_inner(args: &RunArgs) -> Result<bool, String> {
         sched: args.sched,
         html: !args.no_report,
         expected_cycles: expected_cycles.flatten(),
+        servo_clock: args.servo_clock,
     };
     stack.launch(&src.name, input)
 }
@@ -286,6 +299,7 @@ pub struct Stack {
     pub html: bool,
     /// The run's length in cycles, for the progress bar (`None`: no bar).
     pub expected_cycles: Option<u64>,
+    pub servo_clock: servo_sim::run::ServoClock,
 }
 
 /// A progress bar is drawn only for a person watching: stderr a terminal, not CI.
@@ -421,9 +435,12 @@ impl Stack {
             interpolator::rt::sched::SchedMode::Auto => "auto",
             interpolator::rt::sched::SchedMode::Other => "other",
         };
-        let started = start("servo-sim", vec![])
-            .and_then(|_| start("interpolator", vec!["--sched".into(), sched.into()]))
-            .and_then(|_| start("interpreter", input));
+        let started = start(
+            "servo-sim",
+            vec!["--servo-clock".into(), self.servo_clock.to_string()],
+        )
+        .and_then(|_| start("interpolator", vec!["--sched".into(), sched.into()]))
+        .and_then(|_| start("interpreter", input));
         let mut launcher_fault = started.err();
         if launcher_fault.is_none() {
             launcher_fault = supervise(&mut roles, progress.as_mut());

@@ -103,6 +103,8 @@ fn replay_inner(args: &ReplayArgs) -> Result<bool, String> {
         sched: args.sched,
         html: !args.no_report,
         expected_cycles,
+        // A replay reproduces a run bit for bit: lock-step.
+        servo_clock: servo_sim::run::ServoClock::Lockstep,
     };
     stack.launch(&header.program, input)
 }

@@ -65,6 +65,15 @@ pub struct Report {
     /// positions; null when the path has none.
     pub roundness: Option<RoundnessFigures>,
     pub lost_setpoints: u64,
+    /// Who paced the drives: `lockstep` or `own` (see `cnc run --servo-clock`).
+    #[serde(default)]
+    pub servo_clock: String,
+    /// Own servo clock: drive ticks that held the last set-point (none new had come), and
+    /// set-points overtaken before a drive tick used them.
+    #[serde(default)]
+    pub servo_held_ticks: u64,
+    #[serde(default)]
+    pub servo_skipped_setpoints: u64,
     pub blocks: usize,
     /// Replays of a damaged log (`--salvage`): what was wrong and what ran.
     pub salvaged: Option<String>,
@@ -188,6 +197,11 @@ pub fn assemble(
             .and_then(|c| c.roundness.as_ref().ok())
             .map(RoundnessFigures::of),
         lost_setpoints: servo.as_ref().map_or(0, |s| s.lost_setpoints),
+        servo_clock: servo
+            .as_ref()
+            .map_or_else(String::new, |s| s.servo_clock.clone()),
+        servo_held_ticks: servo.as_ref().map_or(0, |s| s.held_ticks),
+        servo_skipped_setpoints: servo.as_ref().map_or(0, |s| s.skipped_setpoints),
         blocks: interp.as_ref().map_or(0, |s| s.blocks),
         salvaged: interp.as_ref().and_then(|s| s.salvaged.clone()),
         sched: i.map(|s| s.sched.clone()),

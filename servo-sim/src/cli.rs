@@ -1,6 +1,6 @@
 //! Command-line arguments of the servo-sim process (also a role of `cnc`).
 
-use crate::run::{self, Config};
+use crate::run::{self, Config, ServoClock};
 use shared::clock::ClockMode;
 use std::path::PathBuf;
 use std::time::Duration;
@@ -22,6 +22,10 @@ pub struct Args {
     /// `real` or `sim`: under the simulated clock the drives answer as fast as they can.
     #[arg(long, default_value_t = ClockMode::Real)]
     pub clock: ClockMode,
+    /// Who paces the drives: `lockstep` (one step per set-point, deterministic) or `own`
+    /// (the drives' own period; a late set-point is held, as real drives do).
+    #[arg(long, value_enum, default_value_t = ServoClock::Lockstep)]
+    pub servo_clock: ServoClock,
 }
 
 pub fn run(args: &Args, machine: shared::Machine) -> anyhow::Result<()> {
@@ -32,6 +36,7 @@ pub fn run(args: &Args, machine: shared::Machine) -> anyhow::Result<()> {
         period_ns: args.period_us * 1000,
         machine,
         clock: args.clock,
+        servo_clock: args.servo_clock,
         start_timeout: Duration::from_secs(30),
         // Set-points come every period under the real clock: 100 ms of silence means the
         // interpolator is gone. The simulated clock may pause while blocks are late.

@@ -1,7 +1,10 @@
-//! The servo-sim process loop, in lock-step with the set-points: it sleeps on the
-//! set-point wake-up event, steps the three axes once per set-point in cycle order, and
-//! answers each with feedback. The output depends only on the set-points, never on when
-//! they arrive.
+//! The servo-sim process loop. In lock-step (the default) it sleeps on the set-point
+//! wake-up event, steps the three axes once per set-point in cycle order, and answers
+//! each with feedback: the output depends only on the set-points, never on when they
+//! arrive. On its own clock ([`ServoClock::Own`]) it keeps its own period, as real drives
+//! do: each tick it takes the newest set-point that has arrived; when none has, it holds
+//! the last position command (with no feed-forward: the command did not move), and the
+//! effect shows in the following and contour errors.
 
 use crate::axis::Axis;
 use iceoryx2::prelude::*;
@@ -16,6 +19,25 @@ use shared::Machine;
 use std::path::PathBuf;
 use std::time::{Duration, Instant};
 
+/// Who paces the drives.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, clap::ValueEnum)]
+pub enum ServoClock {
+    /// One drive step per set-point, in cycle order: deterministic.
+    #[default]
+    Lockstep,
+    /// The drives' own period (real clock only): late set-points are held.
+    Own,
+}
+
+impl std::fmt::Display for ServoClock {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(match self {
+            ServoClock::Lockstep => "lockstep",
+            ServoClock::Own => "own",
+        })
+    }
+}
+
 #[derive(Debug, Clone)]
 pub struct Config {
     pub prefix: String,
@@ -23,6 +45,7 @@ pub struct Config {
     pub period_ns: u64,
     pub machine: Machine,
     pub clock: ClockMode,
+    pub servo_clock: ServoClock,
     /// How long to wait for the first set-point.
     pub start_timeout: Duration,
     /// Silence after which the interpolator is taken for dead (drives hold position).
@@ -44,6 +67,15 @@ pub struct Summary {
     pub rms_following_error_axis_um: [f64; 3],
     pub saturated_cycles: u64,
     pub trace_dropped: u64,
+    /// `lockstep` or `own`.
+    #[serde(default)]
+    pub servo_clock: String,
+    /// Own clock only: drive ticks with no new set-point, which held the last command.
+    #[serde(default)]
+    pub held_ticks: u64,
+    /// Own clock only: set-points overtaken by a newer one before a tick used them.
+    #[serde(default)]
+    pub skipped_setpoints: u64,
 }
 
 #[derive(Debug, Clone, Copy)]
@@ -105,6 +137,12 @@ impl Drives {
             self.lost += sp.cycle - self.expected_cycle;
         }
         self.expected_cycle = sp.cycle + 1;
+        self.drive(sp)
+    }
+
+    /// One drive period with `sp` as the command, whatever its cycle (the own clock:
+    /// it may be a held or a newer set-point).
+    pub fn drive(&mut self, sp: &Setpoint) -> Feedback {
         let p = &self.machine.servo;
         let mut fb = Feedback {
             protocol: PROTOCOL_VERSION,
@@ -140,6 +178,12 @@ impl Drives {
 /// Runs the servo-sim until the last set-point, and writes `feedback.csv` and
 /// `servo.json` into the run directory.
 pub fn run<S: Service>(cfg: &Config) -> Result<Summary, IpcError> {
+    if cfg.servo_clock == ServoClock::Own && cfg.clock == ClockMode::Sim {
+        return Err(IpcError(
+            "--servo-clock own needs the real clock: under the simulated clock nothing is late"
+                .into(),
+        ));
+    }
     let io = |e: std::io::Error| IpcError(format!("writing the run directory: {e}"));
     let svc = Services::new(&cfg.prefix);
     let node = ipc::node::<S>("servo-sim")?;
@@ -184,8 +228,66 @@ pub fn run<S: Service>(cfg: &Config) -> Result<Summary, IpcError> {
     let period = Duration::from_nanos(cfg.period_ns);
     let mut last_check = Instant::now();
     let mut done = false;
+    let own = cfg.servo_clock == ServoClock::Own;
+    // Own clock: the tick schedule, the command in force and how it came to be.
+    let t0 = shared::clock::now_ns();
+    let mut tick = 0u64;
+    let mut command: Option<Setpoint> = None;
+    let (mut held_ticks, mut skipped) = (0u64, 0u64);
     while !done {
-        if sim {
+        if own {
+            tick += 1;
+            shared::clock::sleep_until_ns(t0 + tick * cfg.period_ns);
+            let mut fresh: Option<Setpoint> = None;
+            while let Ok(Some(sample)) = sp_sub.receive() {
+                let sp = *sample.payload();
+                if let Err(e) = sp.validate() {
+                    fault = Some(format!("bad set-point: {e}"));
+                    done = true;
+                    break;
+                }
+                if fresh.is_some() {
+                    skipped += 1;
+                }
+                fresh = Some(sp);
+            }
+            if done {
+                break;
+            }
+            let sp = match (fresh, command) {
+                (Some(sp), _) => {
+                    last_seen = Instant::now();
+                    last_cycle = Some(sp.cycle);
+                    sp
+                }
+                (None, Some(mut held)) => {
+                    held_ticks += 1;
+                    held.vel_mm_per_s = [0.0; 3];
+                    held.acc_mm_per_s2 = [0.0; 3];
+                    held
+                }
+                (None, None) => {
+                    if last_seen.elapsed() > cfg.start_timeout {
+                        fault = Some("no set-point arrived: the interpolator never started".into());
+                        done = true;
+                    }
+                    continue;
+                }
+            };
+            command = Some(sp);
+            let fb = drives.drive(&sp);
+            count += 1;
+            let _ = fb_pub.send_copy(fb);
+            trace.push(FeedbackRec {
+                cycle: fb.cycle,
+                t_ns: tick * cfg.period_ns,
+                pos: fb.pos_mm,
+                ferr_um: fb.ferr_mm.map(|e| e * 1e3),
+            });
+            if fresh.is_some_and(|f| f.flags & SETPOINT_LAST != 0) {
+                done = true;
+            }
+        } else if sim {
             // The interpolator waits for this answer: spin briefly, then sleep on the event.
             spin_then_block(
                 200_000,
@@ -198,7 +300,13 @@ pub fn run<S: Service>(cfg: &Config) -> Result<Summary, IpcError> {
         } else {
             let _ = listener.timed_wait(|_| {}, period);
         }
-        while let Ok(Some(sample)) = sp_sub.receive() {
+        // Lock-step: every set-point that has arrived, in order (the own clock took its
+        // set-points above).
+        while let Some(sample) = if own {
+            None
+        } else {
+            sp_sub.receive().ok().flatten()
+        } {
             let sp = *sample.payload();
             last_seen = Instant::now();
             last_cycle = Some(sp.cycle);
@@ -270,6 +378,9 @@ pub fn run<S: Service>(cfg: &Config) -> Result<Summary, IpcError> {
         rms_following_error_axis_um: drives.rms_ferr_mm().map(|e| e * 1e3),
         saturated_cycles: drives.saturated_cycles,
         trace_dropped,
+        servo_clock: cfg.servo_clock.to_string(),
+        held_ticks,
+        skipped_setpoints: skipped,
     };
     let text = serde_json::to_string_pretty(&summary).map_err(|e| IpcError(e.to_string()))?;
     std::fs::write(cfg.out_dir.join("servo.json"), text).map_err(io)?;

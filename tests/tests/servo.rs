@@ -146,3 +146,68 @@ fn circle_without_feed_forward_shrinks_by_the_textbook_radial_error() {
         "max following error {ferr} µm, v/Kv = {lag_um} µm"
     );
 }
+
+/// `--servo-clock own`: the drives keep their own period (real clock). Whatever the
+/// scheduling did, `feedback.csv` must account for every drive tick: a tick that found no
+/// new set-point repeats the previous set-point's cycle (held), and a set-point overtaken
+/// before a tick used it leaves a gap in the cycles (skipped); the report's counts must
+/// equal what the trace shows, and the circle must still finish on the path.
+#[test]
+fn own_servo_clock_holds_late_setpoints_and_counts_them() {
+    let dir = temp_dir("own-clock");
+    let prog = dir.join("circle20.ngc");
+    std::fs::write(
+        &prog,
+        format!("G21 G17 G90\nG2 X0 Y0 I{RADIUS_MM} J0 F{FEED_MM_PER_MIN}\nM2\n"),
+    )
+    .unwrap();
+    let run = dir.join("run");
+    let out = Command::new(cnc_exe())
+        .arg("run")
+        .arg(&prog)
+        .args(["--servo-clock", "own", "--no-report", "--out"])
+        .arg(&run)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let rep = report(&run);
+    assert_eq!(rep["servo_clock"], "own");
+    let (_, fb) = tests::csv(&run.join("feedback.csv"));
+    let (_, sp) = tests::csv(&run.join("setpoints.csv"));
+    let (mut held, mut skipped) = (0u64, 0u64);
+    for w in fb.windows(2) {
+        let (a, b) = (w[0][0] as u64, w[1][0] as u64);
+        assert!(b >= a, "the drives never go back to an older set-point");
+        if b == a {
+            held += 1;
+        } else {
+            skipped += b - a - 1;
+        }
+    }
+    assert_eq!(rep["servo_held_ticks"].as_u64(), Some(held), "{rep:#}");
+    assert_eq!(rep["servo_skipped_setpoints"].as_u64(), Some(skipped));
+    // The last set-point reached the drives, and the tool ended on the circle's start.
+    assert_eq!(fb.last().unwrap()[0], sp.last().unwrap()[0]);
+    assert!(f(&rep, "max_contour_error_um") < 1000.0, "{rep:#}");
+
+    // Under the simulated clock nothing is late: the combination is refused up front.
+    let sim = Command::new(cnc_exe())
+        .arg("run")
+        .arg(&prog)
+        .args([
+            "--servo-clock",
+            "own",
+            "--clock",
+            "sim",
+            "--no-report",
+            "--out",
+        ])
+        .arg(dir.join("sim"))
+        .output()
+        .unwrap();
+    assert!(!sim.status.success());
+}

@@ -27,6 +27,7 @@ fn run_stack(
         period_ns,
         machine: Machine::default(),
         clock: ClockMode::Real,
+        servo_clock: servo_sim::run::ServoClock::Lockstep,
         start_timeout: Duration::from_secs(20),
         idle_timeout: Duration::from_secs(5),
     };
