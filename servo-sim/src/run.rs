@@ -57,6 +57,7 @@ pub struct Summary {
     pub outcome: String,
     pub fault: Option<String>,
     pub pid: u32,
+    /// Drive steps taken: one per set-point in lock-step, one per tick on the own clock.
     pub setpoints: u64,
     /// Set-points that never arrived (gaps in the cycle numbers).
     pub lost_setpoints: u64,
@@ -258,34 +259,31 @@ pub fn run<S: Service>(cfg: &Config) -> Result<Summary, IpcError> {
                 (Some(sp), _) => {
                     last_seen = Instant::now();
                     last_cycle = Some(sp.cycle);
-                    sp
+                    Some(sp)
                 }
                 (None, Some(mut held)) => {
                     held_ticks += 1;
                     held.vel_mm_per_s = [0.0; 3];
                     held.acc_mm_per_s2 = [0.0; 3];
-                    held
+                    Some(held)
                 }
-                (None, None) => {
-                    if last_seen.elapsed() > cfg.start_timeout {
-                        fault = Some("no set-point arrived: the interpolator never started".into());
-                        done = true;
-                    }
-                    continue;
-                }
+                // Nothing yet: the start timeout below applies.
+                (None, None) => None,
             };
-            command = Some(sp);
-            let fb = drives.drive(&sp);
-            count += 1;
-            let _ = fb_pub.send_copy(fb);
-            trace.push(FeedbackRec {
-                cycle: fb.cycle,
-                t_ns: tick * cfg.period_ns,
-                pos: fb.pos_mm,
-                ferr_um: fb.ferr_mm.map(|e| e * 1e3),
-            });
-            if fresh.is_some_and(|f| f.flags & SETPOINT_LAST != 0) {
-                done = true;
+            if let Some(sp) = sp {
+                command = Some(sp);
+                let fb = drives.drive(&sp);
+                count += 1;
+                let _ = fb_pub.send_copy(fb);
+                trace.push(FeedbackRec {
+                    cycle: fb.cycle,
+                    t_ns: tick * cfg.period_ns,
+                    pos: fb.pos_mm,
+                    ferr_um: fb.ferr_mm.map(|e| e * 1e3),
+                });
+                if fresh.is_some_and(|f| f.flags & SETPOINT_LAST != 0) {
+                    done = true;
+                }
             }
         } else if sim {
             // The interpolator waits for this answer: spin briefly, then sleep on the event.

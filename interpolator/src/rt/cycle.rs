@@ -68,9 +68,7 @@ pub fn feedback_lag_limit(period_ns: u64) -> u64 {
 /// CPU each in a release build, so faster polling would take a noticeable share of a
 /// core. Measured: a killed servo-sim is noticed 1 to 5 cycles after its last answer at
 /// 1 ms (the kernel's own tear-down of the process takes 1 to 3.5 ms of that).
-pub fn watch_interval(_period_ns: u64) -> Duration {
-    Duration::from_millis(1)
-}
+pub const WATCH_INTERVAL: Duration = Duration::from_millis(1);
 
 /// Why a run could not even produce a report.
 #[derive(Debug)]
@@ -269,7 +267,7 @@ pub fn run<S: Service>(cfg: &Config) -> Result<Summary, RunError> {
     let mut engine = Engine::new(lim, [0.0; 3]);
     // Both peers are connected now (the servo subscribed, the interpreter sent a block):
     // from here on, a port that leaves or a node that dies is a fault.
-    let watch = PeerWatch::start::<S>(&cfg.prefix, watch_interval(cfg.period_ns))?;
+    let watch = PeerWatch::start::<S>(&cfg.prefix, WATCH_INTERVAL)?;
     let mut src = Source {
         sub: &block_sub,
         first,
@@ -340,20 +338,20 @@ pub fn run<S: Service>(cfg: &Config) -> Result<Summary, RunError> {
             });
         }
         // command: a fault turns the run into a controlled stop along the path
-        if let Some(f) = fault {
+        let mut begin_stop = |f: Fault, engine: &mut Engine| {
             if !engine.stopping() {
-                info = Some(FaultRecord::at(f, cycle, &engine, answers.last_cycle));
+                info = Some(FaultRecord::at(f, cycle, engine, answers.last_cycle));
                 engine.stop();
             }
+        };
+        if let Some(f) = fault {
+            begin_stop(f, &mut engine);
         }
         let tick = match engine.tick(&mut src) {
             Err(f) => {
                 // A bad block: nothing moved; stop from where the last cycle left off.
                 fault.get_or_insert(f);
-                if !engine.stopping() {
-                    info = Some(FaultRecord::at(f, cycle, &engine, answers.last_cycle));
-                    engine.stop();
-                }
+                begin_stop(f, &mut engine);
                 engine.tick(&mut src)
             }
             ok => ok,
