@@ -38,6 +38,8 @@ fn curve() -> CommandBlock {
     b.start_feed_mm_per_min = 0.0;
     b.end_feed_mm_per_min = 0.0;
     b.length_mm = shared::path::length(&b);
+    b.acc_mm_per_s2 = 2000.0;
+    b.jerk_mm_per_s3 = 50_000.0;
     b
 }
 
@@ -45,6 +47,8 @@ fn bench(c: &mut Criterion) {
     let lim = Limits {
         period_ns: 1_000_000,
         path_acc_mm_per_s2: 2000.0,
+        path_jerk_mm_per_s3: 50_000.0,
+        lookahead_blocks: 16,
         max_following_error_mm: 1.0,
     };
     c.bench_function("tick_nurbs_deg3", |bch| {

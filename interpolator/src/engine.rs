@@ -2,16 +2,27 @@
 //!
 //! Each [`Engine::tick`] advances the tool along the current block by one period at the
 //! speed the profile allows, crossing into following blocks when one ends mid-period, and
-//! returns the new set-point. The speed profile is acceleration-limited: speed rises by
-//! at most `a·T` per cycle, never exceeds the block's feed, and is always low enough to
-//! reach the block's planned end speed (zero when no next motion is known yet, so a
-//! starved interpolator stops on the path instead of running off its end).
+//! returns the new set-point.
+//!
+//! The speed profile is jerk-limited (an S-curve along the arc length): the engine keeps
+//! the path speed `v` and the path acceleration `a`, and each cycle changes `a` by at most
+//! `J·T` within `±A`, where `A` and `J` are the block's tangential limits (the planner's
+//! share of the machine's limits that the block's curvature leaves). Of the jerks that
+//! keep every speed limit ahead reachable, it takes the largest (a bisection between
+//! `-J` and `+J`). The limits ahead are the current block's feed, the planned end speed
+//! of every block in the look-ahead window (a ring of `lookahead_blocks`, filled from the
+//! source every cycle), and a stop at the end of the last block held: the machine can
+//! always stop on the known path, so a starved interpolator stops on the path instead of
+//! running off its end. The test of each limit is the closed form of
+//! [`shared::profile::Limits::can_reach`].
 //!
 //! A fault does not freeze the set-point where it is: [`Engine::stop`] starts a controlled
 //! stop, as a real control does on a following-error or peer fault. From then on no block
-//! is taken from the source, and the speed falls by `a·T` every cycle along the path
-//! already in hand (crossing into a look-ahead block that is already validated), down to
-//! zero ([`Engine::at_rest`]). The stop is bounded: at most `v/(a·T) + 1` cycles.
+//! is taken from the source; any positive acceleration is dropped at once, so the speed
+//! never rises again, and the speed falls under the machine's path acceleration and jerk
+//! along the path already in hand (crossing into look-ahead blocks that are already
+//! validated), down to zero ([`Engine::at_rest`]). The stop is bounded: the quickest
+//! jerk-limited stop from the speed at the fault, plus one cycle.
 #![deny(
     clippy::indexing_slicing,
     clippy::unwrap_used,
@@ -22,10 +33,19 @@
 use shared::nurbs::fast::FastCurve;
 use shared::nurbs::CurvePoint;
 use shared::path::{self, norm};
+use shared::profile::{self, Limits as Jerk};
 use shared::protocol::{BlockKind, CommandBlock, Feedback, ProtocolError, FLAG_RAPID};
+use shared::Machine;
 
 /// Most blocks one cycle may pass through (tiny CAM segments shorter than one step).
 const MAX_BLOCKS_PER_CYCLE: usize = 64;
+
+/// Most speed limits ahead tested per cycle; further ones are merged into the last kept
+/// (its distance with the lower speed: stricter than both).
+const MAX_AHEAD: usize = 16;
+
+/// Bisection steps for the moment in a cycle where braking must begin: `T/2³⁰`.
+const SWITCH_BISECTIONS: usize = 30;
 
 /// Where the blocks come from: the iceoryx2 subscriber in a run, a slice in tests.
 pub trait BlockSource {
@@ -183,8 +203,98 @@ enum Current {
 #[derive(Debug, Clone, Copy)]
 pub struct Limits {
     pub period_ns: u64,
+    /// Path acceleration and jerk of a controlled stop (blocks carry their own for the
+    /// program's motion).
     pub path_acc_mm_per_s2: f64,
+    pub path_jerk_mm_per_s3: f64,
     pub max_following_error_mm: f64,
+    /// Blocks held ahead of the one being run.
+    pub lookahead_blocks: usize,
+}
+
+impl Limits {
+    /// The limits of `machine` at `period_ns`.
+    pub fn new(machine: &Machine, period_ns: u64) -> Self {
+        Limits {
+            period_ns,
+            path_acc_mm_per_s2: machine.path_acc_mm_per_s2,
+            path_jerk_mm_per_s3: machine.path_jerk_mm_per_s3,
+            max_following_error_mm: machine.max_following_error_mm,
+            lookahead_blocks: machine.lookahead_blocks as usize,
+        }
+    }
+}
+
+/// The validated blocks in hand after the current one, oldest first: a ring allocated
+/// once, when the engine is made.
+struct Window {
+    buf: Vec<CommandBlock>,
+    head: usize,
+    len: usize,
+}
+
+impl Window {
+    fn new(capacity: usize) -> Self {
+        Window {
+            buf: vec![CommandBlock::empty(BlockKind::ProgramEnd, 0, 0); capacity.max(1)],
+            head: 0,
+            len: 0,
+        }
+    }
+
+    fn is_full(&self) -> bool {
+        self.len >= self.buf.len()
+    }
+
+    fn get(&self, i: usize) -> Option<&CommandBlock> {
+        if i < self.len {
+            self.buf.get((self.head + i) % self.buf.len())
+        } else {
+            None
+        }
+    }
+
+    fn push(&mut self, b: CommandBlock) {
+        let n = self.buf.len();
+        if let Some(slot) = self.buf.get_mut((self.head + self.len) % n) {
+            *slot = b;
+            self.len += 1;
+        }
+    }
+
+    fn pop(&mut self) -> Option<CommandBlock> {
+        let b = self.get(0).copied()?;
+        self.head = (self.head + 1) % self.buf.len();
+        self.len -= 1;
+        Some(b)
+    }
+}
+
+/// A speed limit ahead: at most `v` mm/s, `d` mm further on, reached under `lim`.
+#[derive(Debug, Clone, Copy)]
+struct Ahead {
+    d: f64,
+    v: f64,
+    lim: Jerk,
+}
+
+fn is_motion(b: &CommandBlock) -> bool {
+    b.kind == BlockKind::Motion as u32
+}
+
+/// The tangential limits a block's profile may use.
+fn block_jerk(b: &CommandBlock) -> Jerk {
+    Jerk {
+        acc: b.acc_mm_per_s2,
+        jerk: b.jerk_mm_per_s3,
+    }
+}
+
+fn min_lim(a: Jerk, b: Jerk) -> Jerk {
+    Jerk {
+        acc: a.acc.min(b.acc),
+        jerk: a.jerk.min(b.jerk),
+    }
 }
 
 pub struct Engine {
@@ -193,9 +303,13 @@ pub struct Engine {
     curve: FastCurve,
     t_s: f64,
     cur: Current,
-    next: Option<CommandBlock>,
+    window: Window,
     expected_seq: u64,
     speed: f64,
+    /// Path (tangential) acceleration of the profile.
+    acc: f64,
+    /// Controlled stop: the distance left to the point where it ends at rest.
+    stop_left_mm: f64,
     pos: [f64; 3],
     vel: [f64; 3],
     line: u32,
@@ -211,6 +325,21 @@ pub struct Engine {
     /// Times the engine came to a stop for want of a block (not counting the program end).
     starvations: u64,
     starved: bool,
+    /// Feed fluctuation: relative difference of the chord actually stepped and the step
+    /// the profile planned, over the cycles that stay inside one block.
+    fluct_max: f64,
+    fluct_sum_sq: f64,
+    fluct_n: u64,
+}
+
+/// How closely the set-point steps follow the planned ones (seed 001's feed fluctuation).
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct Fluctuation {
+    /// Largest `|chord / planned step - 1|`.
+    pub max: f64,
+    pub rms: f64,
+    /// Cycles measured (moving, inside one block).
+    pub cycles: u64,
 }
 
 fn dist(a: [f64; 3], b: [f64; 3]) -> f64 {
@@ -243,9 +372,11 @@ impl Engine {
             curve,
             t_s: lim.period_ns as f64 * 1e-9,
             cur: Current::None,
-            next: None,
+            window: Window::new(lim.lookahead_blocks),
             expected_seq: 0,
             speed: 0.0,
+            acc: 0.0,
+            stop_left_mm: f64::INFINITY,
             pos: start_mm,
             vel: [0.0; 3],
             line: 0,
@@ -257,13 +388,60 @@ impl Engine {
             deferred: None,
             starvations: 0,
             starved: false,
+            fluct_max: 0.0,
+            fluct_sum_sq: 0.0,
+            fluct_n: 0,
         }
+    }
+
+    /// Feed fluctuation over the run so far.
+    pub fn fluctuation(&self) -> Fluctuation {
+        Fluctuation {
+            max: self.fluct_max,
+            rms: if self.fluct_n > 0 {
+                (self.fluct_sum_sq / self.fluct_n as f64).sqrt()
+            } else {
+                0.0
+            },
+            cycles: self.fluct_n,
+        }
+    }
+
+    /// Path acceleration of the profile in the last tick.
+    pub fn acc_mm_per_s2(&self) -> f64 {
+        self.acc
     }
 
     /// Starts a controlled stop: from the next tick on, no block is taken from the source
     /// and the speed only falls, by `a·T` per cycle, along the path already in hand.
     pub fn stop(&mut self) {
-        self.stopping = true;
+        if !self.stopping {
+            self.stopping = true;
+            // The reaction: no more acceleration. Then the quickest stop from here.
+            self.acc = self.acc.min(0.0);
+            let lim = self.stop_limits();
+            let (mut lo, mut hi) = (0.0, 1.0);
+            while !lim.can_reach(self.speed, self.acc, 0.0, hi) && hi < 1e9 {
+                lo = hi;
+                hi *= 2.0;
+            }
+            for _ in 0..60 {
+                let mid = 0.5 * (lo + hi);
+                if lim.can_reach(self.speed, self.acc, 0.0, mid) {
+                    hi = mid;
+                } else {
+                    lo = mid;
+                }
+            }
+            self.stop_left_mm = hi;
+        }
+    }
+
+    fn stop_limits(&self) -> Jerk {
+        Jerk {
+            acc: self.lim.path_acc_mm_per_s2,
+            jerk: self.lim.path_jerk_mm_per_s3,
+        }
     }
 
     /// A controlled stop is under way (or over).
@@ -303,7 +481,7 @@ impl Engine {
     /// True while the engine holds no look-ahead block and the program end has not been
     /// received yet (it will ask the source for one).
     pub fn wants_block(&self) -> bool {
-        self.next.is_none() && !self.done && !self.end_received && !self.stopping
+        !self.window.is_full() && !self.done && !self.end_received && !self.stopping
     }
 
     /// Takes the next block into the look-ahead slot if there is room. A bad block is
@@ -317,13 +495,14 @@ impl Engine {
         }
     }
 
+    /// Takes blocks from the source until the window is full or the source has none.
     fn fill(&mut self, src: &mut impl BlockSource) -> Result<(), Fault> {
         // Nothing follows the program end: never ask the source past it. A stopping
         // machine takes nothing more.
-        if self.next.is_some() || self.done || self.end_received || self.stopping {
-            return Ok(());
-        }
-        if let Some(b) = src.next_block() {
+        while self.wants_block() {
+            let Some(b) = src.next_block() else {
+                break;
+            };
             b.validate().map_err(Fault::Protocol)?;
             if b.seq != self.expected_seq {
                 return Err(Fault::Protocol(ProtocolError::OutOfSequence {
@@ -333,7 +512,7 @@ impl Engine {
             }
             self.expected_seq += 1;
             self.end_received = b.kind == BlockKind::ProgramEnd as u32;
-            self.next = Some(b);
+            self.window.push(b);
         }
         Ok(())
     }
@@ -373,10 +552,192 @@ impl Engine {
     /// Speed the next motion may be entered with: the planned end speed if the next block
     /// is a motion already in hand, otherwise zero.
     fn exit_speed(&self, m: &Motion) -> f64 {
-        match &self.next {
-            Some(n) if n.kind == BlockKind::Motion as u32 => m.block.end_feed_mm_per_min / 60.0,
+        match self.window.get(0) {
+            Some(n) if is_motion(n) => m.block.end_feed_mm_per_min / 60.0,
             _ => 0.0,
         }
+    }
+
+    /// The speed limits ahead of the current motion `m`, nearest first, that can bind a
+    /// machine at speed `v_top` or below: each block end's planned speed (zero where no
+    /// motion follows in hand), keeping only those lower than every nearer one, up to the
+    /// distance in which the machine can stop anyway. Returns how many were written.
+    fn limits_ahead(&self, m: &Motion, v_top: f64, out: &mut [Ahead; MAX_AHEAD]) -> usize {
+        let mut lim = block_jerk(&m.block);
+        let mut d = if m.u >= m.u_end {
+            0.0
+        } else {
+            (m.block.length_mm - m.s_mm).max(dist(self.pos, m.end_mm))
+        };
+        let mut v = self.exit_speed(m);
+        let mut n = 0usize;
+        let mut lowest = f64::INFINITY;
+        let mut i = 0usize;
+        loop {
+            if v < lowest {
+                lowest = v;
+                let a = Ahead { d, v, lim };
+                if n < MAX_AHEAD {
+                    if let Some(slot) = out.get_mut(n) {
+                        *slot = a;
+                    }
+                    n += 1;
+                } else if let Some(last) = out.get_mut(MAX_AHEAD - 1) {
+                    last.v = v;
+                    last.lim = min_lim(last.lim, lim);
+                }
+            }
+            // Beyond the stopping distance nothing can bind, and nothing is below zero.
+            if v <= 0.0 || d > lim.change_distance(v_top, 0.0) + v_top * self.t_s {
+                break;
+            }
+            let Some(b) = self.window.get(i) else {
+                break;
+            };
+            if !is_motion(b) {
+                break;
+            }
+            lim = min_lim(lim, block_jerk(b));
+            d += b.length_mm;
+            v = match self.window.get(i + 1) {
+                Some(nb) if is_motion(nb) => b.end_feed_mm_per_min / 60.0,
+                _ => 0.0,
+            };
+            i += 1;
+        }
+        n
+    }
+
+    /// The cycle's profile step in motion `m`: the new speed and acceleration and the
+    /// distance covered.
+    ///
+    /// The machine follows its preferred motion (accelerate: jerk `+J` up to the block's
+    /// acceleration, then hold it; in a controlled stop, the quickest braking to rest)
+    /// for as long as every limit ahead can still be kept by the quickest braking to it,
+    /// and from the last such moment inside the cycle (found by bisection) it follows
+    /// that braking. Once braking, the next cycle finds no moment to spare and follows the
+    /// same braking on: the profile tracks the continuous time-optimal one, switching
+    /// inside cycles, and lands exactly on each stop.
+    fn profile_step(&self, m: &Motion) -> (f64, f64, f64) {
+        let t = self.t_s;
+        let own = if self.stopping {
+            self.stop_limits()
+        } else {
+            block_jerk(&m.block)
+        };
+        let x0 = profile::Motion {
+            v: self.speed,
+            a: self.acc,
+            s: 0.0,
+        };
+        let v_top = x0.v + x0.a.abs() * t + own.acc * own.acc / (2.0 * own.jerk);
+        let mut ahead = [Ahead {
+            d: 0.0,
+            v: 0.0,
+            lim: own,
+        }; MAX_AHEAD];
+        let mut n = self.limits_ahead(m, v_top, &mut ahead);
+        if self.stopping {
+            // The stop point, unless a limit of the path ends the stop sooner.
+            if let Some(slot) = ahead.get_mut(n.min(MAX_AHEAD - 1)) {
+                *slot = Ahead {
+                    d: self.stop_left_mm,
+                    v: 0.0,
+                    lim: own,
+                };
+                n = (n + 1).min(MAX_AHEAD);
+            }
+        }
+        let cap = m.feed_mm_per_s;
+        let preferred: profile::Phases = if self.stopping {
+            own.brake(x0, 0.0)
+        } else if x0.a <= own.acc {
+            [
+                (own.jerk, (own.acc - x0.a) / own.jerk),
+                (0.0, f64::INFINITY),
+                (0.0, 0.0),
+            ]
+        } else {
+            // A block with a lower acceleration limit than the last: come down to it.
+            [
+                (-own.jerk, (x0.a - own.acc) / own.jerk),
+                (0.0, f64::INFINITY),
+                (0.0, 0.0),
+            ]
+        };
+        // Room left for limit `c` (0 = the feed cap, then the limits ahead) at the motion
+        // `x`: negative when the quickest braking from there can no longer keep it.
+        let room = |c: usize, x: profile::Motion| -> f64 {
+            if c == 0 {
+                return cap - (x.v + x.a.max(0.0).powi(2) / (2.0 * own.jerk));
+            }
+            match ahead.get(c - 1) {
+                // A limit passed in this cycle was kept on passing (the room was not
+                // negative before): it binds no more.
+                Some(l) if x.s > l.d => f64::INFINITY,
+                Some(l) => l.d - x.s - l.lim.brake_distance(x, l.v),
+                None => f64::INFINITY,
+            }
+        };
+        let brake_for =
+            |c: usize, x: profile::Motion| match c.checked_sub(1).and_then(|i| ahead.get(i)) {
+                Some(l) => l.lim.brake(x, l.v),
+                None => own.brake(x, cap),
+            };
+        let eps = 1e-12;
+        // The cycle's motion is pieced together: the preferred motion, and from the first
+        // moment a limit would be lost, the quickest braking for it; along that braking
+        // another limit may bind later in the cycle, and so on.
+        let (mut t0, mut x_start, mut phases) = (0.0, x0, preferred);
+        let mut braking_for: Option<usize> = None;
+        for _ in 0..=n + 1 {
+            let at = |tau: f64| profile::follow(x_start, &phases, tau - t0);
+            let end = at(t);
+            let mut first: Option<(usize, f64, f64)> = None;
+            for c in 0..=n {
+                if room(c, end) >= -eps {
+                    continue;
+                }
+                let tau = if room(c, at(t0)) < -eps {
+                    t0
+                } else {
+                    let (mut lo, mut hi) = (t0, t);
+                    for _ in 0..SWITCH_BISECTIONS {
+                        let mid = 0.5 * (lo + hi);
+                        if room(c, at(mid)) >= -eps {
+                            lo = mid;
+                        } else {
+                            hi = mid;
+                        }
+                    }
+                    lo
+                };
+                // Ties (limits already lost together) go to the harder braking.
+                let x = at(tau);
+                let s_end = profile::follow(x, &brake_for(c, x), t - tau).s;
+                let better = match first {
+                    None => true,
+                    Some((_, tb, sb)) => tau < tb || (tau == tb && s_end < sb),
+                };
+                if better {
+                    first = Some((c, tau, s_end));
+                }
+            }
+            let Some((c, tau, _)) = first else {
+                break;
+            };
+            if braking_for == Some(c) && tau <= t0 {
+                // Braking for it already, as hard as it goes.
+                break;
+            }
+            let x = at(tau);
+            t0 = tau;
+            x_start = x;
+            phases = brake_for(c, x);
+            braking_for = Some(c);
+        }
+        let x1 = profile::follow(x_start, &phases, t - t0);
+        (x1.v.max(0.0), x1.a, x1.s.max(0.0))
     }
 
     /// Advances one period. Allocation-free, panic-free.
@@ -391,9 +752,10 @@ impl Engine {
             }
             self.fill(src)?;
         }
-        let a = self.lim.path_acc_mm_per_s2;
         let t = self.t_s;
         let mut budget: Option<f64> = None;
+        let mut planned = 0.0;
+        let mut crossed = false;
         let prev_pos = self.pos;
         let mut state = TickState::Running;
         for pass in 0..MAX_BLOCKS_PER_CYCLE {
@@ -402,13 +764,14 @@ impl Engine {
                 self.fill_or_defer(src);
             }
             if let Current::None = self.cur {
-                match self.next.take() {
+                match self.window.pop() {
                     Some(b) => {
                         if let Err(f) = self.start(b) {
                             // Not loadable after all: stand still here, fault next tick.
                             self.deferred.get_or_insert(f);
                             self.cur = Current::None;
                             self.speed = 0.0;
+                            self.acc = 0.0;
                             state = TickState::Starved;
                             break;
                         }
@@ -421,6 +784,7 @@ impl Engine {
                             TickState::Starved
                         };
                         self.speed = 0.0;
+                        self.acc = 0.0;
                         break;
                     }
                 }
@@ -432,6 +796,7 @@ impl Engine {
                     self.seq = seq;
                     self.done = true;
                     self.speed = 0.0;
+                    self.acc = 0.0;
                     state = TickState::Done;
                     break;
                 }
@@ -450,6 +815,7 @@ impl Engine {
                             seq,
                         };
                         self.speed = 0.0;
+                        self.acc = 0.0;
                         break;
                     }
                     if cycles_left == 0 {
@@ -462,6 +828,7 @@ impl Engine {
                         seq,
                     };
                     self.speed = 0.0;
+                    self.acc = 0.0;
                     break;
                 }
                 Current::Motion(mut m) => {
@@ -469,26 +836,43 @@ impl Engine {
                     self.seq = m.block.seq;
                     self.rapid = m.block.flags & FLAG_RAPID != 0;
                     let v_exit = self.exit_speed(&m);
-                    let s_rem = (m.block.length_mm - m.s_mm).max(dist(self.pos, m.end_mm));
+                    // At the end parameter the block is done, whatever the quadrature of
+                    // its length says (near a cusp the two differ in the last digits).
+                    let s_rem = if m.u >= m.u_end {
+                        0.0
+                    } else {
+                        (m.block.length_mm - m.s_mm).max(dist(self.pos, m.end_mm))
+                    };
                     let ds = match budget {
                         Some(d) => d,
                         None => {
-                            // Fastest speed from which v_exit is still reachable at the end,
-                            // accounting for the distance covered in this very cycle.
-                            // When the block end is passed within this very cycle
-                            // (s_rem < v_exit·T), the bound is v_exit itself.
-                            let brake = (-a * t
-                                + (a * a * t * t + v_exit * v_exit + 2.0 * a * s_rem).sqrt())
-                            .max(v_exit);
-                            // A controlled stop only ever slows down.
-                            let up = if self.stopping {
-                                self.speed - a * t
-                            } else {
-                                self.speed + a * t
-                            };
-                            let v = m.feed_mm_per_s.min(up).min(brake).max(0.0);
-                            self.speed = v;
-                            v * t
+                            let (v1, a1, mut ds) = self.profile_step(&m);
+                            // Arriving at a stop: land on it exactly rather than creep
+                            // the last fraction of a jerk step.
+                            // (A thousandth of a jerk step: the jump it leaves is far
+                            // below the jerk limit.)
+                            let snap = 1e-3
+                                * m.block.jerk_mm_per_s3.max(self.lim.path_jerk_mm_per_s3)
+                                * t
+                                * t
+                                * t;
+                            let (mut v1, mut a1) = (v1, a1);
+                            if v_exit <= 0.0 && s_rem - ds <= snap && v1 <= 1e3 * snap / t {
+                                ds = s_rem;
+                                v1 = 0.0;
+                                a1 = 0.0;
+                            }
+                            if self.stopping {
+                                self.stop_left_mm -= ds;
+                                if v1 <= 1e3 * snap / t {
+                                    v1 = 0.0;
+                                    a1 = 0.0;
+                                }
+                            }
+                            self.speed = v1;
+                            self.acc = a1;
+                            planned = ds;
+                            ds
                         }
                     };
                     if ds <= 0.0 && self.stopping {
@@ -500,10 +884,11 @@ impl Engine {
                         // The block ends inside this period; carry the rest into the next.
                         self.pos = m.end_mm;
                         self.cur = Current::None;
+                        crossed = true;
                         if v_exit <= 0.0 {
-                            // An exact stop: the next motion starts from rest, whatever
-                            // the speed of this last, short step was.
+                            // An exact stop: the next motion starts from rest.
                             self.speed = 0.0;
+                            self.acc = 0.0;
                             break;
                         }
                         budget = Some(ds - s_rem);
@@ -518,6 +903,12 @@ impl Engine {
                     break;
                 }
             }
+        }
+        if !crossed && planned > 1e-9 {
+            let f = (dist(self.pos, prev_pos) / planned - 1.0).abs();
+            self.fluct_max = self.fluct_max.max(f);
+            self.fluct_sum_sq += f * f;
+            self.fluct_n += 1;
         }
         // A starvation is a stop for want of a block mid-program, counted once per stop.
         let starved = state == TickState::Starved && !self.stopping;
@@ -588,7 +979,22 @@ fn advance(
         let chord = dist(e1.p, e.p);
         u1 = (u1 + (ds - chord) / sp1).clamp(u, u_end);
     }
-    (u1, eval(curve, block, u1))
+    let e2 = eval(curve, block, u1);
+    if dist(e2.p, e.p) <= ds * (1.0 + 1e-6) + 1e-12 {
+        return (u1, e2);
+    }
+    // The correction overshot: where the curve (nearly) stands still, C' is no guide.
+    // Bisect for the chord `ds` between `u` and `u1`; never step further than planned.
+    let (mut lo, mut hi) = (u, u1);
+    for _ in 0..60 {
+        let mid = 0.5 * (lo + hi);
+        if dist(eval(curve, block, mid).p, e.p) <= ds {
+            lo = mid;
+        } else {
+            hi = mid;
+        }
+    }
+    (lo, eval(curve, block, lo))
 }
 
 /// The block's path at `u`: its NURBS by the moving-data evaluator, plus any helix.

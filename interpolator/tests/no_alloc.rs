@@ -59,6 +59,8 @@ fn closed_curve() -> CommandBlock {
     b.start_feed_mm_per_min = 600.0;
     b.end_feed_mm_per_min = 600.0;
     b.length_mm = shared::path::length(&b);
+    b.acc_mm_per_s2 = 2000.0;
+    b.jerk_mm_per_s3 = 50_000.0;
     b
 }
 
@@ -70,6 +72,8 @@ fn cycle_work_does_not_allocate() {
     let lim = Limits {
         period_ns: 1_000_000,
         path_acc_mm_per_s2: 2000.0,
+        path_jerk_mm_per_s3: 50_000.0,
+        lookahead_blocks: 16,
         max_following_error_mm: 1.0,
     };
     let mut engine = Engine::new(lim, [0.0; 3]);
@@ -124,6 +128,8 @@ fn controlled_stop_does_not_allocate() {
     let lim = Limits {
         period_ns: 1_000_000,
         path_acc_mm_per_s2: 2000.0,
+        path_jerk_mm_per_s3: 50_000.0,
+        lookahead_blocks: 16,
         max_following_error_mm: 1.0,
     };
     let mut engine = Engine::new(lim, [0.0; 3]);

@@ -3,13 +3,16 @@
 //!
 //! The plan is a look-ahead over the whole program (the interpreter reads all of it before
 //! any motion): each motion block gets a speed cap (programmed feed, reduced where its
-//! curvature demands it by the path acceleration and the chord tolerance), corners sharper
-//! than the machine's corner angle get an exact stop, and a backward then a forward pass
-//! make every block's start and end speed reachable under the path acceleration.
+//! curvature demands it by the chord tolerance and the path's and axes' acceleration and
+//! jerk) and the tangential acceleration and jerk its S-curve may use; each junction a
+//! speed (exact stop at corners sharper than the machine's corner angle, limited at kinks
+//! and curvature jumps); and a backward then a forward pass make every block's start and
+//! end speed reachable under the jerk-limited profile the interpolator runs.
 
 use crate::program::{Move, Plane};
 use shared::nurbs::{self, SplitCurve, MAX_CTRL};
 use shared::path;
+use shared::profile::Limits as Jerk;
 use shared::protocol::{BlockKind, CommandBlock, Helix, FLAG_RAPID};
 use shared::Machine;
 use std::f64::consts::{FRAC_PI_2, PI};
@@ -132,6 +135,64 @@ fn sweep_of(
     }
 }
 
+/// The parameter of a cusp inside `c`, if it has one: a point where the curve's speed
+/// `|C'|` dips to (nearly) zero and its tangent turns by more than the machine's corner
+/// angle, as where a curve runs back along itself. The tool must stop there; a block
+/// boundary at the cusp makes it a corner the planner stops at.
+fn find_cusp(c: &SplitCurve, machine: &Machine) -> Option<f64> {
+    const N: usize = 64;
+    let (u0, u1) = (c.knots[0], c.knots[c.knots.len() - 1]);
+    let at = |i: usize| u0 + (u1 - u0) * i as f64 / N as f64;
+    let d1 = |u: f64| nurbs::eval(c.degree, &c.knots, &c.ctrl, u).d1;
+    let cos_corner = machine.corner_angle_deg.to_radians().cos();
+    for i in 1..N {
+        let (a, b) = (d1(at(i - 1)), d1(at(i + 1)));
+        let (na, nb) = (path::norm(a), path::norm(b));
+        if na < 1e-12 || nb < 1e-12 {
+            continue;
+        }
+        if (a[0] * b[0] + a[1] * b[1] + a[2] * b[2]) / (na * nb) >= cos_corner {
+            continue;
+        }
+        // The tangent turns sharply in [at(i-1), at(i+1)]: find the speed's minimum.
+        let (mut lo, mut hi) = (at(i - 1), at(i + 1));
+        for _ in 0..100 {
+            let m1 = lo + (hi - lo) / 3.0;
+            let m2 = hi - (hi - lo) / 3.0;
+            if path::norm(d1(m1)) < path::norm(d1(m2)) {
+                hi = m2;
+            } else {
+                lo = m1;
+            }
+        }
+        let u = 0.5 * (lo + hi);
+        let len = path::norm(d1(u0)).max(path::norm(d1(u1))).max(1e-9);
+        if path::norm(d1(u)) <= 1e-6 * len && u > u0 + 1e-9 * (u1 - u0) && u < u1 - 1e-9 * (u1 - u0)
+        {
+            return Some(u);
+        }
+    }
+    None
+}
+
+/// `c` split exactly at its cusps.
+fn split_at_cusps(c: SplitCurve, machine: &Machine) -> Vec<SplitCurve> {
+    let mut out = Vec::new();
+    let mut rest = c;
+    for _ in 0..16 {
+        match find_cusp(&rest, machine) {
+            Some(u) => {
+                let (l, r) = nurbs::split_at(&rest, u);
+                out.push(l);
+                rest = r;
+            }
+            None => break,
+        }
+    }
+    out.push(rest);
+    out
+}
+
 /// Turns moves into unplanned command blocks (feeds are the caps, speeds not yet set).
 pub fn build(moves: &[Move], machine: &Machine) -> Vec<CommandBlock> {
     let mut out = Vec::new();
@@ -186,8 +247,13 @@ pub fn build(moves: &[Move], machine: &Machine) -> Vec<CommandBlock> {
                     knots: knots.clone(),
                     ctrl: ctrl.clone(),
                 };
-                for piece in nurbs::split_to_capacity(curve, MAX_CTRL) {
-                    out.push(curve_block(*line, &piece, Helix::NONE, f, false));
+                // One block per knot span (its Bézier piece, split exactly): the planner's
+                // speed cap and profile limits are then those of each span, not the
+                // worst of the whole curve.
+                for span in nurbs::split_to_capacity(curve, (*degree + 1).min(MAX_CTRL)) {
+                    for piece in split_at_cusps(span, machine) {
+                        out.push(curve_block(*line, &piece, Helix::NONE, f, false));
+                    }
                 }
             }
             Move::Dwell { line, seconds } => {
@@ -204,72 +270,246 @@ pub fn build(moves: &[Move], machine: &Machine) -> Vec<CommandBlock> {
     out
 }
 
-fn unit(v: [f64; 3]) -> [f64; 3] {
-    let n = path::norm(v);
-    if n > 0.0 {
-        v.map(|x| x / n)
-    } else {
-        v
-    }
+fn sub(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
+    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
 }
 
-/// Highest speed (mm/s) the curvature of a block allows: centripetal acceleration within
-/// the path acceleration, and the chord of one period within the chord tolerance.
-fn curvature_cap(b: &CommandBlock, machine: &Machine, period_s: f64) -> f64 {
+fn dot(a: [f64; 3], b: [f64; 3]) -> f64 {
+    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+}
+
+/// The path's unit tangent and curvature vector `dT/ds` (length the curvature, pointing
+/// to the centre) at `u`.
+fn frame(b: &CommandBlock, u: f64) -> Option<([f64; 3], [f64; 3])> {
+    let e = path::eval(b, u);
+    let sp = path::norm(e.d1);
+    if sp < 1e-12 {
+        return None;
+    }
+    let t = e.d1.map(|x| x / sp);
+    let along = dot(e.d2, t);
+    let k = [0, 1, 2].map(|i| (e.d2[i] - along * t[i]) / (sp * sp));
+    Some((t, k))
+}
+
+/// What the planner takes from one block's geometry: its speed cap and the tangential
+/// acceleration and jerk its profile may use (all in mm and s), and its end frames.
+#[derive(Debug, Clone, Copy)]
+struct Shape {
+    v_cap: f64,
+    acc: f64,
+    jerk: f64,
+    t_start: [f64; 3],
+    t_end: [f64; 3],
+    k_start: [f64; 3],
+    k_end: [f64; 3],
+}
+
+/// Share of the path (and each axis's) acceleration the curvature may take at the cap
+/// speed, and of the jerk; the rest is left to the speed profile along the path.
+const NORMAL_SHARE: f64 = 0.5;
+
+/// The block's speed cap and profile limits. At every sample of the curve, for the
+/// speed `v`, tangential acceleration `a_t` and jerk `j_t` of the profile, the
+/// set-points' acceleration is `a_t·T + v²·k` and their jerk `j_t·T + 3·v·a_t·k +
+/// v³·dk/ds` (`T` the tangent, `k` the curvature vector). The cap keeps `v²|k|` within
+/// half the path (and each axis's) acceleration, `v³|dk/ds|` within half the jerk, each
+/// axis's velocity share `v·|T_i|` within its limit, and one period's chord within the
+/// chord tolerance (exact form: a chord `c` of a circle of radius `r` deviates
+/// `r - sqrt(r² - c²/4)`). The tangential limits are what is left at the cap speed.
+fn shape(b: &CommandBlock, machine: &Machine, period_s: f64, feed_mm_s: f64) -> Shape {
     let (u0, u1) = path::domain(b);
-    let samples = 16 * b.n_ctrl.max(2) as usize;
-    let mut cap = f64::INFINITY;
+    let samples = (16 * b.n_ctrl.max(2) as usize).max(32);
+    let axes = machine.axes.as_array();
+    let a_path = machine.path_acc_mm_per_s2;
+    let j_path = machine.path_jerk_mm_per_s3;
+    // Distinct knots: dk/ds is taken by differences inside one span (where the curve is
+    // smooth), and the curvature jump at a knot of continuity below C² is a junction of
+    // its own.
+    let mut spans: Vec<f64> = b.knots().to_vec();
+    spans.dedup();
+    let span_of = |u: f64| {
+        let i = spans
+            .partition_point(|k| *k <= u)
+            .clamp(1, spans.len().max(2) - 1);
+        (spans[i - 1], spans[i.min(spans.len() - 1)])
+    };
+    let mut pts: Vec<([f64; 3], [f64; 3])> = Vec::with_capacity(samples + 1);
+    let mut dk: Vec<[f64; 3]> = Vec::with_capacity(samples + 1);
     for i in 0..=samples {
-        let e = path::eval(b, u0 + (u1 - u0) * i as f64 / samples as f64);
-        let sp = path::norm(e.d1);
-        if sp < 1e-12 {
+        let u = u0 + (u1 - u0) * i as f64 / samples as f64;
+        let Some((t, k)) = frame(b, u) else {
             continue;
+        };
+        pts.push((t, k));
+        let (lo, hi) = span_of(u);
+        let h = 1e-4 * (hi - lo);
+        let (ua, ub) = ((u - h).max(lo), (u + h).min(hi));
+        let d = match (frame(b, ua), frame(b, ub)) {
+            (Some((_, ka)), Some((_, kb))) if ub > ua => {
+                let ds = path::norm(sub(path::eval(b, ub).p, path::eval(b, ua).p));
+                if ds > 1e-15 {
+                    sub(kb, ka).map(|x| x / ds)
+                } else {
+                    [0.0; 3]
+                }
+            }
+            _ => [0.0; 3],
+        };
+        dk.push(d);
+    }
+    // Curvature jumps at interior knots where the curve is only C¹ (or less).
+    let mut jumps: Vec<f64> = Vec::new();
+    let degree = b.degree as usize;
+    for w in spans.windows(2).skip(1) {
+        let knot = w[0];
+        let mult = b.knots().iter().filter(|k| **k == knot).count();
+        if degree < mult + 2 {
+            let eps = 1e-9 * (u1 - u0);
+            if let (Some((_, ka)), Some((_, kb))) = (frame(b, knot - eps), frame(b, knot + eps)) {
+                jumps.push(path::norm(sub(kb, ka)));
+            }
         }
-        let c = [
-            e.d1[1] * e.d2[2] - e.d1[2] * e.d2[1],
-            e.d1[2] * e.d2[0] - e.d1[0] * e.d2[2],
-            e.d1[0] * e.d2[1] - e.d1[1] * e.d2[0],
-        ];
-        let kappa = path::norm(c) / sp.powi(3);
+    }
+    let first = pts.first().copied().unwrap_or(([1.0, 0.0, 0.0], [0.0; 3]));
+    let last = pts.last().copied().unwrap_or(first);
+    let mut v = feed_mm_s;
+    for jump in &jumps {
+        if *jump > 1e-9 {
+            v = v.min((NORMAL_SHARE * j_path * period_s / jump).sqrt());
+        }
+    }
+    for ((t, k), dk) in pts.iter().zip(&dk) {
+        let kappa = path::norm(*k);
         if kappa > 1e-12 {
             let rho = 1.0 / kappa;
             let tol = machine.chord_tolerance_mm.min(rho);
             let chord = 2.0 * (tol * (2.0 * rho - tol)).sqrt();
-            cap = cap
-                .min((machine.path_acc_mm_per_s2 * rho).sqrt())
-                .min(chord / period_s);
+            v = v
+                .min(chord / period_s)
+                .min((NORMAL_SHARE * a_path / kappa).sqrt());
+        }
+        let dkn = path::norm(*dk);
+        if dkn > 1e-12 {
+            v = v.min((NORMAL_SHARE * j_path / dkn).cbrt());
+        }
+        for (i, ax) in axes.iter().enumerate() {
+            if t[i].abs() > 1e-12 {
+                v = v.min(ax.max_vel_mm_per_min / 60.0 / t[i].abs());
+            }
+            if k[i].abs() > 1e-12 {
+                v = v.min((NORMAL_SHARE * ax.max_acc_mm_per_s2 / k[i].abs()).sqrt());
+            }
+            if dk[i].abs() > 1e-12 {
+                v = v.min((NORMAL_SHARE * ax.max_jerk_mm_per_s3 / dk[i].abs()).cbrt());
+            }
         }
     }
-    cap
+    // What the cap speed leaves to the profile along the path.
+    let mut acc = a_path;
+    for ((t, k), dk) in pts.iter().zip(&dk) {
+        let kappa = path::norm(*k);
+        let an = v * v * kappa;
+        acc = acc.min((a_path * a_path - an * an).max(0.0).sqrt());
+        let jn = v * v * v * path::norm(*dk);
+        if kappa > 1e-12 {
+            acc = acc.min((j_path - jn) / (6.0 * v * kappa));
+        }
+        for (i, ax) in axes.iter().enumerate() {
+            if t[i].abs() > 1e-12 {
+                acc = acc.min((ax.max_acc_mm_per_s2 - v * v * k[i].abs()) / t[i].abs());
+                if k[i].abs() > 1e-12 {
+                    let jn_i = v * v * v * dk[i].abs();
+                    acc = acc.min((ax.max_jerk_mm_per_s3 - jn_i) / (6.0 * v * k[i].abs()));
+                }
+            }
+        }
+    }
+    let mut jerk = j_path;
+    for ((t, k), dk) in pts.iter().zip(&dk) {
+        let kappa = path::norm(*k);
+        jerk = jerk.min(j_path - 3.0 * v * acc * kappa - v * v * v * path::norm(*dk));
+        for (i, ax) in axes.iter().enumerate() {
+            if t[i].abs() > 1e-12 {
+                let other = 3.0 * v * acc * k[i].abs() + v * v * v * dk[i].abs();
+                jerk = jerk.min((ax.max_jerk_mm_per_s3 - other) / t[i].abs());
+            }
+        }
+    }
+    Shape {
+        v_cap: v,
+        // The shares above leave at least a quarter of each; the floor only guards
+        // against a degenerate sample.
+        acc: acc.max(0.05 * a_path),
+        jerk: jerk.max(0.05 * j_path),
+        t_start: first.0,
+        t_end: last.0,
+        k_start: first.1,
+        k_end: last.1,
+    }
 }
 
-/// Fills in lengths, feed caps and start/end speeds of every motion block.
+/// Speed (mm/s) at which the junction between two motions with these shapes can be
+/// passed: the lower cap; at a kink (tangent turning by `θ`), the speed whose direction
+/// change in one period stays within the acceleration (`2·v·sin(θ/2) <= A·T`); where the
+/// curvature jumps by `Δk`, the speed whose acceleration step `v²·Δk` in one period stays
+/// within the jerk. Zero (exact stop) for corners sharper than the machine's corner angle.
+fn junction_speed(a: &Shape, b: &Shape, machine: &Machine, period_s: f64) -> f64 {
+    let cos = dot(a.t_end, b.t_start).clamp(-1.0, 1.0);
+    if cos < machine.corner_angle_deg.to_radians().cos() {
+        return 0.0;
+    }
+    let mut v = a.v_cap.min(b.v_cap);
+    let half_sin = (0.5 * (1.0 - cos)).max(0.0).sqrt();
+    if half_sin > 1e-7 {
+        v = v.min(a.acc.min(b.acc) * period_s / (2.0 * half_sin));
+    }
+    let dk = path::norm(sub(a.k_end, b.k_start));
+    if dk > 1e-9 {
+        v = v.min((a.jerk.min(b.jerk) * period_s / dk).sqrt());
+    }
+    v
+}
+
+/// Plans one motion block standing alone (from rest to rest) at `feed` mm/min.
+pub fn plan_alone(b: &mut CommandBlock, machine: &Machine, feed: f64) {
+    b.feed_mm_per_min = feed;
+    plan(std::slice::from_mut(b), machine, 1_000_000);
+}
+
+/// Fills in lengths, feed caps, profile limits and start/end speeds of every motion
+/// block: a look-ahead over the whole program (the interpreter reads all of it before
+/// any motion). A backward then a forward pass, with the jerk-limited distances of
+/// [`shared::profile`], make every block's start and end speed reachable.
 pub fn plan(blocks: &mut [CommandBlock], machine: &Machine, period_ns: u64) {
     let period_s = period_ns as f64 * 1e-9;
-    let a = machine.path_acc_mm_per_s2;
-    let cos_corner = machine.corner_angle_deg.to_radians().cos();
     let motion = |b: &CommandBlock| b.kind == BlockKind::Motion as u32;
-    for b in blocks.iter_mut().filter(|b| motion(b)) {
-        b.length_mm = path::length(b);
-        let cap = curvature_cap(b, machine, period_s) * 60.0;
-        b.feed_mm_per_min = b.feed_mm_per_min.min(cap);
-    }
-    // Junction speed limits (mm/s) at the end of each block.
     let n = blocks.len();
+    let mut shapes: Vec<Option<Shape>> = vec![None; n];
+    for (b, sh) in blocks.iter_mut().zip(shapes.iter_mut()) {
+        if !motion(b) {
+            continue;
+        }
+        b.length_mm = path::length(b);
+        let shp = shape(b, machine, period_s, b.feed_mm_per_min / 60.0);
+        b.feed_mm_per_min = b.feed_mm_per_min.min(shp.v_cap * 60.0);
+        b.acc_mm_per_s2 = shp.acc;
+        b.jerk_mm_per_s3 = shp.jerk;
+        *sh = Some(shp);
+    }
+    let lim = |b: &CommandBlock| Jerk {
+        acc: b.acc_mm_per_s2,
+        jerk: b.jerk_mm_per_s3,
+    };
+    // Junction speed limits (mm/s) at the end of each block.
     let mut end = vec![0.0f64; n];
     for i in 0..n.saturating_sub(1) {
         let (b, nb) = (&blocks[i], &blocks[i + 1]);
-        if !motion(b) || !motion(nb) {
-            continue;
-        }
-        let (_, u1) = path::domain(b);
-        let (v0, _) = path::domain(nb);
-        let t_out = unit(path::eval(b, u1).d1);
-        let t_in = unit(path::eval(nb, v0).d1);
-        let cos = t_out[0] * t_in[0] + t_out[1] * t_in[1] + t_out[2] * t_in[2];
         let rapid_change = (b.flags ^ nb.flags) & FLAG_RAPID != 0;
-        if cos >= cos_corner && !rapid_change {
-            end[i] = b.feed_mm_per_min.min(nb.feed_mm_per_min) / 60.0;
+        if let (Some(sa), Some(sb), false) = (&shapes[i], &shapes[i + 1], rapid_change) {
+            end[i] = junction_speed(sa, sb, machine, period_s)
+                .min(b.feed_mm_per_min / 60.0)
+                .min(nb.feed_mm_per_min / 60.0);
         }
     }
     // Backward pass: every block must be able to slow to its end speed.
@@ -284,7 +524,7 @@ pub fn plan(blocks: &mut [CommandBlock], machine: &Machine, period_ns: u64) {
         } else {
             0.0
         };
-        start[i] = entry.min((end[i] * end[i] + 2.0 * a * len).sqrt());
+        start[i] = entry.min(lim(&blocks[i]).reachable_speed(end[i], len));
         if i > 0 {
             end[i - 1] = start[i];
         }
@@ -295,7 +535,7 @@ pub fn plan(blocks: &mut [CommandBlock], machine: &Machine, period_ns: u64) {
             continue;
         }
         let len = blocks[i].length_mm;
-        end[i] = end[i].min((start[i] * start[i] + 2.0 * a * len).sqrt());
+        end[i] = end[i].min(lim(&blocks[i]).reachable_speed(start[i], len));
         if i + 1 < n && motion(&blocks[i + 1]) {
             start[i + 1] = start[i + 1].min(end[i]);
         }

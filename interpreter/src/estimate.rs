@@ -45,11 +45,7 @@ pub fn estimate(
     machine: &Machine,
     period_ns: u64,
 ) -> Result<Estimate, String> {
-    let lim = Limits {
-        period_ns,
-        path_acc_mm_per_s2: machine.path_acc_mm_per_s2,
-        max_following_error_mm: machine.max_following_error_mm,
-    };
+    let lim = Limits::new(machine, period_ns);
     let mut engine = Engine::new(lim, [0.0; 3]);
     let mut src = Slice(blocks, 0);
     let mut moves: Vec<LineTime> = Vec::new();

@@ -162,7 +162,7 @@ impl Default for Streaming {
 
 /// A rapid (G0) straight move from `from` back to the machine's start, the origin, with a
 /// stop at both ends; `None` when `from` is the origin already.
-fn return_to_start(from: [f64; 3], rapid_mm_per_min: f64) -> Option<CommandBlock> {
+fn return_to_start(from: [f64; 3], machine: &Machine) -> Option<CommandBlock> {
     let length = shared::path::norm(from);
     if length < 1e-9 {
         return None;
@@ -174,8 +174,9 @@ fn return_to_start(from: [f64; 3], rapid_mm_per_min: f64) -> Option<CommandBlock
     b.knots[..4].copy_from_slice(&[0.0, 0.0, 1.0, 1.0]);
     b.ctrl[0] = [from[0], from[1], from[2], 1.0];
     b.ctrl[1] = [0.0, 0.0, 0.0, 1.0];
-    b.feed_mm_per_min = rapid_mm_per_min;
     b.length_mm = length;
+    // A straight line: the planner's limits for it are the machine's.
+    crate::blocks::plan_alone(&mut b, machine, machine.rapid_mm_per_min);
     Some(b)
 }
 
@@ -195,7 +196,7 @@ pub fn repeated<'a>(
         .rev()
         .find(|b| b.kind == BlockKind::Motion as u32)
         .map(|b| shared::path::eval(b, shared::path::domain(b).1).p);
-    let back = end_pos.and_then(|p| return_to_start(p, machine.rapid_mm_per_min));
+    let back = end_pos.and_then(|p| return_to_start(p, machine));
     let repeat = repeat.max(1);
     (0..repeat)
         .flat_map(move |r| {

@@ -21,6 +21,7 @@ pub mod ipc;
 pub mod machine;
 pub mod nurbs;
 pub mod path;
+pub mod profile;
 pub mod protocol;
 pub mod stop;
 pub mod trace;

@@ -13,6 +13,9 @@ pub struct Machine {
     pub max_feed_mm_per_min: f64,
     /// Path acceleration used by the speed profile and the curvature limit.
     pub path_acc_mm_per_s2: f64,
+    /// Path jerk: how fast the path acceleration may change (the S-curve of the profile),
+    /// and the limit on the jerk that curvature adds at speed.
+    pub path_jerk_mm_per_s3: f64,
     /// Largest allowed deviation of a chord between consecutive set-points from the curve.
     pub chord_tolerance_mm: f64,
     /// Corners sharper than this (between the tangents of consecutive blocks) are taken
@@ -20,7 +23,65 @@ pub struct Machine {
     pub corner_angle_deg: f64,
     /// Following error that stops the machine with a fault.
     pub max_following_error_mm: f64,
+    /// Shortest and longest interpolation period this machine runs (`--period-us`).
+    pub min_period_us: u64,
+    pub max_period_us: u64,
+    /// Look-ahead window of the interpolator, in blocks: it holds this many blocks ahead
+    /// of the one it runs and always keeps a speed from which it can stop by the end of
+    /// the last one it holds (the planner itself looks over the whole program).
+    pub lookahead_blocks: u32,
+    /// Per-axis limits: the planner keeps every axis's share of the path motion within
+    /// them.
+    pub axes: Axes,
     pub servo: Servo,
+}
+
+/// The three linear axes' limits.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct Axes {
+    pub x: AxisLimits,
+    pub y: AxisLimits,
+    pub z: AxisLimits,
+}
+
+impl Default for Axes {
+    fn default() -> Self {
+        Axes {
+            x: AxisLimits::default(),
+            y: AxisLimits::default(),
+            z: AxisLimits {
+                max_vel_mm_per_min: 10_000.0,
+                max_acc_mm_per_s2: 2_000.0,
+                max_jerk_mm_per_s3: 50_000.0,
+            },
+        }
+    }
+}
+
+impl Axes {
+    pub fn as_array(&self) -> [AxisLimits; 3] {
+        [self.x, self.y, self.z]
+    }
+}
+
+/// One axis's velocity, acceleration and jerk limit.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct AxisLimits {
+    pub max_vel_mm_per_min: f64,
+    pub max_acc_mm_per_s2: f64,
+    pub max_jerk_mm_per_s3: f64,
+}
+
+impl Default for AxisLimits {
+    fn default() -> Self {
+        AxisLimits {
+            max_vel_mm_per_min: 15_000.0,
+            max_acc_mm_per_s2: 3_000.0,
+            max_jerk_mm_per_s3: 100_000.0,
+        }
+    }
 }
 
 impl Default for Machine {
@@ -29,9 +90,14 @@ impl Default for Machine {
             rapid_mm_per_min: 10_000.0,
             max_feed_mm_per_min: 10_000.0,
             path_acc_mm_per_s2: 2_000.0,
+            path_jerk_mm_per_s3: 50_000.0,
             chord_tolerance_mm: 0.001,
             corner_angle_deg: 5.0,
             max_following_error_mm: 2.0,
+            min_period_us: 100,
+            max_period_us: 10_000,
+            lookahead_blocks: 256,
+            axes: Axes::default(),
             servo: Servo::default(),
         }
     }
@@ -143,6 +209,7 @@ impl Machine {
             ("rapid_mm_per_min", self.rapid_mm_per_min),
             ("max_feed_mm_per_min", self.max_feed_mm_per_min),
             ("path_acc_mm_per_s2", self.path_acc_mm_per_s2),
+            ("path_jerk_mm_per_s3", self.path_jerk_mm_per_s3),
             ("chord_tolerance_mm", self.chord_tolerance_mm),
             ("corner_angle_deg", self.corner_angle_deg),
             ("max_following_error_mm", self.max_following_error_mm),
@@ -156,10 +223,38 @@ impl Machine {
                 s.total_mass_kg(),
             ),
         ];
-        for (name, v) in named {
+        let mut axis_named = vec![];
+        for (axis, l) in ["x", "y", "z"].iter().zip(self.axes.as_array()) {
+            axis_named.push((
+                format!("axes.{axis}.max_vel_mm_per_min"),
+                l.max_vel_mm_per_min,
+            ));
+            axis_named.push((
+                format!("axes.{axis}.max_acc_mm_per_s2"),
+                l.max_acc_mm_per_s2,
+            ));
+            axis_named.push((
+                format!("axes.{axis}.max_jerk_mm_per_s3"),
+                l.max_jerk_mm_per_s3,
+            ));
+        }
+        let named = named.iter().map(|(n, v)| (n.to_string(), *v));
+        for (name, v) in named.chain(axis_named) {
             if !v.is_finite() || v <= 0.0 {
                 return Err(format!("{name} must be a positive number, got {v}"));
             }
+        }
+        if self.min_period_us == 0 || self.min_period_us > self.max_period_us {
+            return Err(format!(
+                "min_period_us ({}) must be at least 1 and at most max_period_us ({})",
+                self.min_period_us, self.max_period_us
+            ));
+        }
+        if !(2..=4096).contains(&self.lookahead_blocks) {
+            return Err(format!(
+                "lookahead_blocks must be from 2 to 4096, got {}",
+                self.lookahead_blocks
+            ));
         }
         let non_negative = [
             ("servo.motor_inertia_kg", s.motor_inertia_kg),
@@ -185,6 +280,18 @@ impl Machine {
         Ok(())
     }
 
+    /// Checks that this machine runs at `period_us`; the error says the allowed range.
+    pub fn check_period(&self, period_us: u64) -> Result<(), String> {
+        if period_us < self.min_period_us || period_us > self.max_period_us {
+            return Err(format!(
+                "a period of {period_us} µs is outside this machine's range of {} to {} µs \
+                 (min_period_us and max_period_us in the machine file)",
+                self.min_period_us, self.max_period_us
+            ));
+        }
+        Ok(())
+    }
+
     /// The default machine file, as TOML, each key with a comment giving its meaning and
     /// unit (what `cnc machine` prints).
     pub fn default_toml() -> String {
@@ -199,7 +306,7 @@ impl Machine {
             }
             let key = line.split('=').next().unwrap_or("").trim();
             if let Some((_, doc)) = KEY_DOCS.iter().find(|(k, _)| {
-                k.split_once('.')
+                k.rsplit_once('.')
                     .map_or(section.is_empty() && *k == key, |(s, k)| {
                         s == section && k == key
                     })
@@ -240,6 +347,40 @@ const KEY_DOCS: &[(&str, &str)] = &[
         "path_acc_mm_per_s2",
         "path acceleration of the feed profile and curvature limit, mm/s²",
     ),
+    (
+        "path_jerk_mm_per_s3",
+        "path jerk: rate of change of the path acceleration (S-curve), mm/s³",
+    ),
+    (
+        "min_period_us",
+        "shortest interpolation period this machine runs, µs",
+    ),
+    (
+        "max_period_us",
+        "longest interpolation period this machine runs, µs",
+    ),
+    (
+        "lookahead_blocks",
+        "blocks the interpolator holds ahead; it can always stop by the last one",
+    ),
+    ("axes.x.max_vel_mm_per_min", "X axis velocity limit, mm/min"),
+    (
+        "axes.x.max_acc_mm_per_s2",
+        "X axis acceleration limit, mm/s²",
+    ),
+    ("axes.x.max_jerk_mm_per_s3", "X axis jerk limit, mm/s³"),
+    ("axes.y.max_vel_mm_per_min", "Y axis velocity limit, mm/min"),
+    (
+        "axes.y.max_acc_mm_per_s2",
+        "Y axis acceleration limit, mm/s²",
+    ),
+    ("axes.y.max_jerk_mm_per_s3", "Y axis jerk limit, mm/s³"),
+    ("axes.z.max_vel_mm_per_min", "Z axis velocity limit, mm/min"),
+    (
+        "axes.z.max_acc_mm_per_s2",
+        "Z axis acceleration limit, mm/s²",
+    ),
+    ("axes.z.max_jerk_mm_per_s3", "Z axis jerk limit, mm/s³"),
     (
         "chord_tolerance_mm",
         "largest deviation of a set-point chord from the curve, mm",

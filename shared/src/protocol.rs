@@ -9,7 +9,7 @@ use crate::nurbs::{self, CurveError, MAX_CTRL, MAX_KNOTS};
 use iceoryx2::prelude::ZeroCopySend;
 
 /// Bumped whenever a payload's layout or meaning changes.
-pub const PROTOCOL_VERSION: u32 = 1;
+pub const PROTOCOL_VERSION: u32 = 2;
 
 /// What a command block asks for.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -79,7 +79,7 @@ impl Helix {
 /// One command from the interpreter to the interpolator.
 #[repr(C)]
 #[derive(Debug, Clone, Copy, ZeroCopySend)]
-#[type_name("cnc::CommandBlockV1")]
+#[type_name("cnc::CommandBlockV2")]
 pub struct CommandBlock {
     pub protocol: u32,
     /// A [`BlockKind`] code.
@@ -100,6 +100,11 @@ pub struct CommandBlock {
     pub end_feed_mm_per_min: f64,
     /// Path length of the block's curve.
     pub length_mm: f64,
+    /// Tangential (along the path) acceleration and jerk the speed profile may use in
+    /// this block: the machine's path limits less what the block's curvature takes at
+    /// the block's feed, and within every axis's share (set by the planner).
+    pub acc_mm_per_s2: f64,
+    pub jerk_mm_per_s3: f64,
     pub dwell_ns: u64,
     pub helix: Helix,
     pub knots: [f64; MAX_KNOTS],
@@ -122,6 +127,8 @@ impl CommandBlock {
             start_feed_mm_per_min: 0.0,
             end_feed_mm_per_min: 0.0,
             length_mm: 0.0,
+            acc_mm_per_s2: 0.0,
+            jerk_mm_per_s3: 0.0,
             dwell_ns: 0,
             helix: Helix::NONE,
             knots: [0.0; MAX_KNOTS],
@@ -206,6 +213,17 @@ impl CommandBlock {
                         seq: self.seq,
                         field: "length_mm",
                     });
+                }
+                for (field, v) in [
+                    ("acc_mm_per_s2", self.acc_mm_per_s2),
+                    ("jerk_mm_per_s3", self.jerk_mm_per_s3),
+                ] {
+                    if !v.is_finite() || v <= 0.0 {
+                        return Err(ProtocolError::BadField {
+                            seq: self.seq,
+                            field,
+                        });
+                    }
                 }
                 let h = &self.helix;
                 if h.axis != NO_AXIS {

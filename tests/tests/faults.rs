@@ -239,6 +239,8 @@ fn good_block() -> CommandBlock {
     b.ctrl[1] = [10.0, 0.0, 0.0, 1.0];
     b.feed_mm_per_min = 3000.0;
     b.length_mm = 10.0;
+    b.acc_mm_per_s2 = 2000.0;
+    b.jerk_mm_per_s3 = 50_000.0;
     b
 }
 

@@ -259,11 +259,7 @@ pub fn run<S: Service>(cfg: &Config) -> Result<Summary, RunError> {
         first.is_some()
     })?;
 
-    let lim = Limits {
-        period_ns: cfg.period_ns,
-        path_acc_mm_per_s2: cfg.machine.path_acc_mm_per_s2,
-        max_following_error_mm: cfg.machine.max_following_error_mm,
-    };
+    let lim = Limits::new(&cfg.machine, cfg.period_ns);
     let mut engine = Engine::new(lim, [0.0; 3]);
     // Both peers are connected now (the servo subscribed, the interpreter sent a block):
     // from here on, a port that leaves or a node that dies is a fault.

@@ -49,7 +49,7 @@ pub fn insert_knot(curve: &SplitCurve, u: f64) -> SplitCurve {
 }
 
 /// Splits a curve exactly at the interior parameter `u` into a left and a right curve.
-fn split_at(curve: &SplitCurve, u: f64) -> (SplitCurve, SplitCurve) {
+pub fn split_at(curve: &SplitCurve, u: f64) -> (SplitCurve, SplitCurve) {
     let p = curve.degree;
     let mut c = curve.clone();
     while c.knots.iter().filter(|&&k| k == u).count() < p {

@@ -14,7 +14,7 @@ pub mod reference;
 pub mod surface;
 
 pub use eval::{eval, find_span, CurvePoint};
-pub use knots::{insert_knot, split_to_capacity, SplitCurve};
+pub use knots::{insert_knot, split_at, split_to_capacity, SplitCurve};
 pub use length::arc_length;
 
 /// The highest degree a block may carry (order 10: Fanuc's G06.2 rank limit we accept).

@@ -1,0 +1,339 @@
+//! Jerk-limited speed along a path: the closed forms the planner and the interpolator
+//! share, so that what the planner promises the interpolator can keep.
+//!
+//! The state is the path speed `v` and the path (tangential) acceleration `a`; the
+//! acceleration is limited to `|a| <= acc` and changes at most at `jerk` per second (an
+//! S-curve). A speed change between two states of zero acceleration takes, with the
+//! quickest jerk-limited profile, `T = dv/acc + acc/jerk` when `dv >= acc²/jerk` (the
+//! acceleration saturates) and `T = 2·sqrt(dv/jerk)` otherwise; that profile is
+//! point-symmetric in time, so the distance it covers is the mean speed times `T`.
+
+/// Path acceleration and jerk limits, both positive.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Limits {
+    /// mm/s²
+    pub acc: f64,
+    /// mm/s³
+    pub jerk: f64,
+}
+
+impl Limits {
+    /// Time (s) of the quickest speed change `dv >= 0` from rest acceleration to rest
+    /// acceleration.
+    #[inline]
+    pub fn change_time(&self, dv: f64) -> f64 {
+        let dv = dv.max(0.0);
+        if dv * self.jerk >= self.acc * self.acc {
+            dv / self.acc + self.acc / self.jerk
+        } else {
+            2.0 * (dv / self.jerk).sqrt()
+        }
+    }
+
+    /// Distance (mm) of the quickest speed change between `v0` and `v1`, with zero
+    /// acceleration at both ends (it is the same going up or down).
+    #[inline]
+    pub fn change_distance(&self, v0: f64, v1: f64) -> f64 {
+        0.5 * (v0 + v1) * self.change_time((v0 - v1).abs())
+    }
+
+    /// The highest speed (zero acceleration) from which `v_end` is reached within `d` mm,
+    /// or equally the highest speed reachable from `v_end` within `d` mm. Inverse of
+    /// [`change_distance`](Self::change_distance), found by bisection (not for the cycle).
+    pub fn reachable_speed(&self, v_end: f64, d: f64) -> f64 {
+        if d <= 0.0 {
+            return v_end;
+        }
+        let (mut lo, mut hi) = (v_end, v_end + 1.0);
+        while self.change_distance(hi, v_end) < d {
+            lo = hi;
+            hi = v_end + 2.0 * (hi - v_end);
+            if hi > 1e9 {
+                return hi;
+            }
+        }
+        for _ in 0..100 {
+            let mid = 0.5 * (lo + hi);
+            if self.change_distance(mid, v_end) <= d {
+                lo = mid;
+            } else {
+                hi = mid;
+            }
+            if hi - lo <= 1e-12 * hi {
+                break;
+            }
+        }
+        lo
+    }
+
+    /// Can a machine at speed `v` and acceleration `a` (`|a| <= acc`) be at a speed of at
+    /// most `v_end`, with its acceleration back to zero or below, within `d` mm, braking
+    /// as hard as the limits allow? This is the test the interpolator makes every cycle
+    /// against each speed limit ahead.
+    #[inline]
+    pub fn can_reach(&self, v: f64, a: f64, v_end: f64, d: f64) -> bool {
+        let j = self.jerk;
+        if a >= 0.0 {
+            // Bring the acceleration down to zero first: the speed peaks on the way.
+            let t = a / j;
+            let peak = v + a * t * 0.5;
+            if peak <= v_end {
+                return true;
+            }
+            let d_up = v * t + a * t * t * 0.5 - j * t * t * t / 6.0;
+            d_up + self.change_distance(peak, v_end) <= d
+        } else {
+            // Easing off from this braking would run the speed below zero: the path does
+            // not reverse, so no limit ahead can be met from here.
+            if v < a * a / (2.0 * j) {
+                return false;
+            }
+            if v <= v_end {
+                return true;
+            }
+            // Already braking with -a: this state lies on the quickest profile from the
+            // speed `v0` where the braking began at zero acceleration, `t` seconds ago.
+            let t = -a / j;
+            let v0 = v + a * a / (2.0 * j);
+            if v0 - v_end >= a * a / j {
+                let behind = v0 * t - j * t * t * t / 6.0;
+                self.change_distance(v0, v_end) - behind <= d
+            } else {
+                // Braking harder than this change needs: ease off at once; the speed
+                // passes `v_end` before the acceleration is back to zero, after `t`
+                // seconds with `v + a·t + j·t²/2 = v_end`.
+                let disc = (a * a - 2.0 * j * (v - v_end)).max(0.0);
+                let t = (-a - disc.sqrt()) / j;
+                v * t + a * t * t * 0.5 + j * t * t * t / 6.0 <= d
+            }
+        }
+    }
+}
+
+/// Where the machine is along the path: speed, acceleration and distance covered.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct Motion {
+    pub v: f64,
+    pub a: f64,
+    pub s: f64,
+}
+
+impl Motion {
+    /// The motion `dt` seconds on, under constant jerk `j`.
+    #[inline]
+    pub fn after(self, j: f64, dt: f64) -> Motion {
+        Motion {
+            v: self.v + self.a * dt + 0.5 * j * dt * dt,
+            a: self.a + j * dt,
+            s: self.s + self.v * dt + 0.5 * self.a * dt * dt + j * dt * dt * dt / 6.0,
+        }
+    }
+}
+
+/// Up to three constant-jerk phases, `(jerk, duration)`; after the last the acceleration
+/// is zero and the speed held.
+pub type Phases = [(f64, f64); 3];
+
+/// Where `phases` from `m` lead after `dt` seconds. Past their end the motion goes on at
+/// the speed reached, without acceleration (never below standstill).
+#[inline]
+pub fn follow(m: Motion, phases: &Phases, dt: f64) -> Motion {
+    let mut m = m;
+    let mut left = dt;
+    for &(j, d) in phases {
+        if left <= 0.0 {
+            break;
+        }
+        let step = d.min(left).max(0.0);
+        m = m.after(j, step);
+        left -= step;
+    }
+    if left > 0.0 {
+        m.a = 0.0;
+        m.v = m.v.max(0.0);
+        m.s += m.v * left;
+    }
+    m
+}
+
+impl Limits {
+    /// The quickest braking from `m` to the speed `v_end`, ending with zero acceleration:
+    /// jerk `-J` down to the peak deceleration, held there if that is the limit, then `+J`
+    /// back to zero. A machine that already brakes harder than that eases off at once
+    /// (its speed then passes below `v_end`). Empty phases when no braking is needed.
+    pub fn brake(&self, m: Motion, v_end: f64) -> Phases {
+        let (j, acc) = (self.jerk, self.acc);
+        let none = [(0.0, 0.0); 3];
+        let peak = if m.a > 0.0 {
+            m.v + m.a * m.a / (2.0 * j)
+        } else {
+            m.v
+        };
+        if peak <= v_end {
+            // Only the acceleration needs to go.
+            return if m.a > 0.0 {
+                [(-j, m.a / j), (0.0, 0.0), (0.0, 0.0)]
+            } else {
+                none
+            };
+        }
+        let ap2 = 0.5 * m.a * m.a + j * (m.v - v_end);
+        let ap = ap2.max(0.0).sqrt();
+        if m.a < 0.0 && -m.a >= ap {
+            return [(j, -m.a / j), (0.0, 0.0), (0.0, 0.0)];
+        }
+        if ap <= acc {
+            return [(-j, (m.a + ap) / j), (j, ap / j), (0.0, 0.0)];
+        }
+        // The deceleration saturates at `acc`: hold it in between.
+        let dv1 = (m.a * m.a - acc * acc) / (2.0 * j);
+        let dv3 = -acc * acc / (2.0 * j);
+        let hold = ((m.v - v_end) + dv1 + dv3) / acc;
+        [(-j, (m.a + acc) / j), (0.0, hold.max(0.0)), (j, acc / j)]
+    }
+
+    /// Distance the quickest braking from `m` to `v_end` covers (zero when none is
+    /// needed).
+    pub fn brake_distance(&self, m: Motion, v_end: f64) -> f64 {
+        let end = self
+            .brake(m, v_end)
+            .iter()
+            .fold(m, |m, &(j, d)| m.after(j, d));
+        end.s - m.s
+    }
+}
+
+/// One cycle of the profile: the acceleration moves linearly from `a` to `a1` over the
+/// period `t`. Returns the speed at its end and the distance covered.
+#[inline]
+pub fn integrate(v: f64, a: f64, a1: f64, t: f64) -> (f64, f64) {
+    let v1 = v + 0.5 * (a + a1) * t;
+    let ds = v * t + (2.0 * a + a1) * t * t / 6.0;
+    (v1, ds)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const LIM: Limits = Limits {
+        acc: 2000.0,
+        jerk: 50_000.0,
+    };
+
+    /// Brakes from (v, a) to v_end with the quickest profile, simulated in tiny steps.
+    fn simulate_brake(v: f64, a: f64, v_end: f64) -> f64 {
+        let dt = 1e-6;
+        let (mut v, mut a, mut s) = (v, a, 0.0);
+        // Brake at -acc until easing off (raising the acceleration back to zero) would
+        // land on v_end, then ease off; stop once the speed is down to v_end.
+        let mut easing = false;
+        // Ends when the ease-off is complete (the speed then is v_end to rounding; a test on
+        // the speed alone would stop early on a step's rounding, where the speed is flat).
+        // A state that already brakes harder than needed passes v_end with a slope: there
+        // the speed alone ends it.
+        while !(easing && a >= 0.0) && v > v_end - 1e-2 {
+            let ease = if a < 0.0 {
+                a * a / (2.0 * LIM.jerk)
+            } else {
+                0.0
+            };
+            easing |= a < 0.0 && v - ease <= v_end;
+            let target = if easing { 0.0 } else { -LIM.acc };
+            let a1 = if target > a {
+                (a + LIM.jerk * dt).min(target)
+            } else {
+                (a - LIM.jerk * dt).max(target)
+            };
+            let (v1, ds) = integrate(v, a, a1, dt);
+            v = v1;
+            a = a1;
+            s += ds;
+        }
+        s
+    }
+
+    #[test]
+    fn change_distance_matches_a_simulated_profile() {
+        for (v0, v1) in [(100.0, 0.0), (50.0, 10.0), (20.0, 0.0), (5.0, 4.0)] {
+            let want = LIM.change_distance(v0, v1);
+            let got = simulate_brake(v0, 0.0, v1);
+            assert!(
+                (got - want).abs() < 1e-3 * want + 1e-6,
+                "{v0}->{v1}: {got} vs {want}"
+            );
+        }
+    }
+
+    #[test]
+    fn reachable_speed_inverts_change_distance() {
+        for (v_end, d) in [(0.0, 4.5), (10.0, 0.3), (0.0, 1e-4), (30.0, 100.0)] {
+            let v = LIM.reachable_speed(v_end, d);
+            assert!((LIM.change_distance(v, v_end) - d).abs() < 1e-9 * d.max(1.0));
+        }
+    }
+
+    #[test]
+    fn can_reach_agrees_with_the_braking_distance_from_any_state() {
+        // From a state with acceleration a, the quickest braking distance found by a
+        // search over the distance d where can_reach flips equals the simulated one.
+        for (v, a, v_end) in [
+            (100.0, 0.0, 0.0),
+            (60.0, 1500.0, 0.0),
+            (60.0, -1500.0, 0.0),
+            (60.0, -2000.0, 20.0),
+            (40.0, -1800.0, 39.0),
+        ] {
+            let (mut lo, mut hi) = (0.0, 1000.0);
+            for _ in 0..80 {
+                let mid = 0.5 * (lo + hi);
+                if LIM.can_reach(v, a, v_end, mid) {
+                    hi = mid;
+                } else {
+                    lo = mid;
+                }
+            }
+            let sim = simulate_brake(v, a, v_end);
+            assert!(
+                hi <= sim * (1.0 + 1e-3) + 1e-6,
+                "{v} {a} -> {v_end}: {hi} vs {sim}"
+            );
+            assert!(
+                hi >= sim * (1.0 - 1e-3) - 1e-3,
+                "{v} {a} -> {v_end}: {hi} vs {sim}"
+            );
+        }
+    }
+
+    #[test]
+    fn brake_lands_on_the_target_speed_with_zero_acceleration() {
+        for (v, a, v_end) in [
+            (100.0, 0.0, 0.0),
+            (60.0, 1500.0, 0.0),
+            (60.0, -1500.0, 0.0),
+            (60.0, -2000.0, 20.0),
+            (5.0, 300.0, 1.0),
+        ] {
+            let m = Motion { v, a, s: 0.0 };
+            let ph = LIM.brake(m, v_end);
+            let end = ph.iter().fold(m, |m, &(j, d)| m.after(j, d));
+            assert!((end.v - v_end).abs() < 1e-9, "{v} {a}: {end:?}");
+            assert!(end.a.abs() < 1e-9, "{end:?}");
+            for &(j, d) in &ph {
+                assert!(j.abs() <= LIM.jerk && d >= 0.0);
+            }
+            // The same distance as the closed form the cycle tests with.
+            let d = LIM.brake_distance(m, v_end);
+            assert!(LIM.can_reach(v, a, v_end, d * (1.0 + 1e-9) + 1e-12));
+            assert!(!LIM.can_reach(v, a, v_end, d * (1.0 - 1e-6)));
+        }
+    }
+
+    #[test]
+    fn integrate_is_exact_for_a_linear_acceleration() {
+        let (v1, ds) = integrate(10.0, 100.0, 200.0, 0.01);
+        assert!((v1 - 11.5).abs() < 1e-12);
+        // s = v t + a t²/2 + j t³/6 with j = 10000.
+        assert!((ds - (0.1 + 0.005 + 10000.0 * 1e-6 / 6.0)).abs() < 1e-12);
+    }
+}
