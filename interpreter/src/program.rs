@@ -25,7 +25,7 @@ mod feed;
 mod flow;
 mod linuxcnc;
 
-use crate::parse::{flow, o_word_of, read_line, Diagnostic, OWord, Params, Word};
+use crate::parse::{flow, o_word_of, read_line, Diagnostic, OKind, OWord, Params, Word};
 pub use dialect::Dialect;
 use dialect::DialectState;
 use flow::Runner;
@@ -320,6 +320,15 @@ pub fn interpret_with(text: &str, opts: &Options) -> Result<Program, Vec<Diagnos
             prog.messages.push((line, m.clone()));
         }
         if let Some(o) = &parsed.o_word {
+            if o.kind == OKind::ProgramNumber {
+                if let Err(d) = st
+                    .dialect
+                    .claim(Dialect::Fanuc, line, o.col, "a program number O…")
+                {
+                    errors.push(d);
+                }
+                continue;
+            }
             match run.step(here, o, &mut params, &mut errors) {
                 Some(next) => pc = next,
                 None => break,

@@ -354,6 +354,16 @@ fn block_inner(
             ));
         }
     }
+    // The first `rank` knots must be equal: said at the first one that is not.
+    if n.knots.len() < n.rank && n.knots.first().is_some_and(|&f| f != k.value) {
+        return Err(lw.err(
+            k.col,
+            format!(
+                "G06.2: knot K{} differs from the first knot K{}; a curve of rank {} starts with {} equal knots, so that it starts at its first control point (Fanuc alarm PS1007)",
+                k.value, n.knots[0], n.rank, n.rank
+            ),
+        ));
+    }
     n.knots.push(k.value);
     if has_point {
         n.ctrl.push([pt[0], pt[1], pt[2], w]);
