@@ -129,7 +129,7 @@ fn seed_004_table_as_printed_is_refused_like_a_control_would() {
         "{msg}"
     );
     assert!(
-        msg.contains("PS1004") && msg.contains("G5 came after 1 of the 5"),
+        msg.contains("PS1004") && msg.contains("`G5 P0` came after 1 of the 5"),
         "{msg}"
     );
 }
@@ -522,4 +522,29 @@ fn lines_longer_than_linuxcnc_reads_are_refused() {
     let ok = format!("G1 X1 F100 ({})\n", "x".repeat(255 - 13));
     assert_eq!(ok.trim_end().len(), 255);
     assert!(interpret(&ok).is_ok());
+}
+
+// ---------------------------------------------------------------- the command line
+
+#[test]
+fn cnc_check_says_the_dialect_and_honours_the_forced_one() {
+    let cnc = env!("CARGO_BIN_EXE_cnc");
+    let file = format!("{NGC}fanuc_ellipse.ngc");
+    let out = std::process::Command::new(cnc)
+        .args(["check", &file])
+        .output()
+        .unwrap();
+    assert!(out.status.success());
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(text.contains("ok, fanuc dialect"), "{text}");
+    let out = std::process::Command::new(cnc)
+        .args(["check", "--dialect", "linuxcnc", &file])
+        .output()
+        .unwrap();
+    assert!(!out.status.success());
+    let text = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        text.contains(&format!("{file}:5:1: dialect: G05 P… is fanuc's")),
+        "{text}"
+    );
 }

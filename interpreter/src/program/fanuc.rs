@@ -159,12 +159,21 @@ pub(super) fn continues(lw: &LineWords, codes: &LineCodes) -> bool {
         && !lw.words.iter().any(|w| "GMST".contains(w.letter))
 }
 
-/// The first word of a line that ends an open curve, and how to name it.
+/// Where a line that ends an open curve does so (its first G, M, S or T word), and the
+/// block itself, to name it (`G5 P0`).
 pub(super) fn interrupter(lw: &LineWords) -> (u32, String) {
-    match lw.words.iter().find(|w| "GMST".contains(w.letter)) {
-        Some(w) => (w.col, format!("{}{}", w.letter, w.value)),
-        None => (lw.first_col(), "this block".into()),
-    }
+    let col = lw
+        .words
+        .iter()
+        .find(|w| "GMST".contains(w.letter))
+        .map_or(lw.first_col(), |w| w.col);
+    let block: Vec<String> = lw
+        .words
+        .iter()
+        .filter(|w| w.letter != 'N')
+        .map(|w| format!("{}{}", w.letter, w.value))
+        .collect();
+    (col, format!("`{}`", block.join(" ")))
 }
 
 /// Refuses the words no `G06.2` block has.
