@@ -31,7 +31,10 @@ fn errors(text: &str) -> Vec<(u32, u32, String)> {
     errors_as(text, None)
 }
 
-fn curves(m: &[Move]) -> Vec<(usize, &[f64], &[[f64; 4]], f64, u32)> {
+/// A parsed curve: degree, knots, control points, feed, source line.
+type Curve<'a> = (usize, &'a [f64], &'a [[f64; 4]], f64, u32);
+
+fn curves(m: &[Move]) -> Vec<Curve<'_>> {
     m.iter()
         .filter_map(|m| match m {
             Move::Nurbs {
@@ -408,7 +411,7 @@ fn g93_inverse_time_becomes_the_feed_that_takes_1_over_f_minutes() {
     let m = moves(
         "G21 G17\nG93 G1 X10 F2\nG2 X20 R5 F1\nG5 I0 J5 P0 Q5 X30 Y0 F4\nG0 X0\nG94 G1 Y1 F100\n",
     );
-    let feeds: Vec<(f64, f64)> = m
+    let feeds: Vec<f64> = m
         .iter()
         .filter_map(|m| match m {
             Move::Line {
@@ -418,23 +421,17 @@ fn g93_inverse_time_becomes_the_feed_that_takes_1_over_f_minutes() {
             | Move::Nurbs { feed, .. } => Some(*feed),
             _ => None,
         })
-        .zip([2.0, 1.0, 4.0, 0.0])
-        .map(|(feed, f)| (feed, f))
         .collect();
     // Line: 10 mm in 1/2 min.
-    assert!((feeds[0].0 - 20.0).abs() < 1e-12);
+    assert!((feeds[0] - 20.0).abs() < 1e-12);
     // Half circle of radius 5 in 1 min, as LinuxCNC's rs274 says (15.7080).
-    assert!((feeds[1].0 - 5.0 * std::f64::consts::PI).abs() < 1e-12);
+    assert!((feeds[1] - 5.0 * std::f64::consts::PI).abs() < 1e-12);
     // The cubic: its exact length in 1/4 min.
     let (degree, knots, ctrl, _, _) = curves(&m)[0];
     let len = polyline_length(degree, knots, ctrl);
-    assert!(
-        (feeds[2].0 / 4.0 - len).abs() < 1e-6,
-        "{} vs {len}",
-        feeds[2].0
-    );
+    assert!((feeds[2] / 4.0 - len).abs() < 1e-6, "{} vs {len}", feeds[2]);
     // G94 again: an ordinary feed.
-    assert_eq!(feeds[3].0, 100.0);
+    assert_eq!(feeds[3], 100.0);
     // The rapid keeps no feed of its own.
     assert!(m
         .iter()
