@@ -209,9 +209,10 @@ struct State {
 const ARC_RADIUS_TOL_MM: f64 = 0.002;
 const ARC_RADIUS_TOL_REL: f64 = 0.001;
 
-/// LinuxCNC reads at most this many characters of a line (its `LINELEN` is 256 with the
-/// terminating NUL) and refuses longer lines.
-const MAX_LINE_CHARS: usize = 255;
+/// The longest line LinuxCNC reads, in bytes without the newline: its `fgets` buffer is
+/// `LINELEN` = 255 bytes, and a line that fills it (253 bytes and the newline) is
+/// refused as "Command too long" (checked with rs274 2.9: 252 pass, 253 fail).
+const MAX_LINE_BYTES: usize = 252;
 
 const AXES: [char; 3] = ['X', 'Y', 'Z'];
 const OFFSETS: [char; 3] = ['I', 'J', 'K'];
@@ -297,12 +298,16 @@ pub fn interpret_with(text: &str, opts: &Options) -> Result<Program, Vec<Diagnos
         }
         let here = pc;
         pc += 1;
-        if let Some((col, _)) = lines[here].char_indices().nth(MAX_LINE_CHARS) {
+        if lines[here].len() > MAX_LINE_BYTES {
+            let col = lines[here]
+                .char_indices()
+                .take_while(|(b, _)| *b < MAX_LINE_BYTES)
+                .count();
             errors.push(Diagnostic {
                 line,
-                col: lines[here][..col].chars().count() as u32 + 1,
+                col: col as u32 + 1,
                 message: format!(
-                    "line longer than {MAX_LINE_CHARS} characters (LinuxCNC's limit): split it"
+                    "line longer than {MAX_LINE_BYTES} characters (LinuxCNC's limit, \"Command too long\"): split it"
                 ),
             });
             pc = run.unreadable(here);

@@ -511,14 +511,17 @@ fn path_mode_spindle_and_stops_are_moves_in_program_order() {
 
 #[test]
 fn lines_longer_than_linuxcnc_reads_are_refused() {
+    // rs274 2.9 reads lines of up to 252 characters and says "Command too long" after.
     let long = format!("G1 X1 F100 ({})\nG1 X2 F100\n", "x".repeat(300));
     let e = errors(&long);
     assert_eq!(e.len(), 1, "{e:?}");
-    assert_eq!((e[0].0, e[0].1), (1, 256));
-    assert!(e[0].2.contains("255"), "{e:?}");
-    let ok = format!("G1 X1 F100 ({})\n", "x".repeat(255 - 13));
-    assert_eq!(ok.trim_end().len(), 255);
+    assert_eq!((e[0].0, e[0].1), (1, 253));
+    assert!(e[0].2.contains("252"), "{e:?}");
+    let ok = format!("G1 X1 F100 ({})\n", "x".repeat(252 - 13));
+    assert_eq!(ok.trim_end().len(), 252);
     assert!(interpret(&ok).is_ok());
+    let over = format!("G1 X1 F100 ({})\n", "x".repeat(253 - 13));
+    assert!(interpret(&over).is_err());
 }
 
 // ---------------------------------------------------------------- the command line
