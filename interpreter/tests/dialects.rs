@@ -281,6 +281,11 @@ fn fanuc_alarms_name_the_rule_the_number_and_the_place() {
     let e = errors("F100\nG06.2 P2 K0 X0 Y0\nK0 X1 Y1\nK1\nK1\nK1\n");
     assert_eq!((e[0].0, e[0].1), (6, 1));
     assert!(e[0].2.contains("take 4 knots"), "{e:?}");
+    // G06.2 stays the motion after a curve: coordinates alone are a control point
+    // without its knot.
+    let e = errors("F100\nG06.2 P2 K0 X0 Y0\nK0 X1 Y1\nK1\nK1\nX5\n");
+    assert_eq!((e[0].0, e[0].1), (6, 1));
+    assert!(e[0].2.contains("PS1002"), "{e:?}");
 }
 
 #[test]

@@ -235,6 +235,12 @@ pub(super) fn open(st: &mut State, lw: &LineWords, g: &Word, unit: f64) -> Resul
             ),
         ));
     }
+    if modal && lw.get('K').is_none() {
+        return Err(lw.err(
+            lw.first_col(),
+            "G06.2 is still the motion: a block with coordinates is the first control point of a new curve and needs its knot K (Fanuc alarm PS1002); give G1 or G0 for a straight move",
+        ));
+    }
     if st.cutter_comp || st.inverse_time {
         let why = if st.cutter_comp {
             "cutter compensation (G41/G42) is active: cancel it with G40 first"
