@@ -20,7 +20,8 @@
 //! Mistakes are refused with the alarm Fanuc users know. The numbers below were
 //! confirmed in the Fanuc Series 15i/150i-MA programming manual (B-63324EN, section
 //! 4.17 "NURBS interpolation": its text on knots, control points and cutter
-//! compensation, and its list of NURBS alarms); the 30i series keeps these PS numbers:
+//! compensation, and its list of NURBS alarms). That the 30i/0i-F use the same numbers
+//! is what users report, not something checked against their manuals here:
 //! * PS1002: a control point block without its knot `K`;
 //! * PS1004: fewer knot-only blocks than the rank before another command;
 //! * PS1005: another command before any knot-only block (NURBS mode ended early);
