@@ -262,6 +262,8 @@ pub fn build(moves: &[Move], machine: &Machine) -> Vec<CommandBlock> {
                 out.push(b);
             }
             Move::End { line } => out.push(CommandBlock::empty(BlockKind::ProgramEnd, 0, *line)),
+            // Carried for the planner and the reports; no block of their own yet.
+            Move::PathMode { .. } | Move::Spindle { .. } | Move::Stop { .. } => {}
         }
     }
     for (i, b) in out.iter_mut().enumerate() {

@@ -30,7 +30,7 @@ pub enum Command {
     /// Check a program without running it: exit 0 if fine, else one `FILE:LINE:COL: message`
     /// line per problem on stderr and exit 1.
     Check {
-        /// The NC program (RS274/NGC with LinuxCNC G5.2 NURBS).
+        /// The NC program (RS274/NGC with LinuxCNC splines and NURBS, or Fanuc G06.2).
         program: PathBuf,
         /// Machine file (TOML) whose limits apply.
         #[arg(long)]
@@ -45,6 +45,9 @@ pub enum Command {
         /// Interpolation period in µs the estimate assumes.
         #[arg(long, default_value_t = 1000, value_parser = clap::value_parser!(u64).range(100..=10_000))]
         period_us: u64,
+        /// Read the program as `linuxcnc` or `fanuc` instead of detecting the dialect.
+        #[arg(long)]
+        dialect: Option<crate::program::Dialect>,
     },
     /// Replay a command log through a fresh stack, without the NC program. Under the
     /// lock-step servo the new setpoints.csv and feedback.csv equal the original run's,
@@ -102,6 +105,9 @@ pub enum Role {
         /// Test aid: wait this many ms before publishing each block (a slow interpreter).
         #[arg(long)]
         throttle_ms: Option<u64>,
+        /// Read the program in this dialect (see `cnc run --dialect`).
+        #[arg(long)]
+        dialect: Option<crate::program::Dialect>,
     },
     Interpolator(interpolator::cli::Args),
     ServoSim(servo_sim::cli::Args),
@@ -200,6 +206,7 @@ pub fn main() -> ExitCode {
             estimate,
             json,
             period_us,
+            dialect,
         } => {
             let machine = match shared::machine::load(machine.as_deref()) {
                 Ok(m) => m,
@@ -210,8 +217,9 @@ pub fn main() -> ExitCode {
                 Err(e) => return fail(e),
             };
             let period_ns = period_us * 1000;
-            match process::compile(&src.text, &machine, period_ns) {
-                Ok((_, blocks)) if estimate => {
+            let opts = crate::program::Options { dialect };
+            match process::compile_with(&src.text, &opts, &machine, period_ns) {
+                Ok((prog, blocks)) if estimate => {
                     match crate::estimate::estimate(&blocks, &machine, period_ns) {
                         Ok(est) if json => {
                             println!("{}", serde_json::to_string_pretty(&est).unwrap_or_default());
@@ -219,8 +227,9 @@ pub fn main() -> ExitCode {
                         }
                         Ok(est) => {
                             println!(
-                            "{}: ok, {} blocks; machining time {:.3} s ({} cycles of {} µs), path {:.3} mm",
+                            "{}: ok, {} dialect, {} blocks; machining time {:.3} s ({} cycles of {} µs), path {:.3} mm",
                             src.name,
+                            prog.dialect,
                             blocks.len(),
                             est.time_s,
                             est.cycles,
@@ -232,8 +241,13 @@ pub fn main() -> ExitCode {
                         Err(e) => fail(format!("{}: estimate: {e}", src.name)),
                     }
                 }
-                Ok((_, blocks)) => {
-                    println!("{}: ok, {} blocks", src.name, blocks.len());
+                Ok((prog, blocks)) => {
+                    println!(
+                        "{}: ok, {} dialect, {} blocks",
+                        src.name,
+                        prog.dialect,
+                        blocks.len()
+                    );
                     ExitCode::SUCCESS
                 }
                 Err(diags) => {
@@ -268,6 +282,7 @@ pub fn main() -> ExitCode {
             salvage,
             repeat,
             throttle_ms,
+            dialect,
         }) => run_interpreter_streaming(
             &common,
             program,
@@ -277,6 +292,7 @@ pub fn main() -> ExitCode {
             process::Streaming {
                 repeat,
                 throttle: throttle_ms.map(std::time::Duration::from_millis),
+                dialect,
             },
         ),
         Command::Role(Role::Interpolator(args)) => match interpolator::cli::run(&args) {

@@ -75,6 +75,10 @@ pub struct RunArgs {
     /// interpolator on purpose).
     #[arg(long, hide = true)]
     pub throttle_ms: Option<u64>,
+    /// Read the program as `linuxcnc` or `fanuc` instead of detecting the dialect from
+    /// its codes (G5.x/G6.2 with Q: LinuxCNC; G06.2, G05 P10000: Fanuc).
+    #[arg(long)]
+    pub dialect: Option<crate::program::Dialect>,
 }
 
 /// How long the survivors of a failed process get to stop by themselves.
@@ -244,7 +248,10 @@ fn run_inner(args: &RunArgs) -> Result<bool, String> {
     let src = Source::load(args.program.as_deref())?;
     let period_ns = args.period_us * 1000;
     // Bad input is rejected before any process starts, let alone any motion.
-    let blocks = match process::compile(&src.text, &machine, period_ns) {
+    let opts = crate::program::Options {
+        dialect: args.dialect,
+    };
+    let blocks = match process::compile_with(&src.text, &opts, &machine, period_ns) {
         Ok((_, blocks)) => blocks,
         Err(diags) => {
             eprint!("{}", process::format_diagnostics(&src.name, &diags));
@@ -267,6 +274,9 @@ fn run_inner(args: &RunArgs) -> Result<bool, String> {
     ];
     if let Some(ms) = args.throttle_ms {
         input.extend(["--throttle-ms".into(), ms.to_string()]);
+    }
+    if let Some(d) = args.dialect {
+        input.extend(["--dialect".into(), d.to_string()]);
     }
     // The length of the run for a progress bar, only where one is drawn.
     let expected_cycles = progress_wanted().then(|| {

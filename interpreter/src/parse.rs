@@ -131,6 +131,8 @@ pub enum OKind {
     EndRepeat,
     Break,
     Continue,
+    /// A Fanuc program number: `O1234` alone on its line (LinuxCNC has none).
+    ProgramNumber,
 }
 
 /// Keywords, each before any other it is a prefix of (`ELSEIF` before `ELSE`).
@@ -348,6 +350,14 @@ fn o_head(cur: &mut Cursor, col: u32) -> Result<OWord, Diagnostic> {
         };
     }
     let at = cur.col();
+    if cur.peek().is_none() && !label.starts_with('<') {
+        return Ok(OWord {
+            label,
+            kind: OKind::ProgramNumber,
+            col,
+            args: Vec::new(),
+        });
+    }
     let Some(&(text, kind)) = O_KEYWORDS.iter().find(|(k, _)| cur.at(k)) else {
         return Err(cur.err(
             at,
@@ -465,7 +475,7 @@ pub fn flow(o_words: &[Option<OWord>]) -> (Flow, Vec<Diagnostic>) {
             _ => false,
         };
         match o.kind {
-            OKind::Call => {}
+            OKind::Call | OKind::ProgramNumber => {}
             OKind::Return => {
                 if !open
                     .iter()

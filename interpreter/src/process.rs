@@ -55,7 +55,17 @@ pub fn compile(
     machine: &Machine,
     period_ns: u64,
 ) -> Result<(program::Program, Vec<CommandBlock>), Vec<Diagnostic>> {
-    let prog = program::interpret(text)?;
+    compile_with(text, &program::Options::default(), machine, period_ns)
+}
+
+/// [`compile`], reading the program as `opts` say (a forced dialect).
+pub fn compile_with(
+    text: &str,
+    opts: &program::Options,
+    machine: &Machine,
+    period_ns: u64,
+) -> Result<(program::Program, Vec<CommandBlock>), Vec<Diagnostic>> {
+    let prog = program::interpret_with(text, opts)?;
     let mut blocks = blocks::build(&prog.moves, machine);
     blocks::plan(&mut blocks, machine, period_ns);
     // Nothing leaves this process unless a receiver would accept it.
@@ -149,6 +159,8 @@ pub struct Streaming {
     pub repeat: u32,
     /// Test aid: wait this long before each block (a slow interpreter).
     pub throttle: Option<Duration>,
+    /// Read the program in this dialect instead of detecting it (`--dialect`).
+    pub dialect: Option<program::Dialect>,
 }
 
 impl Default for Streaming {
@@ -156,6 +168,7 @@ impl Default for Streaming {
         Streaming {
             repeat: 1,
             throttle: None,
+            dialect: None,
         }
     }
 }
@@ -223,6 +236,7 @@ pub fn run_streaming<S: Service>(
     streaming: Streaming,
 ) -> Result<InterpreterSummary, String> {
     let mut salvaged = None;
+    let mut dialect = None;
     let (name, blocks, messages) = match &cfg.replay {
         Some(log) => {
             let r = load_replay(log, cfg.salvage)?;
@@ -232,8 +246,12 @@ pub fn run_streaming<S: Service>(
         None => {
             let src = Source::load(cfg.program.as_deref())?;
             let name = cfg.program_name.clone().unwrap_or(src.name.clone());
-            let (prog, blocks) = compile(&src.text, &cfg.machine, cfg.period_ns)
+            let opts = program::Options {
+                dialect: streaming.dialect,
+            };
+            let (prog, blocks) = compile_with(&src.text, &opts, &cfg.machine, cfg.period_ns)
                 .map_err(|d| format_diagnostics(&name, &d))?;
+            dialect = Some(prog.dialect.name().to_string());
             (name, blocks, prog.messages)
         }
     };
@@ -276,6 +294,7 @@ pub fn run_streaming<S: Service>(
         },
         messages,
         salvaged,
+        dialect,
     };
     let text = serde_json::to_string_pretty(&summary).map_err(|e| e.to_string())?;
     std::fs::write(cfg.out_dir.join("interpreter.json"), text)

@@ -1,6 +1,7 @@
 //! From lines of words to moves: the modal state machine of RS274/NGC (the subset this
-//! stack runs so far) and LinuxCNC's G5.2/G5.3 NURBS. Positions are in mm whatever the
-//! program's units; the machine starts at the origin.
+//! stack runs so far), LinuxCNC's splines and NURBS (`G5`, `G5.1`, `G5.2/G5.3`, `G6.2`)
+//! and Fanuc's `G06.2` NURBS. Positions are in mm whatever the program's units; the
+//! machine starts at the origin.
 //!
 //! Every problem found is collected with its line and column; the whole program is read
 //! even after an error, so `cnc check` can report everything at once.
@@ -9,10 +10,24 @@
 //! subroutines (`sub`/`endsub`/`call`/`return`) and control flow (`if`/`elseif`/`else`,
 //! `while`, `do … while`, `repeat`, `break`, `continue`) run within the one file: lines
 //! are read again, with the parameters of the moment, each time the flow reaches them.
+//!
+//! The program's [`Dialect`] (LinuxCNC or Fanuc) is detected from the codes only one of
+//! them has, or forced by the caller; see [`dialect`].
+//!
+//! Vocabulary: a *move* is one thing the machine does ([`Move`]); besides motion, the
+//! path-control mode (`G61`, `G61.1`, `G64 P Q`), the spindle (`M3 M4 M5 S`) and the
+//! program stops (`M0 M1`) are moves too, so the planner and the reports can see them.
 
+mod arc;
+pub mod dialect;
+mod fanuc;
+mod feed;
 mod flow;
+mod linuxcnc;
 
-use crate::parse::{flow, o_word_of, read_line, Diagnostic, OWord, Params, Word};
+use crate::parse::{flow, o_word_of, read_line, Diagnostic, OKind, OWord, Params, Word};
+pub use dialect::Dialect;
+use dialect::DialectState;
 use flow::Runner;
 
 /// The plane of arcs and NURBS, by the axis normal to it.
@@ -37,6 +52,42 @@ impl Plane {
         let n = self.normal();
         ((n + 1) % 3, (n + 2) % 3)
     }
+}
+
+/// How consecutive moves join (RS274/NGC modal group 13).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum PathControl {
+    /// `G61`: follow the programmed path exactly, slowing as much as corners need.
+    ExactPath,
+    /// `G61.1`: come to a stop at the end of every move.
+    ExactStop,
+    /// `G64 [P…] [Q…]`: blend corners, within `tolerance_mm` of the path when given
+    /// (`P`); `naive_cam_mm` (`Q`) is LinuxCNC's tolerance for merging collinear short
+    /// moves.
+    Blend {
+        tolerance_mm: Option<f64>,
+        naive_cam_mm: Option<f64>,
+    },
+}
+
+/// Which way the spindle turns.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum SpindleDir {
+    /// `M3`
+    Clockwise,
+    /// `M4`
+    CounterClockwise,
+    /// `M5`
+    Off,
+}
+
+/// A programmed stop of the whole program.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum StopKind {
+    /// `M0`: stop until the operator resumes.
+    Pause,
+    /// `M1`: stop only when the operator's optional-stop switch is on.
+    OptionalPause,
 }
 
 /// One thing the machine does, in mm and mm/min.
@@ -73,6 +124,22 @@ pub enum Move {
     End {
         line: u32,
     },
+    /// The path-control mode changes (`G61`, `G61.1`, `G64`) for the moves after it.
+    PathMode {
+        line: u32,
+        control: PathControl,
+    },
+    /// The spindle starts, stops, reverses or changes speed (`M3`, `M4`, `M5`, `S`).
+    Spindle {
+        line: u32,
+        dir: SpindleDir,
+        rpm: f64,
+    },
+    /// A programmed stop (`M0`, `M1`); the program goes on when resumed.
+    Stop {
+        line: u32,
+        kind: StopKind,
+    },
 }
 
 /// A whole program, read and checked.
@@ -81,6 +148,16 @@ pub struct Program {
     pub moves: Vec<Move>,
     /// `(MSG, …)` texts with their lines.
     pub messages: Vec<(u32, String)>,
+    /// The dialect the program was read in: forced by the caller, else detected from
+    /// the codes it uses, else LinuxCNC (plain RS274/NGC).
+    pub dialect: Dialect,
+}
+
+/// How to read a program beyond its text.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct Options {
+    /// Read the program in this dialect instead of detecting it (`--dialect`).
+    pub dialect: Option<Dialect>,
 }
 
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -88,44 +165,54 @@ enum Motion {
     None,
     Rapid,
     Linear,
-    Arc { ccw: bool },
-}
-
-/// Points of an open G5.2 block.
-struct NurbsOpen {
-    line: u32,
-    col: u32,
-    order: usize,
-    ctrl: Vec<[f64; 4]>,
-}
-
-/// An open G6.2 NURBS: control points with their knots, then the closing knots.
-struct G62Open {
-    line: u32,
-    col: u32,
-    order: usize,
-    ctrl: Vec<[f64; 4]>,
-    knots: Vec<f64>,
-    /// Knot-only lines seen so far; `order` of them close the curve.
-    closing: usize,
+    Arc {
+        ccw: bool,
+    },
+    /// LinuxCNC `G5`: a cubic Bézier per line.
+    Cubic,
+    /// LinuxCNC `G5.1`: a quadratic Bézier per line.
+    Quadratic,
+    /// Fanuc `G06.2` after a curve has closed: the next control point block opens
+    /// another curve.
+    FanucNurbs,
 }
 
 struct State {
     pos: [f64; 3],
-    g62: Option<G62Open>,
+    g62: Option<linuxcnc::G62Open>,
+    fanuc: Option<fanuc::FanucOpen>,
     motion: Motion,
     plane: Plane,
     inch: bool,
     absolute: bool,
     arc_absolute: bool,
+    /// The programmed feed in mm/min; in `G93` the last F (per minute, 1/time).
     feed: f64,
-    nurbs: Option<NurbsOpen>,
+    /// `G93`: F on each feed move says in how many minutes⁻¹ the move is done.
+    inverse_time: bool,
+    /// `G41`/`G42` is active (refused, but remembered so `G06.2` can say PS1006).
+    cutter_comp: bool,
+    nurbs: Option<linuxcnc::NurbsOpen>,
+    /// After a `G5`: the offset of the next `G5`'s first control point from its start
+    /// (minus the last `P Q`), used when that `G5` leaves out `I J`.
+    g5_tangent: Option<[f64; 2]>,
+    spindle: (SpindleDir, f64),
+    dialect: DialectState,
+    /// The last Fanuc curve closed (for a knot block that comes after it).
+    fanuc_closed: Option<fanuc::Closed>,
+    /// Errors found on a line that still runs (a Fanuc curve it ended).
+    deferred: Vec<Diagnostic>,
     ended: bool,
 }
 
 /// Radius mismatch LinuxCNC accepts between the start and end of a centre-format arc.
 const ARC_RADIUS_TOL_MM: f64 = 0.002;
 const ARC_RADIUS_TOL_REL: f64 = 0.001;
+
+/// The longest line LinuxCNC reads, in bytes without the newline: its `fgets` buffer is
+/// `LINELEN` = 255 bytes, and a line that fills it (253 bytes and the newline) is
+/// refused as "Command too long" (checked with rs274 2.9: 252 pass, 253 fail).
+const MAX_LINE_BYTES: usize = 252;
 
 const AXES: [char; 3] = ['X', 'Y', 'Z'];
 const OFFSETS: [char; 3] = ['I', 'J', 'K'];
@@ -142,6 +229,12 @@ impl LineWords<'_> {
     fn value(&self, letter: char) -> Option<f64> {
         self.get(letter).map(|w| w.value)
     }
+    fn has_any(&self, letters: &str) -> bool {
+        self.words.iter().any(|w| letters.contains(w.letter))
+    }
+    fn first_col(&self) -> u32 {
+        self.words.first().map_or(1, |w| w.col)
+    }
     fn err(&self, col: u32, message: impl Into<String>) -> Diagnostic {
         Diagnostic {
             line: self.line,
@@ -151,23 +244,37 @@ impl LineWords<'_> {
     }
 }
 
-/// Reads and checks a whole program. All problems are returned, not only the first.
+/// Reads and checks a whole program, detecting its dialect. All problems are returned,
+/// not only the first.
 ///
 /// O-word subroutines and control flow run as LinuxCNC runs them, within this file:
 /// a `sub … endsub` is skipped where it stands and entered by `call`, conditions are
 /// evaluated when their line is reached, and a line is read again (with the parameters
 /// of that moment) each time the flow comes back to it.
 pub fn interpret(text: &str) -> Result<Program, Vec<Diagnostic>> {
+    interpret_with(text, &Options::default())
+}
+
+/// [`interpret`], with the dialect forced or other options.
+pub fn interpret_with(text: &str, opts: &Options) -> Result<Program, Vec<Diagnostic>> {
     let mut st = State {
         pos: [0.0; 3],
         g62: None,
+        fanuc: None,
         motion: Motion::None,
         plane: Plane::XY,
         inch: false,
         absolute: true,
         arc_absolute: false,
         feed: 0.0,
+        inverse_time: false,
+        cutter_comp: false,
         nurbs: None,
+        g5_tangent: None,
+        spindle: (SpindleDir::Off, 0.0),
+        dialect: DialectState::new(opts.dialect),
+        fanuc_closed: None,
+        deferred: Vec::new(),
         ended: false,
     };
     let mut params = Params::default();
@@ -191,6 +298,21 @@ pub fn interpret(text: &str) -> Result<Program, Vec<Diagnostic>> {
         }
         let here = pc;
         pc += 1;
+        if lines[here].len() > MAX_LINE_BYTES {
+            let col = lines[here]
+                .char_indices()
+                .take_while(|(b, _)| *b < MAX_LINE_BYTES)
+                .count();
+            errors.push(Diagnostic {
+                line,
+                col: col as u32 + 1,
+                message: format!(
+                    "line longer than {MAX_LINE_BYTES} characters (LinuxCNC's limit, \"Command too long\"): split it"
+                ),
+            });
+            pc = run.unreadable(here);
+            continue;
+        }
         let parsed = match read_line(lines[here], line, &params) {
             Ok(l) => l,
             Err(d) => {
@@ -203,21 +325,32 @@ pub fn interpret(text: &str) -> Result<Program, Vec<Diagnostic>> {
             prog.messages.push((line, m.clone()));
         }
         if let Some(o) = &parsed.o_word {
+            if o.kind == OKind::ProgramNumber {
+                if let Err(d) = st
+                    .dialect
+                    .claim(Dialect::Fanuc, line, o.col, "a program number O…")
+                {
+                    errors.push(d);
+                }
+                continue;
+            }
             match run.step(here, o, &mut params, &mut errors) {
                 Some(next) => pc = next,
                 None => break,
             }
             continue;
         }
-        if let Err(d) = execute(
-            &mut st,
-            &LineWords {
-                words: &parsed.words,
-                line,
-            },
-            &mut prog.moves,
-        ) {
+        let lw = LineWords {
+            words: &parsed.words,
+            line,
+        };
+        let before = prog.moves.len();
+        if let Err(d) = execute(&mut st, &lw, &mut prog.moves) {
             errors.push(d);
+        }
+        errors.append(&mut st.deferred);
+        if st.inverse_time {
+            feed::inverse_time(&mut prog.moves[before..]);
         }
         for (p, v) in &parsed.assignments {
             params.set(p, *v);
@@ -236,6 +369,9 @@ pub fn interpret(text: &str) -> Result<Program, Vec<Diagnostic>> {
             ),
         });
     }
+    if let Some(n) = st.fanuc.take() {
+        errors.extend(n.unfinished(last_line.max(1), 1, "the end of the program"));
+    }
     if let Some(n) = &st.nurbs {
         errors.push(Diagnostic {
             line: n.line,
@@ -246,6 +382,7 @@ pub fn interpret(text: &str) -> Result<Program, Vec<Diagnostic>> {
     if !st.ended {
         prog.moves.push(Move::End { line: last_line });
     }
+    prog.dialect = st.dialect.resolved();
     if errors.is_empty() {
         Ok(prog)
     } else {
@@ -256,6 +393,19 @@ pub fn interpret(text: &str) -> Result<Program, Vec<Diagnostic>> {
 fn gcode(w: &Word) -> Option<u32> {
     let tenths = (w.value * 10.0).round();
     ((tenths - w.value * 10.0).abs() < 1e-6 && tenths >= 0.0).then_some(tenths as u32)
+}
+
+/// The G-codes of a line that start or shape motion, by kind.
+#[derive(Default)]
+struct LineCodes<'a> {
+    motion: Option<(&'a Word, Motion)>,
+    nurbs_open: Option<&'a Word>,
+    nurbs_close: Option<&'a Word>,
+    g62: Option<&'a Word>,
+    dwell: Option<&'a Word>,
+    /// Fanuc `G05`/`G05.1` (high-precision / AI contour control on or off).
+    fanuc_mode: Option<&'a Word>,
+    path: Option<(&'a Word, u32)>,
 }
 
 fn execute(st: &mut State, lw: &LineWords, moves: &mut Vec<Move>) -> Result<(), Diagnostic> {
@@ -280,24 +430,112 @@ fn execute(st: &mut State, lw: &LineWords, moves: &mut Vec<Move>) -> Result<(), 
             c => return Err(lw.err(w.col, format!("{c} word is not supported"))),
         }
     }
-    let mut motion_word: Option<(&Word, Motion)> = None;
-    let mut nurbs_open: Option<&Word> = None;
-    let mut nurbs_close: Option<&Word> = None;
-    let mut g62_word: Option<&Word> = None;
-    let mut dwell: Option<&Word> = None;
+    let codes = g_codes(st, lw)?;
+    // G20/G21 on this line already apply to its own numbers.
+    let unit = if st.inch { 25.4 } else { 1.0 };
+
+    // An open Fanuc curve takes its control point and knot blocks; any other command
+    // ends it (an alarm), and the line then runs as it would have.
+    if st.fanuc.is_some() {
+        if fanuc::continues(lw, &codes) {
+            return fanuc::block(st, lw, unit, moves);
+        }
+        let (col, what) = fanuc::interrupter(lw);
+        if let Some(n) = st.fanuc.take() {
+            st.deferred.extend(n.unfinished(lw.line, col, &what));
+            st.motion = Motion::None;
+        }
+    }
+    if let Some(f) = lw.get('F') {
+        if f.value < 0.0 {
+            return Err(lw.err(f.col, "F must not be negative"));
+        }
+        // In G93, F is the inverse of the move's time: no length unit.
+        st.feed = if st.inverse_time {
+            f.value
+        } else {
+            f.value * unit
+        };
+    }
+    let mut end = false;
+    let mut stop = None;
+    let mut spindle = st.spindle;
+    if let Some(s) = lw.get('S') {
+        if s.value < 0.0 {
+            return Err(lw.err(s.col, "S (spindle speed) must not be negative"));
+        }
+        spindle.1 = s.value;
+    }
+    for w in lw.words.iter().filter(|w| w.letter == 'M') {
+        match gcode(w) {
+            Some(20) | Some(300) => end = true,
+            Some(0) => stop = Some(StopKind::Pause),
+            Some(10) => stop = Some(StopKind::OptionalPause),
+            Some(30) => spindle.0 = SpindleDir::Clockwise,
+            Some(40) => spindle.0 = SpindleDir::CounterClockwise,
+            Some(50) => spindle.0 = SpindleDir::Off,
+            // tool change, coolant: accepted, nothing of ours depends on them
+            Some(60 | 70 | 80 | 90) => {}
+            _ => return Err(lw.err(w.col, format!("M{} is not supported", w.value))),
+        }
+    }
+    let curve_open = st.g62.is_some() || st.nurbs.is_some();
+    if curve_open && (spindle != st.spindle || stop.is_some() || codes.path.is_some()) {
+        return Err(lw.err(
+            lw.first_col(),
+            "spindle, stop or path-mode change inside an open NURBS: close the curve first",
+        ));
+    }
+    if spindle != st.spindle {
+        st.spindle = spindle;
+        moves.push(Move::Spindle {
+            line: lw.line,
+            dir: spindle.0,
+            rpm: spindle.1,
+        });
+    }
+    if let Some((w, code)) = codes.path {
+        moves.push(Move::PathMode {
+            line: lw.line,
+            control: path_control(lw, w, code, unit)?,
+        });
+    }
+    if let Some(w) = codes.fanuc_mode {
+        fanuc::precision_mode(st, lw, w)?;
+    }
+    motion(st, lw, &codes, unit, moves, end)?;
+    if let Some(kind) = stop {
+        moves.push(Move::Stop {
+            line: lw.line,
+            kind,
+        });
+    }
+    if end {
+        moves.push(Move::End { line: lw.line });
+        st.ended = true;
+    }
+    Ok(())
+}
+
+/// Reads the G-codes of a line: modal groups checked, modal state set, motion returned.
+fn g_codes<'a>(st: &mut State, lw: &'a LineWords) -> Result<LineCodes<'a>, Diagnostic> {
+    let mut c = LineCodes::default();
     let mut groups: Vec<(u8, &Word)> = Vec::new();
     for w in lw.words.iter().filter(|w| w.letter == 'G') {
         let code =
             gcode(w).ok_or_else(|| lw.err(w.col, format!("G{} is not a G-code", w.value)))?;
         let group = match code {
             0 | 10 | 20 | 30 | 52 | 53 | 62 | 800 => 1,
+            // G5 and G5.1 are motions in LinuxCNC, one-shot mode switches in Fanuc.
+            50 | 51 if fanuc::is_precision_mode(lw, code) => 0,
+            50 | 51 => 1,
             40 => 0,
             170 | 180 | 190 => 2,
             200 | 210 => 6,
             900 | 910 => 3,
             901 | 911 => 4,
             930 | 940 => 5,
-            400 => 7,
+            400 | 410 | 420 => 7,
             490 => 8,
             540..=590 => 12,
             610 | 611 | 640 => 13,
@@ -315,15 +553,18 @@ fn execute(st: &mut State, lw: &LineWords, moves: &mut Vec<Move>) -> Result<(), 
         }
         groups.push((group, w));
         match code {
-            0 => motion_word = Some((w, Motion::Rapid)),
-            10 => motion_word = Some((w, Motion::Linear)),
-            20 => motion_word = Some((w, Motion::Arc { ccw: false })),
-            30 => motion_word = Some((w, Motion::Arc { ccw: true })),
-            52 => nurbs_open = Some(w),
-            53 => nurbs_close = Some(w),
-            62 => g62_word = Some(w),
-            800 => motion_word = Some((w, Motion::None)),
-            40 => dwell = Some(w),
+            0 => c.motion = Some((w, Motion::Rapid)),
+            10 => c.motion = Some((w, Motion::Linear)),
+            20 => c.motion = Some((w, Motion::Arc { ccw: false })),
+            30 => c.motion = Some((w, Motion::Arc { ccw: true })),
+            50 | 51 if group == 0 => c.fanuc_mode = Some(w),
+            50 => c.motion = Some((w, Motion::Cubic)),
+            51 => c.motion = Some((w, Motion::Quadratic)),
+            52 => c.nurbs_open = Some(w),
+            53 => c.nurbs_close = Some(w),
+            62 => c.g62 = Some(w),
+            800 => c.motion = Some((w, Motion::None)),
+            40 => c.dwell = Some(w),
             170 => st.plane = Plane::XY,
             180 => st.plane = Plane::ZX,
             190 => st.plane = Plane::YZ,
@@ -333,50 +574,117 @@ fn execute(st: &mut State, lw: &LineWords, moves: &mut Vec<Move>) -> Result<(), 
             910 => st.absolute = false,
             901 => st.arc_absolute = true,
             911 => st.arc_absolute = false,
-            940 => {}
-            930 => return Err(lw.err(w.col, "G93 inverse-time feed is not supported yet")),
-            _ => {} // G40, G49, G54..G59 (zero offsets), G61/G61.1/G64: accepted, no effect yet
+            930 | 940 => {
+                // LinuxCNC forgets the feed when the feed mode changes.
+                let inverse = code == 930;
+                if inverse != st.inverse_time {
+                    st.feed = 0.0;
+                }
+                st.inverse_time = inverse;
+            }
+            400 => st.cutter_comp = false,
+            410 | 420 => {
+                // Remembered so that a G06.2 can name Fanuc's PS1006, then refused.
+                st.cutter_comp = true;
+                return Err(lw.err(
+                    w.col,
+                    format!(
+                        "G{}: cutter radius compensation is not supported yet; program the tool centre path with G40",
+                        w.value
+                    ),
+                ));
+            }
+            610 | 611 | 640 => c.path = Some((w, code)),
+            _ => {} // G49, G54..G59 (zero offsets), G96/G97: accepted, no effect yet
         }
     }
-    // G20/G21 on this line already apply to its own numbers.
-    let unit = if st.inch { 25.4 } else { 1.0 };
-    if let Some(f) = lw.get('F') {
-        if f.value < 0.0 {
-            return Err(lw.err(f.col, "F must not be negative"));
-        }
-        st.feed = f.value * unit;
-    }
-    let mut end = false;
-    for w in lw.words.iter().filter(|w| w.letter == 'M') {
-        match gcode(w) {
-            Some(20) | Some(300) => end = true,
-            // stops, spindle, tool change, coolant: accepted, carried in a later version
-            Some(0 | 10 | 30 | 40 | 50 | 60 | 70 | 80 | 90) => {}
-            _ => return Err(lw.err(w.col, format!("M{} is not supported", w.value))),
-        }
-    }
+    Ok(c)
+}
 
+fn path_control(lw: &LineWords, w: &Word, code: u32, unit: f64) -> Result<PathControl, Diagnostic> {
+    let tol = |letter: char| -> Result<Option<f64>, Diagnostic> {
+        match lw.get(letter) {
+            Some(p) if p.value < 0.0 => Err(lw.err(
+                p.col,
+                format!("G64 {letter} (a tolerance) must not be negative"),
+            )),
+            Some(p) => Ok(Some(p.value * unit)),
+            None => Ok(None),
+        }
+    };
+    Ok(match code {
+        610 => PathControl::ExactPath,
+        611 => PathControl::ExactStop,
+        _ => {
+            let tolerance_mm = tol('P')?;
+            let naive_cam_mm = tol('Q')?;
+            if naive_cam_mm.is_some() && tolerance_mm.is_none() {
+                return Err(lw.err(w.col, "G64 Q needs P too (Q is only read after P)"));
+            }
+            PathControl::Blend {
+                tolerance_mm,
+                naive_cam_mm,
+            }
+        }
+    })
+}
+
+/// The motion of a line: curves opened or continued, dwell, straight and arc moves.
+fn motion(
+    st: &mut State,
+    lw: &LineWords,
+    codes: &LineCodes,
+    unit: f64,
+    moves: &mut Vec<Move>,
+    end: bool,
+) -> Result<(), Diagnostic> {
+    let motion_word = codes.motion.map(|m| m.0);
+    // G6.2 is LinuxCNC's NURBS with a method Q, or Fanuc's G06.2.
+    if st.g62.is_none() {
+        let fanuc_open = match codes.g62 {
+            Some(g) => fanuc::is_fanuc_g62(st, lw).then_some(g),
+            None if st.motion == Motion::FanucNurbs
+                && codes.motion.is_none()
+                && lw.has_any("XYZK") =>
+            {
+                lw.words.first()
+            }
+            None => None,
+        };
+        if let Some(g) = fanuc_open {
+            st.dialect.claim(Dialect::Fanuc, lw.line, g.col, "G06.2")?;
+            return fanuc::open(st, lw, g, unit);
+        }
+    }
     // G6.2: control points with their knots, then `order` knot-only lines close it.
-    if st.g62.is_some() || g62_word.is_some() {
-        return g62_line(st, lw, g62_word, motion_word.map(|m| m.0), unit, moves, end);
+    if st.g62.is_some() || codes.g62.is_some() {
+        if let (None, Some(g)) = (&st.g62, codes.g62) {
+            st.dialect
+                .claim(Dialect::LinuxCnc, lw.line, g.col, "G6.2 with Q")?;
+        }
+        return linuxcnc::g62_line(st, lw, codes.g62, motion_word, unit, moves, end);
     }
     // Inside an open G5.2 block every line is a control point (or the G5.3 that closes it).
-    if st.nurbs.is_some() || nurbs_open.is_some() {
-        return nurbs_line(
+    if st.nurbs.is_some() || codes.nurbs_open.is_some() {
+        if let Some(g) = codes.nurbs_open {
+            st.dialect
+                .claim(Dialect::LinuxCnc, lw.line, g.col, "G5.2")?;
+        }
+        return linuxcnc::nurbs_line(
             st,
             lw,
-            nurbs_open,
-            nurbs_close,
-            motion_word.map(|m| m.0),
+            codes.nurbs_open,
+            codes.nurbs_close,
+            motion_word,
             unit,
             moves,
             end,
         );
     }
-    if let Some(w) = nurbs_close {
+    if let Some(w) = codes.nurbs_close {
         return Err(lw.err(w.col, "G5.3 without an open G5.2 NURBS"));
     }
-    if let Some(w) = dwell {
+    if let Some(w) = codes.dwell {
         let p = lw
             .value('P')
             .ok_or_else(|| lw.err(w.col, "G4 dwell needs P (seconds)"))?;
@@ -388,18 +696,22 @@ fn execute(st: &mut State, lw: &LineWords, moves: &mut Vec<Move>) -> Result<(), 
             seconds: p,
         });
     }
-    if let Some((_, m)) = motion_word {
+    if let Some((w, m)) = codes.motion {
+        if matches!(m, Motion::Cubic | Motion::Quadratic) {
+            st.dialect
+                .claim(Dialect::LinuxCnc, lw.line, w.col, "G5/G5.1")?;
+        }
         st.motion = m;
     }
     let has_axis = AXES.iter().any(|a| lw.get(*a).is_some());
-    if has_axis && dwell.is_none() {
+    if has_axis && codes.dwell.is_none() {
         let target = target(st, lw, unit);
-        let col = motion_word
-            .map(|m| m.0.col)
-            .or_else(|| lw.words.first().map(|w| w.col))
-            .unwrap_or(1);
+        let col = motion_word.map_or_else(|| lw.first_col(), |m| m.col);
+        if !matches!(st.motion, Motion::Cubic) {
+            st.g5_tangent = None;
+        }
         match st.motion {
-            Motion::None => {
+            Motion::None | Motion::FanucNurbs => {
                 return Err(lw.err(col, "axis words without an active motion (G0, G1, G2, G3)"))
             }
             Motion::Rapid => push_line(moves, lw.line, st.pos, target, true, 0.0),
@@ -409,27 +721,47 @@ fn execute(st: &mut State, lw: &LineWords, moves: &mut Vec<Move>) -> Result<(), 
             }
             Motion::Arc { ccw } => {
                 need_feed(st, lw, col)?;
-                moves.push(arc(st, lw, target, ccw, unit, col)?);
+                moves.push(arc::arc(st, lw, target, ccw, unit, col)?);
+            }
+            Motion::Cubic | Motion::Quadratic => {
+                need_feed(st, lw, col)?;
+                let cubic = st.motion == Motion::Cubic;
+                moves.push(linuxcnc::bezier(st, lw, target, cubic, unit, col)?);
             }
         }
         st.pos = target;
-    } else if let Some((w, Motion::Arc { .. } | Motion::Linear | Motion::Rapid)) = motion_word {
-        if lw
-            .words
-            .iter()
-            .any(|w| matches!(w.letter, 'I' | 'J' | 'K' | 'R'))
-        {
+    } else if let Some((w, Motion::Arc { .. } | Motion::Linear | Motion::Rapid)) = codes.motion {
+        if lw.has_any("IJKR") {
             return Err(lw.err(w.col, "arc without any axis word for its end point"));
         }
-    }
-    if end {
-        moves.push(Move::End { line: lw.line });
-        st.ended = true;
+    } else if let Some((w, Motion::Cubic | Motion::Quadratic)) = codes.motion {
+        return Err(lw.err(
+            w.col,
+            format!("G{} spline without its end point (X and Y)", w.value),
+        ));
     }
     Ok(())
 }
 
+/// A feed move needs a feed: a modal F in G94, its own F on the line in G93.
 fn need_feed(st: &State, lw: &LineWords, col: u32) -> Result<(), Diagnostic> {
+    if st.inverse_time {
+        match lw.get('F') {
+            Some(f) if f.value > 0.0 => return Ok(()),
+            Some(f) => {
+                return Err(lw.err(
+                    f.col,
+                    "G93 inverse time: F must be > 0 (the move takes 1/F minutes)",
+                ))
+            }
+            None => {
+                return Err(lw.err(
+                    col,
+                    "G93 inverse time: F word missing on this feed move (in G93 every feed move needs its own F; the move takes 1/F minutes)",
+                ))
+            }
+        }
+    }
     if st.feed <= 0.0 {
         return Err(lw.err(
             col,
@@ -464,384 +796,6 @@ fn push_line(
             feed,
         });
     }
-}
-
-fn arc(
-    st: &State,
-    lw: &LineWords,
-    to: [f64; 3],
-    ccw: bool,
-    unit: f64,
-    col: u32,
-) -> Result<Move, Diagnostic> {
-    let (a, b) = st.plane.axes();
-    let n = st.plane.normal();
-    let from = st.pos;
-    if let Some(w) = lw.get(OFFSETS[n]) {
-        return Err(lw.err(
-            w.col,
-            format!(
-                "{} offset given for an arc in the {:?} plane",
-                OFFSETS[n], st.plane
-            ),
-        ));
-    }
-    let turns = match lw.get('P') {
-        None => 1,
-        Some(p) if p.value >= 1.0 && p.value.fract() == 0.0 => p.value as u32,
-        Some(p) => return Err(lw.err(p.col, "arc turn count P must be a positive integer")),
-    };
-    let (da, db) = (to[a] - from[a], to[b] - from[b]);
-    let chord = (da * da + db * db).sqrt();
-    let mut center = [0.0; 3];
-    center[n] = from[n];
-    if let Some(rw) = lw.get('R') {
-        if lw.get(OFFSETS[a]).is_some() || lw.get(OFFSETS[b]).is_some() {
-            return Err(lw.err(rw.col, "arc has both R and centre offsets; give one form"));
-        }
-        let r = rw.value * unit;
-        if chord < 1e-9 {
-            return Err(lw.err(rw.col, "R-form arc with its end at its start: a full circle needs the centre form (I, J, K)"));
-        }
-        let half = chord / 2.0;
-        if r.abs() < half - ARC_RADIUS_TOL_MM {
-            return Err(lw.err(
-                rw.col,
-                format!(
-                    "arc radius {:.4} mm is too small to reach an end point {:.4} mm away",
-                    r.abs(),
-                    chord
-                ),
-            ));
-        }
-        let h = (r * r - half * half).max(0.0).sqrt();
-        // Centre on the left of the chord for a short counter-clockwise arc; R < 0 asks
-        // for the long way round, which puts it on the other side.
-        let side = if ccw { 1.0 } else { -1.0 } * r.signum();
-        let (ua, ub) = (da / chord, db / chord);
-        center[a] = from[a] + da / 2.0 - side * h * ub;
-        center[b] = from[b] + db / 2.0 + side * h * ua;
-    } else {
-        let (ia, ib) = (lw.value(OFFSETS[a]), lw.value(OFFSETS[b]));
-        if ia.is_none() && ib.is_none() {
-            return Err(lw.err(
-                col,
-                format!(
-                    "arc needs R or a centre ({} and {})",
-                    OFFSETS[a], OFFSETS[b]
-                ),
-            ));
-        }
-        let (ia, ib) = (ia.unwrap_or(0.0) * unit, ib.unwrap_or(0.0) * unit);
-        let (ca, cb) = if st.arc_absolute {
-            (ia, ib)
-        } else {
-            (from[a] + ia, from[b] + ib)
-        };
-        let r0 = ((from[a] - ca).powi(2) + (from[b] - cb).powi(2)).sqrt();
-        let r1 = ((to[a] - ca).powi(2) + (to[b] - cb).powi(2)).sqrt();
-        if r0 < 1e-9 {
-            return Err(lw.err(col, "arc centre coincides with its start point"));
-        }
-        let diff = (r1 - r0).abs();
-        if diff > ARC_RADIUS_TOL_MM && diff > ARC_RADIUS_TOL_REL * r0 {
-            return Err(lw.err(
-                col,
-                format!("radius to the end of the arc ({r1:.4} mm) differs from the radius to its start ({r0:.4} mm)"),
-            ));
-        }
-        if chord < 1e-9 {
-            center[a] = ca;
-            center[b] = cb;
-        } else {
-            // Within tolerance: move the centre to the nearest point of the chord's
-            // bisector, so the exact circle passes through both programmed end points.
-            let (ma, mb) = (from[a] + da / 2.0, from[b] + db / 2.0);
-            let (na, nb) = (-db / chord, da / chord);
-            let t = (ca - ma) * na + (cb - mb) * nb;
-            center[a] = ma + t * na;
-            center[b] = mb + t * nb;
-        }
-    }
-    Ok(Move::Arc {
-        line: lw.line,
-        from,
-        to,
-        center,
-        plane: st.plane,
-        ccw,
-        turns,
-        feed: st.feed,
-    })
-}
-
-#[allow(clippy::too_many_arguments)]
-fn nurbs_line(
-    st: &mut State,
-    lw: &LineWords,
-    open: Option<&Word>,
-    close: Option<&Word>,
-    motion: Option<&Word>,
-    unit: f64,
-    moves: &mut Vec<Move>,
-    end: bool,
-) -> Result<(), Diagnostic> {
-    let (a, b) = st.plane.axes();
-    if let Some(m) = motion {
-        return Err(lw.err(
-            m.col,
-            format!("G{} inside a G5.2 NURBS: close it with G5.3 first", m.value),
-        ));
-    }
-    if end {
-        let col = lw
-            .words
-            .iter()
-            .find(|w| w.letter == 'M')
-            .map(|w| w.col)
-            .unwrap_or(1);
-        return Err(lw.err(
-            col,
-            "program end inside a G5.2 NURBS: close it with G5.3 first",
-        ));
-    }
-    if let Some(w) = open {
-        if st.nurbs.is_some() {
-            return Err(lw.err(w.col, "G5.2 inside an open G5.2 NURBS"));
-        }
-        need_feed(st, lw, w.col)?;
-        let order = match lw.get('L') {
-            None => 3,
-            Some(l) if l.value.fract() == 0.0 && l.value >= 2.0 && l.value <= 10.0 => {
-                (l.value as usize).max(3)
-            }
-            Some(l) => return Err(lw.err(l.col, "NURBS order L must be an integer from 2 to 10")),
-        };
-        let has_point = lw.get(AXES[a]).is_some() || lw.get(AXES[b]).is_some();
-        // `G5.2 P.. L..` alone: P is the weight of the first control point (the current
-        // position); with coordinates, the line is already the second control point.
-        let w0 = match (has_point, lw.get('P')) {
-            (false, Some(p)) => p.value,
-            _ => 1.0,
-        };
-        if w0 <= 0.0 {
-            return Err(lw.err(
-                lw.get('P').map(|p| p.col).unwrap_or(w.col),
-                "weight P must be > 0",
-            ));
-        }
-        let p = st.pos;
-        st.nurbs = Some(NurbsOpen {
-            line: lw.line,
-            col: w.col,
-            order,
-            ctrl: vec![[p[0], p[1], p[2], w0]],
-        });
-        if !has_point {
-            return Ok(());
-        }
-    }
-    let has_a = lw.get(AXES[a]);
-    let has_b = lw.get(AXES[b]);
-    let normal = st.plane.normal();
-    if let Some(w) = lw.get(AXES[normal]) {
-        return Err(lw.err(
-            w.col,
-            format!(
-                "{} is not a word of the NURBS plane {:?}",
-                AXES[normal], st.plane
-            ),
-        ));
-    }
-    match (has_a, has_b) {
-        (Some(_), Some(_)) => {
-            let p = lw.get('P').ok_or_else(|| {
-                lw.err(
-                    lw.words[0].col,
-                    "every NURBS control point needs its weight P",
-                )
-            })?;
-            if p.value <= 0.0 {
-                return Err(lw.err(p.col, "weight P must be > 0"));
-            }
-            // The normal axis word was refused above, so this moves only the plane's two.
-            let pt = target(st, lw, unit);
-            if let Some(n) = st.nurbs.as_mut() {
-                n.ctrl.push([pt[0], pt[1], pt[2], p.value]);
-            }
-            st.pos = pt;
-        }
-        (Some(w), None) | (None, Some(w)) => {
-            return Err(lw.err(
-                w.col,
-                format!("NURBS control point needs both {} and {}", AXES[a], AXES[b]),
-            ));
-        }
-        (None, None) => {}
-    }
-    if let Some(w) = close {
-        let Some(n) = st.nurbs.take() else {
-            return Err(lw.err(w.col, "G5.3 without an open G5.2 NURBS"));
-        };
-        let count = n.ctrl.len();
-        if count < n.order {
-            return Err(lw.err(
-                w.col,
-                format!(
-                    "NURBS of order {} needs at least {} control points, got {count}",
-                    n.order, n.order
-                ),
-            ));
-        }
-        // Clamped uniform integer knots, as LinuxCNC makes them.
-        let k = n.order;
-        let knots: Vec<f64> = (0..count + k)
-            .map(|i| {
-                if i < k {
-                    0.0
-                } else if i < count {
-                    (i - k + 1) as f64
-                } else {
-                    (count - k + 1) as f64
-                }
-            })
-            .collect();
-        moves.push(Move::Nurbs {
-            line: n.line,
-            degree: k - 1,
-            knots,
-            ctrl: n.ctrl,
-            feed: st.feed,
-        });
-        st.motion = Motion::None;
-    }
-    Ok(())
-}
-
-fn g62_line(
-    st: &mut State,
-    lw: &LineWords,
-    open: Option<&Word>,
-    motion: Option<&Word>,
-    unit: f64,
-    moves: &mut Vec<Move>,
-    end: bool,
-) -> Result<(), Diagnostic> {
-    let (a, b) = st.plane.axes();
-    let first_col = lw.words.first().map_or(1, |w| w.col);
-    if let Some(m) = motion {
-        return Err(lw.err(
-            m.col,
-            format!(
-                "G{} inside a G6.2 NURBS: give its closing knots first",
-                m.value
-            ),
-        ));
-    }
-    if end {
-        return Err(lw.err(
-            first_col,
-            "program end inside a G6.2 NURBS: give its closing knots first",
-        ));
-    }
-    let point = lw.get(AXES[a]).is_some() || lw.get(AXES[b]).is_some();
-    if let Some(w) = lw.get(AXES[st.plane.normal()]) {
-        return Err(lw.err(
-            w.col,
-            format!(
-                "{} is not a word of the NURBS plane {:?}",
-                w.letter, st.plane
-            ),
-        ));
-    }
-    if st.g62.is_none() {
-        let Some(g) = open else { return Ok(()) };
-        need_feed(st, lw, g.col)?;
-        let order = match lw.get('P') {
-            Some(p) if p.value.fract() == 0.0 && (2.0..=10.0).contains(&p.value) => {
-                p.value as usize
-            }
-            Some(p) => return Err(lw.err(p.col, "G6.2 order P must be an integer from 2 to 10")),
-            None => return Err(lw.err(g.col, "the first G6.2 block needs the order P")),
-        };
-        match lw.get('Q') {
-            Some(q) if [1.0, 2.0, 3.0].contains(&q.value) => {} // LinuxCNC's method; we run the exact curve
-            Some(q) => return Err(lw.err(q.col, "G6.2 method Q must be 1, 2 or 3")),
-            None => {
-                return Err(lw.err(g.col, "the first G6.2 block needs the method Q (1, 2 or 3)"))
-            }
-        }
-        if !point {
-            return Err(lw.err(g.col, "the first G6.2 block needs its first control point"));
-        }
-        st.g62 = Some(G62Open {
-            line: lw.line,
-            col: g.col,
-            order,
-            ctrl: vec![],
-            knots: vec![],
-            closing: 0,
-        });
-    }
-    let knot = lw.get('K');
-    if point {
-        let (Some(_), Some(_)) = (lw.get(AXES[a]), lw.get(AXES[b])) else {
-            return Err(lw.err(
-                first_col,
-                format!("G6.2 control point needs both {} and {}", AXES[a], AXES[b]),
-            ));
-        };
-        let k = knot.ok_or_else(|| lw.err(first_col, "G6.2 control point needs its knot K"))?;
-        let weight = lw.get('R').map_or(1.0, |r| r.value);
-        if weight <= 0.0 {
-            return Err(lw.err(
-                lw.get('R').map_or(first_col, |r| r.col),
-                "G6.2 weight R must be > 0",
-            ));
-        }
-        // The normal axis word was refused above, so this moves only the plane's two.
-        let pt = target(st, lw, unit);
-        let Some(n) = st.g62.as_mut() else {
-            return Ok(());
-        };
-        if n.closing > 0 {
-            return Err(lw.err(first_col, "G6.2 control point after the closing knots"));
-        }
-        if n.ctrl.is_empty() {
-            let gap = ((pt[a] - st.pos[a]).powi(2) + (pt[b] - st.pos[b]).powi(2)).sqrt();
-            if gap > 1e-6 {
-                return Err(lw.err(
-                    first_col,
-                    format!("the first G6.2 control point must be the current position (it is {gap:.4} mm away)"),
-                ));
-            }
-        }
-        n.ctrl.push([pt[0], pt[1], pt[2], weight]);
-        n.knots.push(k.value);
-        st.pos = pt;
-    } else if let Some(k) = knot {
-        let Some(n) = st.g62.as_mut() else {
-            return Ok(());
-        };
-        n.knots.push(k.value);
-        n.closing += 1;
-        if n.closing == n.order {
-            let n = st.g62.take().unwrap_or_else(|| unreachable!());
-            let degree = n.order - 1;
-            if let Err(e) = shared::nurbs::validate(degree, &n.knots, &n.ctrl, usize::MAX) {
-                return Err(lw.err(k.col, format!("G6.2 NURBS opened on line {}: {e}", n.line)));
-            }
-            moves.push(Move::Nurbs {
-                line: n.line,
-                degree,
-                knots: n.knots,
-                ctrl: n.ctrl,
-                feed: st.feed,
-            });
-            st.motion = Motion::None;
-        }
-    }
-    Ok(())
 }
 
 #[cfg(test)]

@@ -20,6 +20,9 @@ pub struct InterpreterSummary {
     /// Set when a damaged command log was salvaged: what was wrong, what ran.
     #[serde(default)]
     pub salvaged: Option<String>,
+    /// The NC dialect the program was read in (`linuxcnc` or `fanuc`); none for replays.
+    #[serde(default)]
+    pub dialect: Option<String>,
 }
 
 #[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
@@ -77,6 +80,9 @@ pub struct Report {
     pub blocks: usize,
     /// Replays of a damaged log (`--salvage`): what was wrong and what ran.
     pub salvaged: Option<String>,
+    /// The NC dialect the program was read in (`linuxcnc`, `fanuc`); null for replays.
+    #[serde(default)]
+    pub dialect: Option<String>,
     pub sched: Option<interpolator::rt::sched::SchedReport>,
     pub miss_list: Vec<interpolator::summary::MissEntry>,
     pub processes: Vec<Process>,
@@ -204,6 +210,7 @@ pub fn assemble(
         servo_skipped_setpoints: servo.as_ref().map_or(0, |s| s.skipped_setpoints),
         blocks: interp.as_ref().map_or(0, |s| s.blocks),
         salvaged: interp.as_ref().and_then(|s| s.salvaged.clone()),
+        dialect: interp.as_ref().and_then(|s| s.dialect.clone()),
         sched: i.map(|s| s.sched.clone()),
         miss_list: i.map(|s| s.miss_list.clone()).unwrap_or_default(),
         processes,

@@ -50,6 +50,8 @@ pub struct Report {
     pub outcome: Option<String>,
     pub fault: Option<String>,
     pub program: Option<String>,
+    /// The NC dialect the program was read in; absent in older reports and replays.
+    pub dialect: Option<String>,
     pub clock: Option<String>,
     pub period_ns: Option<u64>,
     pub cycles: Option<u64>,
@@ -419,6 +421,7 @@ fn load_report(path: &Path, problems: &mut Vec<String>) -> Option<Report> {
         outcome: f.get("outcome", |x| x.as_str().map(str::to_owned)),
         fault: f.get("fault", |x| x.as_str().map(str::to_owned)),
         program: f.get("program", |x| x.as_str().map(str::to_owned)),
+        dialect: v.get("dialect").and_then(Value::as_str).map(str::to_owned),
         clock: f.get("clock", |x| x.as_str().map(str::to_owned)),
         period_ns: f.get("period_ns", Value::as_u64),
         cycles: f.get("cycles", Value::as_u64),

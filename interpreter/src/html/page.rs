@@ -111,7 +111,10 @@ fn summary(run: &Run, max_contour: Option<f64>, out: &mut String) {
         out,
         "program",
         "program",
-        &or_missing(r.program.as_deref(), |p| format!("<code>{}</code>", esc(p))),
+        &or_missing(r.program.as_deref(), |p| match &r.dialect {
+            Some(d) => format!("<code>{}</code> ({} dialect)", esc(p), esc(d)),
+            None => format!("<code>{}</code>", esc(p)),
+        }),
     );
     row(out, "outcome", "outcome", &outcome(r));
     row(

@@ -142,7 +142,7 @@ impl Runner {
                     self.branch = link;
                 }
             }
-            OKind::Else | OKind::EndIf | OKind::Do => {}
+            OKind::Else | OKind::EndIf | OKind::Do | OKind::ProgramNumber => {}
             OKind::While if self.flow.closes_do[here] => {
                 if cond {
                     pc = link.map_or(pc, |d| d + 1);

@@ -155,6 +155,12 @@ fn g6_2_errors_name_the_rule() {
     assert!(e[0].2.contains("current position"), "{e:?}");
     let e = errors("F100\nG6.2 X0 Y0 R1 K0 P2 Q1\nX1 Y1 R1 K2\nX2 Y0 R1 K1\nG6.2 K2\nG6.2 K2\n");
     assert!(e[0].2.contains("smaller than knot"), "{e:?}");
+    // Without Q, a G6.2 is Fanuc's G06.2 unless the dialect is forced to LinuxCNC.
+    let forced = Options {
+        dialect: Some(Dialect::LinuxCnc),
+    };
+    let e = interpret_with("F100\nG6.2 X0 Y0 R1 K0 P2\n", &forced).unwrap_err();
+    assert!(e[0].message.contains("method Q"), "{e:?}");
     let e = errors("F100\nG6.2 X0 Y0 R1 K0 P2\n");
-    assert!(e[0].2.contains("method Q"), "{e:?}");
+    assert!(e[0].2.contains("PS1005"), "{e:?}");
 }

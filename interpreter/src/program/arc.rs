@@ -1,0 +1,113 @@
+//! Circular and helical moves (G2, G3) in the three planes, centre and radius forms.
+
+use super::{LineWords, Move, State, ARC_RADIUS_TOL_MM, ARC_RADIUS_TOL_REL, OFFSETS};
+use crate::parse::Diagnostic;
+
+pub(super) fn arc(
+    st: &State,
+    lw: &LineWords,
+    to: [f64; 3],
+    ccw: bool,
+    unit: f64,
+    col: u32,
+) -> Result<Move, Diagnostic> {
+    let (a, b) = st.plane.axes();
+    let n = st.plane.normal();
+    let from = st.pos;
+    if let Some(w) = lw.get(OFFSETS[n]) {
+        return Err(lw.err(
+            w.col,
+            format!(
+                "{} offset given for an arc in the {:?} plane",
+                OFFSETS[n], st.plane
+            ),
+        ));
+    }
+    let turns = match lw.get('P') {
+        None => 1,
+        Some(p) if p.value >= 1.0 && p.value.fract() == 0.0 => p.value as u32,
+        Some(p) => return Err(lw.err(p.col, "arc turn count P must be a positive integer")),
+    };
+    let (da, db) = (to[a] - from[a], to[b] - from[b]);
+    let chord = (da * da + db * db).sqrt();
+    let mut center = [0.0; 3];
+    center[n] = from[n];
+    if let Some(rw) = lw.get('R') {
+        if lw.get(OFFSETS[a]).is_some() || lw.get(OFFSETS[b]).is_some() {
+            return Err(lw.err(rw.col, "arc has both R and centre offsets; give one form"));
+        }
+        let r = rw.value * unit;
+        if chord < 1e-9 {
+            return Err(lw.err(rw.col, "R-form arc with its end at its start: a full circle needs the centre form (I, J, K)"));
+        }
+        let half = chord / 2.0;
+        if r.abs() < half - ARC_RADIUS_TOL_MM {
+            return Err(lw.err(
+                rw.col,
+                format!(
+                    "arc radius {:.4} mm is too small to reach an end point {:.4} mm away",
+                    r.abs(),
+                    chord
+                ),
+            ));
+        }
+        let h = (r * r - half * half).max(0.0).sqrt();
+        // Centre on the left of the chord for a short counter-clockwise arc; R < 0 asks
+        // for the long way round, which puts it on the other side.
+        let side = if ccw { 1.0 } else { -1.0 } * r.signum();
+        let (ua, ub) = (da / chord, db / chord);
+        center[a] = from[a] + da / 2.0 - side * h * ub;
+        center[b] = from[b] + db / 2.0 + side * h * ua;
+    } else {
+        let (ia, ib) = (lw.value(OFFSETS[a]), lw.value(OFFSETS[b]));
+        if ia.is_none() && ib.is_none() {
+            return Err(lw.err(
+                col,
+                format!(
+                    "arc needs R or a centre ({} and {})",
+                    OFFSETS[a], OFFSETS[b]
+                ),
+            ));
+        }
+        let (ia, ib) = (ia.unwrap_or(0.0) * unit, ib.unwrap_or(0.0) * unit);
+        let (ca, cb) = if st.arc_absolute {
+            (ia, ib)
+        } else {
+            (from[a] + ia, from[b] + ib)
+        };
+        let r0 = ((from[a] - ca).powi(2) + (from[b] - cb).powi(2)).sqrt();
+        let r1 = ((to[a] - ca).powi(2) + (to[b] - cb).powi(2)).sqrt();
+        if r0 < 1e-9 {
+            return Err(lw.err(col, "arc centre coincides with its start point"));
+        }
+        let diff = (r1 - r0).abs();
+        if diff > ARC_RADIUS_TOL_MM && diff > ARC_RADIUS_TOL_REL * r0 {
+            return Err(lw.err(
+                col,
+                format!("radius to the end of the arc ({r1:.4} mm) differs from the radius to its start ({r0:.4} mm)"),
+            ));
+        }
+        if chord < 1e-9 {
+            center[a] = ca;
+            center[b] = cb;
+        } else {
+            // Within tolerance: move the centre to the nearest point of the chord's
+            // bisector, so the exact circle passes through both programmed end points.
+            let (ma, mb) = (from[a] + da / 2.0, from[b] + db / 2.0);
+            let (na, nb) = (-db / chord, da / chord);
+            let t = (ca - ma) * na + (cb - mb) * nb;
+            center[a] = ma + t * na;
+            center[b] = mb + t * nb;
+        }
+    }
+    Ok(Move::Arc {
+        line: lw.line,
+        from,
+        to,
+        center,
+        plane: st.plane,
+        ccw,
+        turns,
+        feed: st.feed,
+    })
+}
