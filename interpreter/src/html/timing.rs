@@ -130,10 +130,12 @@ fn measured(run: &Run, d: &DeadlineReport, out: &mut String) {
     }
     out.push_str("</table>");
     let floor = d.floor.as_ref().map(|f| f.wake_late_ns);
-    for (id, (name, f)) in ["wake-hist", "compute-hist", "publish-hist"]
-        .iter()
-        .zip(&figs)
-    {
+    let hists = [
+        ("wake-hist", "wake-up lateness"),
+        ("compute-hist", "compute time"),
+        ("publish-hist", "publish time"),
+    ];
+    for ((id, name), (_, f)) in hists.iter().zip(&figs) {
         let floor = if *id == "wake-hist" { floor } else { None };
         histogram(id, name, f, run.period_ns, floor, out);
     }
@@ -240,7 +242,7 @@ fn histogram(
     let y = (0.5, 10f64.powf((top * 1.5).log10().ceil()));
     let mut c = Chart::new(
         id,
-        &format!("Histogram of {name} time per cycle (log-log), with the period"),
+        &format!("Histogram of the {name} of each cycle (log-log), with the period"),
         &format!("{name} (µs, log scale)"),
         "cycles (log scale)",
         x,
