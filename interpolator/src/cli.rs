@@ -27,6 +27,60 @@ pub struct Args {
     /// `real` (wall time) or `sim` (as fast as the drives answer, same set-points).
     #[arg(long, default_value_t = ClockMode::Real)]
     pub clock: ClockMode,
+    /// Test aid: every Nth cycle computes for 1.5 periods (a long compute, reported as a
+    /// miss of cause `long_compute`). Also taken from `CNC_INJECT_LONG_COMPUTE=N`, which
+    /// `cnc run` passes on to this process.
+    #[arg(long, hide = true)]
+    pub inject_long_compute: Option<u64>,
+}
+
+/// The environment variable that injects long computes (see [`Args::inject_long_compute`]).
+pub const INJECT_ENV: &str = "CNC_INJECT_LONG_COMPUTE";
+
+/// `cnc latency-test`: this machine's wake-up jitter with the cycle's own sleep and
+/// scheduling, no work.
+#[derive(Debug, Clone, clap::Args)]
+pub struct LatencyArgs {
+    /// Period in µs (100..=10000), as `cnc run --period-us`.
+    #[arg(long, default_value_t = 1000, value_parser = clap::value_parser!(u64).range(100..=10_000))]
+    pub period_us: u64,
+    /// How long to measure, in seconds.
+    #[arg(long, default_value_t = 10.0)]
+    pub seconds: f64,
+    /// Scheduling, as `cnc run --sched`.
+    #[arg(long, value_enum, default_value_t = SchedMode::Auto)]
+    pub sched: SchedMode,
+    /// Where to write the result [default: $CNC_LATENCY_FILE, else runs/latency-test.json];
+    /// runs look for it there and compare their wake-up lateness with it.
+    #[arg(long)]
+    pub out: Option<PathBuf>,
+}
+
+/// Runs the latency test, prints the result and writes it where runs find it.
+pub fn latency_test(args: &LatencyArgs) -> anyhow::Result<()> {
+    if !(args.seconds > 0.0 && args.seconds <= 86_400.0) {
+        anyhow::bail!(
+            "--seconds {}: give a time between 0 and 86400",
+            args.seconds
+        );
+    }
+    println!(
+        "cnc latency-test: measuring wake-up lateness for {} s at a {} µs period (no work per cycle)...",
+        args.seconds, args.period_us
+    );
+    let r = crate::rt::latency::measure(args.period_us * 1000, args.seconds, args.sched)?;
+    print!("{}", r.text());
+    let path = args
+        .out
+        .clone()
+        .unwrap_or_else(crate::rt::latency::default_path);
+    r.write(&path)
+        .map_err(|e| anyhow::anyhow!("writing {}: {e}", path.display()))?;
+    println!(
+        "written to {} (runs from this directory compare their wake-up lateness with it)",
+        path.display()
+    );
+    Ok(())
 }
 
 /// Runs the interpolator process; the error names what went wrong.
@@ -41,7 +95,14 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
         clock: args.clock,
         start_timeout: Duration::from_secs(20),
     };
-    let summary = cycle::run::<iceoryx2::prelude::ipc::Service>(&cfg)?;
+    let hooks = cycle::Hooks {
+        long_compute_every: args.inject_long_compute.or_else(|| {
+            std::env::var(INJECT_ENV)
+                .ok()
+                .and_then(|v| v.trim().parse().ok())
+        }),
+    };
+    let summary = cycle::run_with::<iceoryx2::prelude::ipc::Service>(&cfg, hooks)?;
     match summary.fault {
         Some(f) => anyhow::bail!("fault: {f}"),
         None => Ok(()),

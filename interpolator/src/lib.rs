@@ -8,6 +8,7 @@
 //! and on threads of one test (`local::Service`).
 
 pub mod cli;
+pub mod deadline;
 pub mod engine;
 pub mod rt;
 pub mod summary;

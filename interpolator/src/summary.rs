@@ -43,30 +43,47 @@ impl FeedStats {
     }
 }
 
+/// One deadline miss as the JSON files list it (`deadline-misses.json`, and the first
+/// [`REPORT_MISSES`] of them in `report.json`'s `miss_list`).
 #[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
 pub struct MissEntry {
     pub cycle: u64,
+    /// The cycle's release time since the first cycle's, in ns (`cycle × period`).
+    #[serde(default)]
+    pub t_ns: u64,
     pub line: u32,
+    /// Sequence number of the block being run.
+    #[serde(default)]
+    pub block_seq: u64,
+    /// `late_wake`, `long_compute`, `publish_stall` or `downstream_lag`.
     pub cause: String,
     pub wake_late_ns: u64,
     pub compute_ns: u64,
     pub publish_ns: u64,
+    /// How late: the set-point's finish minus its deadline (downstream: how long the
+    /// drives' answer is overdue, at least).
     pub overrun_ns: u64,
+    /// Set-points sent and not yet answered by the drives when the cycle woke.
+    #[serde(default)]
+    pub unanswered: u64,
 }
 
-impl From<&Miss> for MissEntry {
-    fn from(m: &Miss) -> Self {
+/// How many misses `report.json` lists in full; `deadline-misses.json` has them all.
+pub const REPORT_MISSES: usize = 4096;
+
+impl MissEntry {
+    pub fn new(m: &Miss, period_ns: u64) -> Self {
         MissEntry {
             cycle: m.cycle,
+            t_ns: m.cycle * period_ns,
             line: m.source_line,
-            cause: serde_json::to_value(m.cause)
-                .ok()
-                .and_then(|v| v.as_str().map(str::to_owned))
-                .unwrap_or_default(),
+            block_seq: m.block_seq,
+            cause: m.cause.id().into(),
             wake_late_ns: m.wake_late_ns,
             compute_ns: m.compute_ns,
             publish_ns: m.publish_ns,
-            overrun_ns: m.overrun_ns,
+            overrun_ns: m.late_ns,
+            unanswered: m.unanswered,
         }
     }
 }
@@ -161,7 +178,8 @@ pub struct Summary {
     pub wake_late_ns: Option<Percentiles>,
     pub compute_ns: Option<Percentiles>,
     pub publish_ns: Option<Percentiles>,
-    /// Every miss up to the first 4096, in cycle order.
+    /// Every miss up to the first [`REPORT_MISSES`], in cycle order (all of them are in
+    /// `deadline-misses.json`).
     pub miss_list: Vec<MissEntry>,
     pub path_length_mm: f64,
     pub time_s: f64,
@@ -188,7 +206,7 @@ impl Summary {
     pub fn new(
         cfg: &Config,
         cycles: u64,
-        timing: Option<&Timing>,
+        timing: Option<(&Timing, &[Miss])>,
         feed: &FeedStats,
         fault: Option<String>,
         sched: SchedReport,
@@ -207,12 +225,17 @@ impl Summary {
             period_ns: cfg.period_ns,
             clock: cfg.clock.name().into(),
             cycles,
-            misses: timing.map(|t| t.misses),
-            wake_late_ns: timing.map(|t| t.wake_late.percentiles()),
-            compute_ns: timing.map(|t| t.compute.percentiles()),
-            publish_ns: timing.map(|t| t.publish.percentiles()),
+            misses: timing.map(|(t, _)| t.misses),
+            wake_late_ns: timing.map(|(t, _)| t.wake_late.percentiles()),
+            compute_ns: timing.map(|(t, _)| t.compute.percentiles()),
+            publish_ns: timing.map(|(t, _)| t.publish.percentiles()),
             miss_list: timing
-                .map(|t| t.miss_log.iter().map(MissEntry::from).collect())
+                .map(|(_, list)| {
+                    list.iter()
+                        .take(REPORT_MISSES)
+                        .map(|m| MissEntry::new(m, cfg.period_ns))
+                        .collect()
+                })
                 .unwrap_or_default(),
             path_length_mm: feed.path_length_mm,
             time_s: (cycles * cfg.period_ns) as f64 * 1e-9,

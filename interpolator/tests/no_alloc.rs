@@ -1,11 +1,11 @@
-//! The cycle's own work never allocates: engine tick, timing record, feed statistics and
-//! the trace push, over many cycles and block changes, counted by a global allocator that
-//! counts only on the measuring thread (the trace writer thread formats and allocates
-//! freely, off the cycle).
+//! The cycle's own work never allocates: engine tick, timing record (histograms and the
+//! miss ring), feed statistics and the trace push, over more than 100 000 cycles and many
+//! block changes, counted by a global allocator that counts only on the measuring thread
+//! (the trace writer and the miss log's drain thread allocate freely, off the cycle).
 
 use interpolator::engine::{BlockSource, Engine, Fault, Limits, TickState};
 use interpolator::summary::{FaultRecord, FeedStats};
-use interpolator::timing::Timing;
+use interpolator::timing::{CycleTimes, MissCause, Timing, MISS_RING};
 use shared::alloc_count::{arm, count, Counting};
 use shared::protocol::{BlockKind, CommandBlock};
 use shared::trace::TraceWriter;
@@ -80,9 +80,10 @@ fn cycle_work_does_not_allocate() {
     let mut src = Loop {
         block: closed_curve(),
         next_seq: 0,
-        count: 40,
+        count: 400,
     };
-    let mut timing = Timing::new(1_000_000, 16);
+    let (mut timing, mut miss_log) = Timing::new(1_000_000, MISS_RING);
+    miss_log.start().unwrap();
     let mut feed = FeedStats::default();
     let path = std::env::temp_dir().join(format!("cnc-noalloc-{}.csv", std::process::id()));
     let mut trace = TraceWriter::create(&path, "cycle,x", 1 << 12, |r: &Rec, s: &mut String| {
@@ -94,13 +95,26 @@ fn cycle_work_does_not_allocate() {
     loop {
         let t = engine.tick(&mut src).unwrap();
         feed.add(&t, 1_000_000);
-        // Every 1000th cycle is a "miss", so the miss log is exercised too.
-        let compute = if cycles.is_multiple_of(1000) {
-            2_000_000
-        } else {
-            5_000
+        // Every 100th cycle is a miss, of each cause in turn, so the miss ring and its
+        // drain are exercised too.
+        let mut times = CycleTimes {
+            cycle: cycles,
+            block_seq: t.block_seq,
+            source_line: t.source_line,
+            wake_late_ns: 10_000,
+            compute_ns: 5_000,
+            publish_ns: 1_000,
+            unanswered: 0,
         };
-        timing.record(cycles, t.source_line, 10_000, compute, 1_000);
+        if cycles.is_multiple_of(100) {
+            match (cycles / 100) % 4 {
+                0 => times.wake_late_ns = 1_200_000,
+                1 => times.compute_ns = 2_000_000,
+                2 => times.publish_ns = 1_100_000,
+                _ => times.unanswered = 3,
+            }
+        }
+        timing.record(&times);
         trace.push(Rec(cycles, t.pos_mm));
         cycles += 1;
         if t.state == TickState::Done {
@@ -118,9 +132,22 @@ fn cycle_work_does_not_allocate() {
     assert_eq!(trace.dropped(), 0);
     trace.finish().unwrap();
     let _ = std::fs::remove_file(&path);
-    assert!(cycles > 10_000, "only {cycles} cycles");
-    assert!(timing.misses > 5);
+    let misses = miss_log.finish();
+    assert!(cycles >= 100_000, "only {cycles} cycles");
     assert_eq!(allocs, 0, "{allocs} allocations in {cycles} cycles");
+    // Every miss was kept, each with its cause.
+    assert_eq!(timing.misses, cycles.div_ceil(100));
+    assert_eq!(timing.lost, 0);
+    assert_eq!(misses.len() as u64, timing.misses);
+    for m in &misses {
+        let want = [
+            MissCause::LateWake,
+            MissCause::LongCompute,
+            MissCause::PublishStall,
+            MissCause::DownstreamLag,
+        ][((m.cycle / 100) % 4) as usize];
+        assert_eq!((m.cycle % 100, m.cause), (0, want));
+    }
 }
 
 #[test]

@@ -69,6 +69,10 @@ pub enum Command {
     Log(LogCommand),
     /// Print the built-in machine file (TOML), a starting point for your own.
     Machine,
+    /// Measure this machine's wake-up jitter with the interpolator's own sleep and
+    /// scheduling but no work (like LinuxCNC's latency-test); runs compare their lateness
+    /// with the result (runs/latency-test.json).
+    LatencyTest(interpolator::cli::LatencyArgs),
     /// Internal: run one process of the stack (started by `cnc run`).
     #[command(hide = true, subcommand)]
     Role(Role),
@@ -274,6 +278,10 @@ pub fn main() -> ExitCode {
             print!("{}", shared::Machine::default_toml());
             ExitCode::SUCCESS
         }
+        Command::LatencyTest(args) => match interpolator::cli::latency_test(&args) {
+            Ok(()) => ExitCode::SUCCESS,
+            Err(e) => fail(e),
+        },
         Command::Role(Role::Interpreter {
             common,
             program,

@@ -496,6 +496,9 @@ impl Stack {
         rep.write(&dir.join("report.json"))
             .map_err(|e| format!("writing report.json: {e}"))?;
         print!("{}", rep.summary_text(dir));
+        if let Some(line) = interpolator::deadline::summary_line(dir) {
+            println!("  deadlines    {line}");
+        }
         if rep.starvations > 0 {
             println!(
                 "  starvation   {} time(s) the interpolator ran out of blocks, stopped on the path and waited",

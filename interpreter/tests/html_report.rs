@@ -214,12 +214,46 @@ fn demo_page_rounds_its_full_circle_and_a_linuxcnc_page_has_none() {
     fs::write(d.join("butterfly.html"), page).unwrap();
 }
 
+/// The rows of the miss table: (cycle, cause in words).
+fn miss_rows(page: &str) -> Vec<(u64, String)> {
+    let table = &page[page.find("id=\"miss-table\"").unwrap()..];
+    let table = &table[..table.find("</table>").unwrap()];
+    table
+        .split("<tr><td>")
+        .skip(1)
+        .map(|r| {
+            let cells: Vec<&str> = r.split("<td>").collect();
+            let cycle = r[..r.find('<').unwrap()].parse().unwrap();
+            let cause = cells[4].trim_end_matches("</td>").to_string();
+            (cycle, cause)
+        })
+        .collect()
+}
+
+/// The misses of a deadline-misses.json: (cycle, cause in words), in cycle order.
+fn deadline_misses(run: &Path) -> Vec<(u64, String)> {
+    let d: Value =
+        serde_json::from_str(&fs::read_to_string(run.join("deadline-misses.json")).unwrap())
+            .unwrap();
+    d["miss_list"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|m| {
+            (
+                m["cycle"].as_u64().unwrap(),
+                interpolator::deadline::cause_words(m["cause"].as_str().unwrap()).to_string(),
+            )
+        })
+        .collect()
+}
+
 #[test]
 fn misses_are_listed_exactly() {
     let run = circle_run("misses");
     let mut rep = report(&run);
     rep["clock"] = "real".into();
-    rep["misses"] = 3.into();
+    rep["misses"] = 4.into();
     for k in ["wake_late_ns", "compute_ns", "publish_ns"] {
         rep[k] = serde_json::json!({"p50": 20000, "p99": 90000, "max": 1500000});
     }
@@ -227,27 +261,116 @@ fn misses_are_listed_exactly() {
         serde_json::json!({"cycle": cycle, "line": 3, "cause": cause, "wake_late_ns": 1_200_000,
             "compute_ns": 5_000, "publish_ns": 9_000, "overrun_ns": overrun})
     };
-    rep["miss_list"] = serde_json::json!([
+    let list = serde_json::json!([
         miss(100, "late_wake", 250_000),
-        miss(700, "compute", 40_000),
-        miss(1200, "publish", 1_000_000)
+        miss(700, "long_compute", 40_000),
+        miss(701, "downstream_lag", 1_010_000),
+        miss(1200, "publish_stall", 1_000_000)
     ]);
+    rep["miss_list"] = list.clone();
     fs::write(run.join("report.json"), rep.to_string()).unwrap();
+    // deadline-misses.json as the interpolator writes it, with histograms.
+    let mut d: Value =
+        serde_json::from_str(&fs::read_to_string(run.join("deadline-misses.json")).unwrap())
+            .unwrap();
+    let fig = serde_json::json!({
+        "percentiles": {"p50": 20000, "p90": 40000, "p99": 90000, "p999": 300000, "max": 1500000},
+        "min_ns": 9000, "mean_ns": 25000.0,
+        "histogram": [{"lo_ns": 19456, "hi_ns": 20480, "count": 1200},
+                      {"lo_ns": 1441792, "hi_ns": 1507328, "count": 3}]});
+    for k in ["wake_late_ns", "compute_ns", "publish_ns"] {
+        d[k] = fig.clone();
+    }
+    d["measured"] = true.into();
+    d["clock"] = "real".into();
+    d["not_measured"] = Value::Null;
+    d["misses"] = 4.into();
+    d["miss_list"] = list;
+    d["runs"] = serde_json::json!([{"start_cycle": 700, "length": 2}]);
+    d["summary"] = "4 deadline misses in 1300 cycles".into();
+    d["vs_floor"] = "no latency test measured on this machine".into();
+    fs::write(run.join("deadline-misses.json"), d.to_string()).unwrap();
+
     let page = html::render(&run).unwrap();
-    for id in ["pct-plot", "miss-plot", "miss-table", "timing-table"] {
+    for id in [
+        "wake-hist",
+        "compute-hist",
+        "publish-hist",
+        "miss-plot",
+        "miss-table",
+        "timing-table",
+        "runs-table",
+        "floor-compare",
+    ] {
         assert!(page.contains(&format!("id=\"{id}\"")), "no {id}");
     }
-    let table = &page[page.find("id=\"miss-table\"").unwrap()..];
-    let table = &table[..table.find("</table>").unwrap()];
-    let rows: Vec<&str> = table.split("<tr><td>").skip(1).collect();
-    assert_eq!(rows.len(), 3);
+    let rows = miss_rows(&page);
     // Worst first, each with its source line and cause in words.
-    assert!(rows[0].starts_with("1200<") && rows[0].contains("publish"));
-    assert!(rows[1].starts_with("100<") && rows[1].contains("late wake-up"));
-    assert!(rows[2].starts_with("700<") && rows[2].contains("compute"));
-    assert!(rows.iter().all(|r| r.contains("G3 X10 Y0 I-10 J0 F3000")));
+    let cycles: Vec<u64> = rows.iter().map(|r| r.0).collect();
+    assert_eq!(cycles, [701, 1200, 100, 700]);
+    let mut sorted = rows.clone();
+    sorted.sort();
+    assert_eq!(sorted, deadline_misses(&run));
+    assert_eq!(rows[0].1, "downstream not consuming");
+    assert_eq!(rows[1].1, "publish stall");
+    assert_eq!(rows[2].1, "late wake-up");
+    assert_eq!(rows[3].1, "long compute");
+    assert!(page.contains("G3 X10 Y0 I-10 J0 F3000"));
     assert!(page.contains("period 1000 µs"));
-    assert!(cell(&page, "misses").contains('3'));
+    assert!(cell(&page, "misses").contains('4'));
+
+    // An older run directory without deadline-misses.json: report.json's figures.
+    fs::remove_file(run.join("deadline-misses.json")).unwrap();
+    let page = html::render(&run).unwrap();
+    assert!(page.contains("id=\"pct-plot\""));
+    assert!(!page.contains("id=\"wake-hist\""));
+    assert_eq!(miss_rows(&page).len(), 4);
+    assert!(page.contains("no deadline-misses.json"));
+}
+
+/// A real-clock run with injected long computes: the page draws the histograms with the
+/// period and lists exactly the misses of deadline-misses.json.
+#[test]
+fn real_run_page_has_histograms_and_exactly_the_misses() {
+    let d = scratch("real");
+    let prog = d.join("circle.ngc");
+    fs::write(&prog, CIRCLE).unwrap();
+    let run = d.join("run");
+    let o = Command::new(env!("CARGO_BIN_EXE_cnc"))
+        .args(["run", "--clock", "real", "--out"])
+        .arg(&run)
+        .arg(&prog)
+        .env("CNC_INJECT_LONG_COMPUTE", "50")
+        .env("CNC_LATENCY_FILE", d.join("no-latency-test.json"))
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let page = fs::read_to_string(run.join("report.html")).unwrap();
+    let rep = report(&run);
+    check_summary(&page, &rep);
+    check_plots(&page);
+    for id in ["wake-hist", "compute-hist", "publish-hist"] {
+        let at = page.find(&format!("id=\"{id}\"")).unwrap();
+        let svg = &page[at..at + page[at..].find("</svg>").unwrap()];
+        for l in [
+            "(µs, log scale)",
+            "cycles (log scale)",
+            "period 1000 µs",
+            "<rect",
+        ] {
+            assert!(svg.contains(l), "{id}: no `{l}`");
+        }
+    }
+    let listed = deadline_misses(&run);
+    assert!(listed.len() >= 20, "the injected misses are there");
+    let mut rows = miss_rows(&page);
+    rows.sort();
+    assert_eq!(
+        rows, listed,
+        "the table lists exactly the misses of deadline-misses.json"
+    );
+    assert!(page.contains("no latency test measured"));
+    assert!(cell(&page, "misses").contains(&rep["misses"].to_string()));
 }
 
 #[test]
@@ -293,8 +416,13 @@ fn damaged_run_directories_are_named_never_a_panic() {
     let page = html::render(&norep).unwrap();
     assert!(page.contains("report.json: "));
     assert!(page.contains("No summary figures"));
-    assert!(page.contains("Timing unknown"));
     assert!(page.contains("id=\"path-plot\""));
+    // The timing comes from deadline-misses.json (this run's: not measured) ...
+    assert!(page.contains("id=\"timing-not-measured\""));
+    // ... and without it too it is unknown.
+    fs::remove_file(norep.join("deadline-misses.json")).unwrap();
+    let page = html::render(&norep).unwrap();
+    assert!(page.contains("Timing unknown"));
 
     // A report.json that is not JSON: named with line and column.
     let bad = d.join("badjson");
@@ -338,6 +466,7 @@ fn damaged_run_directories_are_named_never_a_panic() {
         "commands.log",
         "machine.toml",
         "program.ngc",
+        "deadline-misses.json",
     ] {
         let full = fs::read(good.join(name)).unwrap();
         for k in 0..=8 {

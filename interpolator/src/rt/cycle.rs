@@ -15,11 +15,12 @@
 //! deaths come from [`PeerWatch`] (iceoryx2 liveness, off the cycle); a drive that stays
 //! silent while alive is caught by the feedback watchdog below.
 
+use crate::deadline::DeadlineReport;
 use crate::engine::{BlockSource, Engine, Fault, Limits, TickState};
 use crate::rt::sched::{self, SchedMode, SchedReport};
 use crate::rt::watch::PeerWatch;
 use crate::summary::{FaultInfo, FaultRecord, FeedStats, Summary};
-use crate::timing::Timing;
+use crate::timing::{CycleTimes, Timing, MISS_RING};
 use iceoryx2::port::subscriber::Subscriber;
 use iceoryx2::prelude::*;
 use shared::clock::{now_ns, sleep_until_ns, spin_then_block, ClockMode};
@@ -43,6 +44,15 @@ pub struct Config {
     pub clock: ClockMode,
     /// How long to wait for the servo-sim and the first block before giving up.
     pub start_timeout: Duration,
+}
+
+/// Test aids that change what a cycle does; none in normal runs.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct Hooks {
+    /// Every Nth cycle (N, 2N, …) spins in its compute phase until 1.5 periods after it
+    /// woke: a long compute that must be reported as exactly those misses, with cause
+    /// `long_compute` (`cnc run --inject-long-compute N`).
+    pub long_compute_every: Option<u64>,
 }
 
 /// Under the simulated clock: how long to spin for an answer before sleeping on the
@@ -210,8 +220,14 @@ impl Answers {
 }
 
 /// Runs the interpolator until the program end or a fault, and writes
-/// `setpoints.csv` and `interpolator.json` into the run directory.
+/// `setpoints.csv`, `interpolator.json` and the deadline-miss report
+/// (`deadline-misses.json`, `deadline-misses.txt`) into the run directory.
 pub fn run<S: Service>(cfg: &Config) -> Result<Summary, RunError> {
+    run_with::<S>(cfg, Hooks::default())
+}
+
+/// [`run`] with test aids.
+pub fn run_with<S: Service>(cfg: &Config, hooks: Hooks) -> Result<Summary, RunError> {
     let sim = cfg.clock == ClockMode::Sim;
     let svc = Services::new(&cfg.prefix);
     let node = ipc::node::<S>("interpolator")?;
@@ -276,7 +292,12 @@ pub fn run<S: Service>(cfg: &Config) -> Result<Summary, RunError> {
         1 << 16,
         format_setpoint,
     )?;
-    let mut timing = Timing::new(cfg.period_ns, 4096);
+    // Misses go through a pre-allocated ring to a thread that keeps them all.
+    let (mut timing, mut miss_log) = Timing::new(cfg.period_ns, MISS_RING);
+    if !sim {
+        miss_log.start()?;
+    }
+    let inject_every = hooks.long_compute_every.filter(|n| *n > 0);
     let mut feed = FeedStats::starting_at(engine.position());
     // Spinning at SCHED_FIFO invites RT throttling: the simulated clock runs plain.
     let sched_mode = if sim { SchedMode::Other } else { cfg.sched };
@@ -321,6 +342,15 @@ pub fn run<S: Service>(cfg: &Config) -> Result<Summary, RunError> {
 
         // inputs → faults
         answers.drain(&fb_sub, &engine, &mut fault, &lines);
+        // Set-points sent (cycles 0..cycle) that the drives have not answered yet; once
+        // they are gone that is the fault's business, not a miss.
+        let unanswered = if servo_lost || watch.servo_gone() {
+            0
+        } else {
+            answers
+                .last_cycle
+                .map_or(cycle, |c| cycle.saturating_sub(c + 1))
+        };
         if shared::stop::requested() {
             fault.get_or_insert(Fault::StopRequested);
         }
@@ -352,6 +382,14 @@ pub fn run<S: Service>(cfg: &Config) -> Result<Summary, RunError> {
             }
             ok => ok,
         };
+        if let Some(n) = inject_every {
+            if cycle > 0 && cycle.is_multiple_of(n) {
+                let until = wake + cfg.period_ns * 3 / 2;
+                while now_ns() < until {
+                    core::hint::spin_loop();
+                }
+            }
+        }
         let computed = now_ns();
         let (sp, state) = match tick {
             Ok(t) => {
@@ -412,13 +450,15 @@ pub fn run<S: Service>(cfg: &Config) -> Result<Summary, RunError> {
         let finished = now_ns();
         // measurement (meaningless under the simulated clock, so not taken)
         if !sim {
-            timing.record(
+            timing.record(&CycleTimes {
                 cycle,
-                sp.source_line,
-                wake.saturating_sub(release),
-                computed - wake,
-                finished - computed,
-            );
+                block_seq: sp.block_seq,
+                source_line: sp.source_line,
+                wake_late_ns: wake.saturating_sub(release),
+                compute_ns: computed - wake,
+                publish_ns: finished - computed,
+                unanswered,
+            });
         }
         trace.push(SetpointRec {
             cycle,
@@ -446,10 +486,24 @@ pub fn run<S: Service>(cfg: &Config) -> Result<Summary, RunError> {
     drop(watch);
     let dropped = trace.dropped();
     trace.finish()?;
+    let misses = miss_log.finish();
+    let deadline = if sim {
+        DeadlineReport::not_measured(cfg.clock.name(), cfg.period_ns, cycle + 1)
+    } else {
+        DeadlineReport::measured(
+            cfg.period_ns,
+            cycle + 1,
+            &sched_report,
+            &timing,
+            &misses,
+            &crate::rt::latency::default_path(),
+        )
+    };
+    deadline.write(&cfg.out_dir)?;
     let summary = Summary::new(
         cfg,
         cycle + 1,
-        (!sim).then_some(&timing),
+        (!sim).then_some((&timing, &misses[..])),
         &feed,
         fault.map(|f| f.to_string()),
         sched_report,

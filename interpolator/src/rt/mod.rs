@@ -1,5 +1,6 @@
 //! The real-time side: scheduling set-up and the periodic loop over iceoryx2.
 
 pub mod cycle;
+pub mod latency;
 pub mod sched;
 pub mod watch;

@@ -112,6 +112,9 @@ pub struct Run {
     pub program: Vec<String>,
     /// The interpolation period in force, from the report or the CSV's `t_ns`.
     pub period_ns: u64,
+    /// `deadline-misses.json`: histograms, every miss, runs, the latency floor (`None`
+    /// when absent, as in run directories older than it, or unusable: then a problem).
+    pub deadline: Option<interpolator::deadline::DeadlineReport>,
     /// What is missing or damaged, each `file[:line]: message`.
     pub problems: Vec<String>,
 }
@@ -213,8 +216,10 @@ impl Run {
                 problems.push("period unknown (no report.json, no t_ns): assuming 1 ms".into());
                 1_000_000
             });
+        let deadline = load_deadline(dir, &mut problems);
         Run {
             dir: dir.to_path_buf(),
+            deadline,
             report,
             setpoints,
             feedback,
@@ -243,6 +248,28 @@ impl Run {
 
     pub fn period_s(&self) -> f64 {
         self.period_ns as f64 * 1e-9
+    }
+}
+
+/// `deadline-misses.json`, if there is a usable one. Its absence is not a problem (older
+/// run directories, or an interpolator that died before the end): the timing section then
+/// draws what report.json has.
+fn load_deadline(
+    dir: &Path,
+    problems: &mut Vec<String>,
+) -> Option<interpolator::deadline::DeadlineReport> {
+    let name = interpolator::deadline::JSON_FILE;
+    let text = std::fs::read_to_string(dir.join(name)).ok()?;
+    match serde_json::from_str(&text) {
+        Ok(d) => Some(d),
+        Err(e) => {
+            problems.push(format!(
+                "{name}:{}:{}: {e} (timing histograms and the full miss list not drawn)",
+                e.line(),
+                e.column()
+            ));
+            None
+        }
     }
 }
 

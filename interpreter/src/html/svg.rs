@@ -158,6 +158,8 @@ pub struct Chart {
     pub x: (f64, f64),
     pub y: (f64, f64),
     pub x_log: bool,
+    /// Log scale on y (decade ticks); the range must be positive.
+    pub y_log: bool,
     /// Category names for a bar chart: category `i` is centred on `y = i + 0.5` and these
     /// names replace the numeric y ticks.
     pub y_cats: Vec<String>,
@@ -187,6 +189,7 @@ impl Chart {
             x,
             y,
             x_log: false,
+            y_log: false,
             y_cats: Vec::new(),
             w: 980.0,
             h: 300.0,
@@ -215,9 +218,18 @@ impl Chart {
         self.ml + (self.fx(x) - a) / (b - a) * self.plot_w()
     }
 
+    fn fy(&self, y: f64) -> f64 {
+        if self.y_log {
+            y.max(1e-300).log10()
+        } else {
+            y
+        }
+    }
+
     pub fn py(&self, y: f64) -> f64 {
         let ph = self.h - self.mt - self.mb;
-        self.mt + ph - (y - self.y.0) / (self.y.1 - self.y.0) * ph
+        let (a, b) = (self.fy(self.y.0), self.fy(self.y.1));
+        self.mt + ph - (self.fy(y) - a) / (b - a) * ph
     }
 
     /// The SVG header, frame, grid, ticks, axis labels and title; data drawn after this is
@@ -250,9 +262,23 @@ impl Chart {
                 esc(name)
             );
         }
+        if self.y_log && self.y_cats.is_empty() {
+            let (a, b) = (self.fy(self.y.0).ceil(), self.fy(self.y.1).floor());
+            for e in a as i32..=b as i32 {
+                let y = self.py(10f64.powi(e));
+                let _ = write!(
+                    out,
+                    r#"<line x1="{ml}" y1="{y:.1}" x2="{:.1}" y2="{y:.1}" class="grid"/><text x="{:.1}" y="{:.1}" class="ty">{}</text>"#,
+                    ml + pw,
+                    ml - 5.0,
+                    y + 4.0,
+                    num(10f64.powi(e))
+                );
+            }
+        }
         let step = nice_step(self.y.1 - self.y.0, (ph / 45.0).max(2.0));
         let mut t = (self.y.0 / step).ceil() * step;
-        while self.y_cats.is_empty() && t <= self.y.1 + step * 1e-9 {
+        while self.y_cats.is_empty() && !self.y_log && t <= self.y.1 + step * 1e-9 {
             let y = self.py(t);
             let _ = write!(
                 out,

@@ -1,21 +1,25 @@
 //! The timing section: what the interpolator measured about its own deadlines.
 //!
-//! The run directory holds, per timing figure, only p50, p99 and the maximum (the
-//! interpolator keeps its histogram in memory and reports percentiles), plus each miss in
-//! full up to a capacity. So this section draws exactly those: the percentiles as bars on
-//! a log scale with the period marked, every recorded miss on the time axis (marker shape
-//! and colour by cause), and a table of the worst misses with their source line. No
-//! per-cycle histogram is drawn because no per-cycle timing was recorded; the page says
-//! so. Under the simulated clock nothing was measured, and the page says that instead.
+//! From `deadline-misses.json` (written by the interpolator at the end of every run): the
+//! log-bucketed histograms of wake-up lateness, compute time and publish time, drawn on
+//! log-log axes with the period marked (and this machine's floor from `cnc latency-test`,
+//! when there is one), the percentiles, every miss on the time axis (marker shape and
+//! colour by cause), the runs of consecutive misses and a table of the misses, worst first,
+//! listing every one of them up to [`MAX_ROWS`]. Run directories older than that file have
+//! only report.json's p50/p99/max and the first misses; then those are drawn as bars and
+//! the page says why there is no histogram. Under the simulated clock nothing was measured,
+//! and the page says that instead.
 
 use super::data::{Miss, Pct, Run};
 use super::series::time_range;
 use super::svg::{esc, num, pad_range, Chart, LIMIT};
+use interpolator::deadline::{cause_words, DeadlineReport, Figure};
 use std::collections::HashSet;
 use std::fmt::Write;
 
-/// Rows in the table of worst misses.
-const WORST: usize = 25;
+/// Most rows in the miss table (worst first); a run with more misses lists them all in
+/// deadline-misses.json, and the page says how many it leaves out.
+pub const MAX_ROWS: usize = 1000;
 
 /// Marker colour, SVG shape and words for a miss cause.
 fn cause(c: &str) -> (&'static str, &'static str, &'static str) {
@@ -25,15 +29,20 @@ fn cause(c: &str) -> (&'static str, &'static str, &'static str) {
             "circle",
             "late wake-up (the OS woke the loop late)",
         ),
-        "compute" => (
+        "long_compute" | "compute" => (
             "#c05a00",
             "square",
-            "compute (stepping the path took too long)",
+            "long compute (stepping the path took too long)",
         ),
-        "publish" => (
+        "publish_stall" | "publish" => (
             "#2a7f3f",
             "triangle",
-            "publish (handing the set-point over took too long)",
+            "publish stall (handing the set-point over took too long)",
+        ),
+        "downstream_lag" => (
+            "#7a1f7a",
+            "cross",
+            "downstream not consuming (the drives answered late)",
         ),
         _ => ("#555555", "cross", "other"),
     }
@@ -67,21 +76,127 @@ fn marker(out: &mut String, shape: &str, x: f64, y: f64, col: &str) {
 
 pub fn section(run: &Run, out: &mut String) {
     out.push_str("<section id=\"timing\"><h2>Timing</h2>");
+    match &run.deadline {
+        Some(d) if !d.measured => not_measured(d.clock == "sim", out),
+        Some(d) => measured(run, d, out),
+        None => from_report(run, out),
+    }
+    out.push_str("</section>");
+}
+
+fn not_measured(sim: bool, out: &mut String) {
+    let why = if sim {
+        "Timing was not measured: this run used the simulated clock (each cycle starts as soon as the drives answered the previous one, without sleeping), so wake-up lateness, compute time and deadline misses have no meaning here. Run with <code>--clock real</code> to measure them."
+    } else {
+        "Timing was not recorded for this run."
+    };
+    let _ = write!(
+        out,
+        "<p class=\"note\" id=\"timing-not-measured\">{why}</p>"
+    );
+}
+
+/// The full picture, from deadline-misses.json.
+fn measured(run: &Run, d: &DeadlineReport, out: &mut String) {
+    let _ = write!(
+        out,
+        "<p id=\"deadline-summary\"><b>{}</b></p><p class=\"note\" id=\"floor-compare\">Against this machine's own floor (<code>cnc latency-test</code>): {}.</p>",
+        esc(&d.summary),
+        esc(&d.vs_floor)
+    );
+    let figs: Vec<(&str, &Figure)> = [
+        ("wake-up late", d.wake_late_ns.as_ref()),
+        ("compute", d.compute_ns.as_ref()),
+        ("publish", d.publish_ns.as_ref()),
+    ]
+    .into_iter()
+    .filter_map(|(n, f)| f.map(|f| (n, f)))
+    .collect();
+    out.push_str("<table class=\"figs\" id=\"timing-table\"><tr><th></th><th>min</th><th>mean</th><th>p50</th><th>p90</th><th>p99</th><th>p99.9</th><th>max</th></tr>");
+    for (name, f) in &figs {
+        let p = f.percentiles;
+        let us = |ns: u64| format!("{:.1}", ns as f64 / 1000.0);
+        let _ = write!(
+            out,
+            "<tr><th>{name} (µs)</th><td>{}</td><td>{:.1}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td></tr>",
+            us(f.min_ns),
+            f.mean_ns / 1000.0,
+            us(p.p50),
+            us(p.p90),
+            us(p.p99),
+            us(p.p999),
+            us(p.max)
+        );
+    }
+    out.push_str("</table>");
+    let floor = d.floor.as_ref().map(|f| f.wake_late_ns);
+    let hists = [
+        ("wake-hist", "wake-up lateness"),
+        ("compute-hist", "compute time"),
+        ("publish-hist", "publish time"),
+    ];
+    for ((id, name), (_, f)) in hists.iter().zip(&figs) {
+        let floor = if *id == "wake-hist" { floor } else { None };
+        histogram(id, name, f, run.period_ns, floor, out);
+    }
+    let list: Vec<Miss> = d
+        .miss_list
+        .iter()
+        .map(|m| Miss {
+            cycle: m.cycle,
+            line: u64::from(m.line),
+            cause: m.cause.clone(),
+            wake_late_ns: m.wake_late_ns as f64,
+            compute_ns: m.compute_ns as f64,
+            publish_ns: m.publish_ns as f64,
+            overrun_ns: m.overrun_ns as f64,
+        })
+        .collect();
+    if d.lost > 0 {
+        let _ = write!(
+            out,
+            "<p class=\"bad\">{} miss records were lost (the interpolator's miss log fell a whole ring behind); they are counted, not listed.</p>",
+            d.lost
+        );
+    }
+    misses(run, &list, d.misses, out);
+    if !d.runs.is_empty() {
+        let mut runs = d.runs.clone();
+        runs.sort_by(|a, b| {
+            b.length
+                .cmp(&a.length)
+                .then(a.start_cycle.cmp(&b.start_cycle))
+        });
+        let shown = runs.len().min(50);
+        let _ = write!(
+            out,
+            "<h3>Runs of consecutive misses</h3><p class=\"note\">{} run(s) of two or more missed cycles in a row; the longest {shown} here, all in deadline-misses.json.</p><table class=\"data\" id=\"runs-table\"><tr><th>first cycle</th><th>time (s)</th><th>cycles</th></tr>",
+            runs.len()
+        );
+        for r in &runs[..shown] {
+            let _ = write!(
+                out,
+                "<tr><td>{}</td><td>{:.3}</td><td>{}</td></tr>",
+                r.start_cycle,
+                r.start_cycle as f64 * run.period_s(),
+                r.length
+            );
+        }
+        out.push_str("</table>");
+    }
+}
+
+/// Older run directories: report.json's percentiles and misses only.
+fn from_report(run: &Run, out: &mut String) {
     let Some(rep) = &run.report else {
-        out.push_str("<p class=\"missing\">Timing unknown: report.json is missing or unusable.</p></section>");
+        out.push_str(
+            "<p class=\"missing\">Timing unknown: report.json is missing or unusable.</p>",
+        );
         return;
     };
     let pcts = (rep.wake_late_ns, rep.compute_ns, rep.publish_ns);
     let (Some(wake), Some(comp), Some(publ)) = pcts else {
-        let why = if rep.clock.as_deref() == Some("sim") {
-            "Timing was not measured: this run used the simulated clock (each cycle starts as soon as the drives answered the previous one, without sleeping), so wake-up lateness, compute time and deadline misses have no meaning here. Run with <code>--clock real</code> to measure them."
-        } else {
-            "Timing was not recorded in report.json for this run."
-        };
-        let _ = write!(
-            out,
-            "<p class=\"note\" id=\"timing-not-measured\">{why}</p></section>"
-        );
+        not_measured(rep.clock.as_deref() == Some("sim"), out);
         return;
     };
     let period_us = run.period_ns as f64 / 1000.0;
@@ -91,7 +206,100 @@ pub fn section(run: &Run, out: &mut String) {
         out,
     );
     misses(run, &rep.miss_list, rep.misses, out);
-    out.push_str("</section>");
+}
+
+/// One histogram on log-log axes: cycles per bucket over time per cycle, with the
+/// period (and the machine's floor) marked.
+fn histogram(
+    id: &str,
+    name: &str,
+    f: &Figure,
+    period_ns: u64,
+    floor: Option<interpolator::timing::Percentiles>,
+    out: &mut String,
+) {
+    let period_us = period_ns as f64 / 1000.0;
+    let lo_us = f
+        .histogram
+        .first()
+        .map_or(1.0, |b| (b.lo_ns.max(1) as f64 / 1000.0).max(0.01));
+    let hi_us = f
+        .histogram
+        .last()
+        .map_or(period_us, |b| b.hi_ns as f64 / 1000.0)
+        .max(period_us * 1.5);
+    let x = (
+        10f64.powf(lo_us.log10().floor()),
+        10f64.powf(hi_us.log10().ceil()),
+    );
+    let top = f
+        .histogram
+        .iter()
+        .map(|b| b.count)
+        .max()
+        .unwrap_or(1)
+        .max(1) as f64;
+    let y = (0.5, 10f64.powf((top * 1.5).log10().ceil()));
+    let mut c = Chart::new(
+        id,
+        &format!("Histogram of the {name} of each cycle (log-log), with the period"),
+        &format!("{name} (µs, log scale)"),
+        "cycles (log scale)",
+        x,
+        y,
+    );
+    c.x_log = true;
+    c.y_log = true;
+    c.h = 260.0;
+    c.open(out);
+    let base = c.py(y.0);
+    for b in &f.histogram {
+        let (x0, x1) = (
+            c.px((b.lo_ns as f64 / 1000.0).max(x.0)),
+            c.px(b.hi_ns as f64 / 1000.0),
+        );
+        let top = c.py(b.count as f64);
+        let _ = write!(
+            out,
+            r##"<rect x="{x0:.1}" y="{top:.1}" width="{:.1}" height="{:.1}" fill="#9a9a9a" stroke="#222" stroke-width="0.4"><title>{:.2}–{:.2} µs: {} cycles</title></rect>"##,
+            (x1 - x0).max(0.8),
+            (base - top).max(0.5),
+            b.lo_ns as f64 / 1000.0,
+            b.hi_ns as f64 / 1000.0,
+            b.count
+        );
+    }
+    let mut marks = String::new();
+    let mut vline = |v_us: f64, label: &str, dash: &str, color: &str, row: f64| {
+        let xp = c.px(v_us);
+        let _ = write!(
+            marks,
+            r#"<line x1="{xp:.1}" y1="{:.1}" x2="{xp:.1}" y2="{base:.1}" stroke="{color}" stroke-width="1.5" stroke-dasharray="{dash}"/><text x="{:.1}" y="{:.1}" class="lim" style="fill:{color}">{label}</text>"#,
+            c.mt,
+            xp - 4.0,
+            c.mt + 12.0 + row * 13.0,
+        );
+    };
+    vline(
+        period_us,
+        &format!("period {} µs", num(period_us)),
+        LIMIT.dash,
+        LIMIT.color,
+        0.0,
+    );
+    if let Some(fl) = floor {
+        let v = fl.max as f64 / 1000.0;
+        if v > x.0 {
+            vline(
+                v,
+                &format!("machine floor max {} µs", num(v)),
+                "2 3",
+                "#1f3b73",
+                1.0,
+            );
+        }
+    }
+    c.close_with(out, &[], &marks);
 }
 
 fn percentiles(figs: &[(&str, Pct)], period_us: f64, out: &mut String) {
@@ -177,7 +385,7 @@ fn percentiles(figs: &[(&str, Pct)], period_us: f64, out: &mut String) {
         num(period_us)
     );
     c.close_with(out, &[], &legend);
-    out.push_str("<p class=\"note\">The run directory records p50, p99 and the maximum of each figure, not every cycle, so these three values are drawn instead of a histogram.</p>");
+    out.push_str("<p class=\"note\">This run directory has no deadline-misses.json (it is older than that file), only p50, p99 and the maximum of each figure in report.json, so these three values are drawn instead of a histogram.</p>");
 }
 
 fn misses(run: &Run, list: &[Miss], count: Option<u64>, out: &mut String) {
@@ -194,9 +402,9 @@ fn misses(run: &Run, list: &[Miss], count: Option<u64>, out: &mut String) {
         .fold(0.0, f64::max);
     let c = Chart::new(
         "miss-plot",
-        "Deadline misses over time: how late each missed cycle finished, by cause",
+        "Deadline misses over time: how late each missed cycle was, by cause",
         "time (s)",
-        "overrun (µs)",
+        "late by (µs)",
         tr,
         pad_range(0.0, top, true),
     );
@@ -212,7 +420,12 @@ fn misses(run: &Run, list: &[Miss], count: Option<u64>, out: &mut String) {
     }
     let mut legend = String::new();
     let mut x = c.ml;
-    for name in ["late_wake", "compute", "publish"] {
+    for name in [
+        "late_wake",
+        "long_compute",
+        "publish_stall",
+        "downstream_lag",
+    ] {
         let (col, shape, words) = cause(name);
         marker(&mut legend, shape, x + 5.0, 32.0, col);
         let short = words.split(" (").next().unwrap_or(words);
@@ -225,18 +438,28 @@ fn misses(run: &Run, list: &[Miss], count: Option<u64>, out: &mut String) {
     }
     c.close_with(out, &[], &legend);
     let mut worst: Vec<&Miss> = list.iter().collect();
-    worst.sort_by(|a, b| b.overrun_ns.total_cmp(&a.overrun_ns));
-    worst.truncate(WORST);
+    worst.sort_by(|a, b| {
+        b.overrun_ns
+            .total_cmp(&a.overrun_ns)
+            .then(a.cycle.cmp(&b.cycle))
+    });
+    worst.truncate(MAX_ROWS);
+    let listed = if worst.len() as u64 == total {
+        format!("Every one of the {total} misses, worst first.")
+    } else if (list.len() as u64) < total && worst.len() == list.len() {
+        format!(
+            "The {} misses recorded in full of {total}, worst first.",
+            list.len()
+        )
+    } else {
+        format!(
+            "The {} worst of {total} misses; every miss is in deadline-misses.json.",
+            worst.len()
+        )
+    };
     let _ = write!(
         out,
-        "<h3>Worst misses</h3><p class=\"note\">{} of {} misses, by overrun{}.</p><table class=\"data\" id=\"miss-table\"><tr><th>cycle</th><th>time (s)</th><th>line</th><th>source</th><th>cause</th><th>wake-up late (µs)</th><th>compute (µs)</th><th>publish (µs)</th><th>overrun (µs)</th></tr>",
-        worst.len(),
-        total,
-        if total > list.len() as u64 {
-            format!(" ({} recorded in full in report.json; later ones only counted)", list.len())
-        } else {
-            String::new()
-        }
+        "<h3>Misses</h3><p class=\"note\">{listed} Late by: finish minus deadline (downstream: how long the drives' answer is overdue).</p><table class=\"data\" id=\"miss-table\"><tr><th>cycle</th><th>time (s)</th><th>line</th><th>source</th><th>cause</th><th>wake-up late (µs)</th><th>compute (µs)</th><th>publish (µs)</th><th>late by (µs)</th></tr>"
     );
     for m in worst {
         let _ = write!(
@@ -246,10 +469,7 @@ fn misses(run: &Run, list: &[Miss], count: Option<u64>, out: &mut String) {
             m.cycle as f64 * period,
             m.line,
             esc(run.source(m.line.min(u32::MAX as u64) as u32)),
-            match cause(&m.cause).2 {
-                "other" => esc(&m.cause),
-                words => words.to_string(),
-            },
+            esc(cause_words(&m.cause)),
             m.wake_late_ns / 1000.0,
             m.compute_ns / 1000.0,
             m.publish_ns / 1000.0,
