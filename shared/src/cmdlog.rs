@@ -335,6 +335,7 @@ mod tests {
             + 4
             + 4
             + 8 * 4
+            + 8 * 2
             + 8
             + core::mem::size_of::<Helix>()
             + 8 * crate::nurbs::MAX_KNOTS
