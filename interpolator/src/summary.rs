@@ -199,6 +199,13 @@ pub struct Summary {
     /// The fault in figures, when there was one.
     #[serde(default)]
     pub fault_info: Option<FaultInfo>,
+    /// Feed fluctuation (seed 001): the chord each set-point step actually covered against
+    /// the step the speed profile planned, `|chord / planned - 1|`, largest and RMS over
+    /// the moving cycles that stay inside one block.
+    #[serde(default)]
+    pub feed_fluctuation_max: f64,
+    #[serde(default)]
+    pub feed_fluctuation_rms: f64,
 }
 
 impl Summary {
@@ -246,7 +253,16 @@ impl Summary {
             trace_dropped,
             starvations: 0,
             fault_info: None,
+            feed_fluctuation_max: 0.0,
+            feed_fluctuation_rms: 0.0,
         }
+    }
+
+    /// Adds the engine's feed fluctuation figures.
+    pub fn with_fluctuation(mut self, f: crate::engine::Fluctuation) -> Self {
+        self.feed_fluctuation_max = f.max;
+        self.feed_fluctuation_rms = f.rms;
+        self
     }
 
     /// Adds the fault figures and the starvation count.

@@ -9,11 +9,11 @@
 //! and curvature jumps); and a backward then a forward pass make every block's start and
 //! end speed reachable under the jerk-limited profile the interpolator runs.
 
-use crate::program::{Move, Plane};
+use crate::program::{Move, PathControl, Plane};
 use shared::nurbs::{self, SplitCurve, MAX_CTRL};
 use shared::path;
 use shared::profile::Limits as Jerk;
-use shared::protocol::{BlockKind, CommandBlock, Helix, FLAG_RAPID};
+use shared::protocol::{BlockKind, CommandBlock, Helix, FLAG_RAPID, FLAG_STOP_AT_END};
 use shared::Machine;
 use std::f64::consts::{FRAC_PI_2, PI};
 
@@ -195,8 +195,18 @@ fn split_at_cusps(c: SplitCurve, machine: &Machine) -> Vec<SplitCurve> {
 
 /// Turns moves into unplanned command blocks (feeds are the caps, speeds not yet set).
 pub fn build(moves: &[Move], machine: &Machine) -> Vec<CommandBlock> {
-    let mut out = Vec::new();
+    let mut out: Vec<CommandBlock> = Vec::new();
+    // `G61.1` exact stop mode: every move ends at rest.
+    let mut exact_stop = false;
+    let stop_after_last = |out: &mut Vec<CommandBlock>| {
+        if let Some(b) = out.last_mut() {
+            if b.kind == BlockKind::Motion as u32 {
+                b.flags |= FLAG_STOP_AT_END;
+            }
+        }
+    };
     for m in moves {
+        let before = out.len();
         match m {
             Move::Line {
                 line,
@@ -262,8 +272,18 @@ pub fn build(moves: &[Move], machine: &Machine) -> Vec<CommandBlock> {
                 out.push(b);
             }
             Move::End { line } => out.push(CommandBlock::empty(BlockKind::ProgramEnd, 0, *line)),
-            // Carried for the planner and the reports; no block of their own yet.
-            Move::PathMode { .. } | Move::Spindle { .. } | Move::Stop { .. } => {}
+            Move::PathMode { control, .. } => {
+                // Without corner blending, `G61` and `G64` (whatever its tolerance) both
+                // follow the exact path; only `G61.1` changes the plan.
+                exact_stop = matches!(control, PathControl::ExactStop);
+            }
+            // A programmed stop: the machine is at rest when it is reached.
+            Move::Stop { .. } => stop_after_last(&mut out),
+            // Carried for the reports; no block of its own yet.
+            Move::Spindle { .. } => {}
+        }
+        if exact_stop && out.len() > before {
+            stop_after_last(&mut out);
         }
     }
     for (i, b) in out.iter_mut().enumerate() {
@@ -508,7 +528,8 @@ pub fn plan(blocks: &mut [CommandBlock], machine: &Machine, period_ns: u64) {
     for i in 0..n.saturating_sub(1) {
         let (b, nb) = (&blocks[i], &blocks[i + 1]);
         let rapid_change = (b.flags ^ nb.flags) & FLAG_RAPID != 0;
-        if let (Some(sa), Some(sb), false) = (&shapes[i], &shapes[i + 1], rapid_change) {
+        let stop = b.flags & FLAG_STOP_AT_END != 0;
+        if let (Some(sa), Some(sb), false) = (&shapes[i], &shapes[i + 1], rapid_change || stop) {
             end[i] = junction_speed(sa, sb, machine, period_s)
                 .min(b.feed_mm_per_min / 60.0)
                 .min(nb.feed_mm_per_min / 60.0);

@@ -216,6 +216,9 @@ pub fn main() -> ExitCode {
                 Ok(m) => m,
                 Err(e) => return fail(e),
             };
+            if let Err(e) = machine.check_period(period_us) {
+                return fail(e);
+            }
             let src = match Source::load(Some(&program)) {
                 Ok(s) => s,
                 Err(e) => return fail(e),

@@ -245,6 +245,7 @@ fn run_inner(args: &RunArgs) -> Result<bool, String> {
         );
     }
     let machine = shared::machine::load(args.machine.as_deref())?;
+    machine.check_period(args.period_us)?;
     let src = Source::load(args.program.as_deref())?;
     let period_ns = args.period_us * 1000;
     // Bad input is rejected before any process starts, let alone any motion.

@@ -190,6 +190,8 @@ pub fn show(source: &Path, json: bool) -> ExitCode {
             return ExitCode::FAILURE;
         }
     };
+    use std::io::Write;
+    let mut out = std::io::stdout().lock();
     if json {
         let views: Vec<BlockView> = parsed.blocks.iter().map(BlockView::from).collect();
         let doc = serde_json::json!({
@@ -200,9 +202,14 @@ pub fn show(source: &Path, json: bool) -> ExitCode {
             "blocks": views,
             "damage": parsed.damage.as_ref().map(|d| d.to_string()),
         });
-        println!("{}", serde_json::to_string_pretty(&doc).unwrap_or_default());
+        let _ = writeln!(
+            out,
+            "{}",
+            serde_json::to_string_pretty(&doc).unwrap_or_default()
+        );
     } else {
-        println!(
+        let _ = writeln!(
+            out,
             "# {}: program {}, period {} ns, machine {:016x}, protocol {}",
             log.display(),
             parsed.header.program,
@@ -211,7 +218,10 @@ pub fn show(source: &Path, json: bool) -> ExitCode {
             parsed.header.protocol_version
         );
         for b in &parsed.blocks {
-            println!("{}", line_of(b));
+            // A closed pipe (`| head`) ends the listing quietly.
+            if writeln!(out, "{}", line_of(b)).is_err() {
+                break;
+            }
         }
     }
     match parsed.damage {

@@ -89,6 +89,11 @@ pub struct Report {
     /// Times the interpolator ran out of blocks mid-program and waited at a stop.
     #[serde(default)]
     pub starvations: u64,
+    /// Feed fluctuation: `|actual step / planned step - 1|`, largest and RMS.
+    #[serde(default)]
+    pub feed_fluctuation_max: f64,
+    #[serde(default)]
+    pub feed_fluctuation_rms: f64,
     /// The interpolator's fault in figures (kind, cycle, line, axis, peer, the stop).
     #[serde(default)]
     pub fault_info: Option<interpolator::summary::FaultInfo>,
@@ -215,6 +220,8 @@ pub fn assemble(
         miss_list: i.map(|s| s.miss_list.clone()).unwrap_or_default(),
         processes,
         starvations: i.map_or(0, |s| s.starvations),
+        feed_fluctuation_max: i.map_or(0.0, |s| s.feed_fluctuation_max),
+        feed_fluctuation_rms: i.map_or(0.0, |s| s.feed_fluctuation_rms),
         fault_info: i.and_then(|s| s.fault_info.clone()),
         dead_process: None,
         memory: Vec::new(),

@@ -230,8 +230,7 @@ proptest! {
 /// --estimate` prints). Printed with `--nocapture`.
 #[test]
 fn butterfly_at_f600_reaches_99_percent_of_the_feed() {
-    let peers =
-        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shared/peers/linuxcnc");
+    let peers = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../tests/peers/linuxcnc");
     let text = std::fs::read_to_string(peers.join("g5_butterfly-xy.ngc"))
         .unwrap()
         .replace("F300", "F600");

@@ -44,6 +44,10 @@ impl BlockKind {
 /// `CommandBlock::flags`: the motion is a rapid (G0) traverse.
 pub const FLAG_RAPID: u32 = 1;
 
+/// `CommandBlock::flags`: the machine stops at the end of this block (exact stop: `G61.1`,
+/// or a programmed stop `M0`/`M1` follows).
+pub const FLAG_STOP_AT_END: u32 = 2;
+
 /// Axis code meaning "no helical axis".
 pub const NO_AXIS: u32 = 3;
 

@@ -513,7 +513,8 @@ pub fn run_with<S: Service>(cfg: &Config, hooks: Hooks) -> Result<Summary, RunEr
     .with_faults(
         info.map(|r| FaultInfo::new(&r, cycle)),
         engine.starvations(),
-    );
+    )
+    .with_fluctuation(engine.fluctuation());
     summary.write(&cfg.out_dir.join("interpolator.json"))?;
     Ok(summary)
 }

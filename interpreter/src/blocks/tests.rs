@@ -108,3 +108,18 @@ fn curvature_limits_the_feed() {
         b[1].feed_mm_per_min
     );
 }
+
+#[test]
+fn exact_stop_mode_and_programmed_stops_end_moves_at_rest() {
+    // Three collinear moves flow through their joins under G64...
+    let flow = planned("G64\nG1 X10 F3000\nX20\nX30\nM2\n");
+    assert!(flow[0].end_feed_mm_per_min > 0.0 && flow[1].end_feed_mm_per_min > 0.0);
+    // ...stop at each under G61.1 (every move, including the NURBS pieces' last)...
+    let stops = planned("G61.1\nG1 X10 F3000\nX20\nX30\nM2\n");
+    assert_eq!(stops[0].end_feed_mm_per_min, 0.0);
+    assert_eq!(stops[1].end_feed_mm_per_min, 0.0);
+    // ...and at an M0 or M1 only where it stands.
+    let m0 = planned("G1 X10 F3000\nM0\nX20\nX30\nM2\n");
+    assert_eq!(m0[0].end_feed_mm_per_min, 0.0);
+    assert!(m0[1].end_feed_mm_per_min > 0.0);
+}
