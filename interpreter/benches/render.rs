@@ -20,7 +20,9 @@ fn one_hour_run() -> PathBuf {
     let base = Path::new(env!("CARGO_TARGET_TMPDIR")).join("render-bench");
     let dir = base.join("hour");
     let done = dir.join(".complete");
-    if done.exists() {
+    // A directory left by an older build (its commands.log in an older protocol) would
+    // render without the path and the contour analysis, and time the wrong thing.
+    if done.exists() && shared::cmdlog::read(&dir.join("commands.log")).is_ok() {
         return dir;
     }
     let _ = std::fs::remove_dir_all(&base);
