@@ -5,6 +5,11 @@
 //!
 //! Run: `cargo bench -p interpreter --bench render`. Each sample renders the whole page
 //! (loading every file, the contour analysis, the plots), so it takes seconds.
+//!
+//! Measured with `/usr/bin/time cnc report DIR --out page.html` on this directory (release
+//! build, 2-core VM with a CI run beside it): 45 s wall / 39 s CPU / 680 MB resident before
+//! the contour analysis stopped re-evaluating each block's coarse samples per feedback row;
+//! 5.2–7 s wall / 4.7–6.5 s CPU / 570 MB after, the same 510 KB page.
 use criterion::{criterion_group, criterion_main, Criterion};
 use std::fmt::Write as _;
 use std::io::Write as _;

@@ -394,17 +394,12 @@ fn load_csv(
         if l.is_empty() {
             continue;
         }
-        let n_cells = l.split(',').count();
-        if n_cells != cols.len() {
-            problems.push(format!(
-                "{name}:{lineno}: {n_cells} of {} columns (row cut off?); rows from here on not drawn",
-                cols.len()
-            ));
-            break;
-        }
+        // One pass over the cells; a wrong number of cells is reported before a bad value.
         let mut bad = None;
-        for (c, cell) in l.split(',').enumerate() {
-            let k = slot[c];
+        let mut n_cells = 0;
+        for cell in l.split(',') {
+            let k = slot.get(n_cells).copied().unwrap_or(usize::MAX);
+            n_cells += 1;
             if k == usize::MAX {
                 continue;
             }
@@ -417,6 +412,13 @@ fn load_csv(
                     }
                 }
             }
+        }
+        if n_cells != cols.len() {
+            problems.push(format!(
+                "{name}:{lineno}: {n_cells} of {} columns (row cut off?); rows from here on not drawn",
+                cols.len()
+            ));
+            break;
         }
         if let Some((k, cell)) = bad {
             problems.push(format!(
