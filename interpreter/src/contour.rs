@@ -23,6 +23,7 @@
 //!   reports it. The fitted radius minus the commanded one is the size error, which
 //!   without feed-forward is the textbook `v² / (2·R·Kv²)`.
 
+use shared::nurbs::CurvePoint;
 use shared::path::{domain, eval, norm};
 use shared::protocol::{BlockKind, CommandBlock, FLAG_RAPID};
 use std::f64::consts::PI;
@@ -100,6 +101,13 @@ struct Seg<'a> {
     rapid: bool,
     /// Samples for the coarse search.
     n: usize,
+    /// The curve at the `n + 1` coarse sample parameters (computed once: the search runs
+    /// for every feedback row, millions on a long run, and the curve does not change).
+    samples: Vec<CurvePoint>,
+    /// Whether a block of the same source line follows within [`LOCATE_AHEAD`] blocks
+    /// (when none does, [`locate`] keeps a set-point of this line on this block without
+    /// searching).
+    line_goes_on: bool,
 }
 
 impl<'a> Seg<'a> {
@@ -124,6 +132,12 @@ impl<'a> Seg<'a> {
         } else {
             shared::path::length(b)
         };
+        let n = (4 * b.ctrl().len()).clamp(16, 256);
+        let samples = if u1 > u0 {
+            (0..=n).map(|i| eval(b, sample_u(u0, u1, n, i))).collect()
+        } else {
+            Vec::new()
+        };
         Seg {
             b,
             u0,
@@ -132,7 +146,9 @@ impl<'a> Seg<'a> {
             hi,
             len_mm,
             rapid: b.flags & FLAG_RAPID != 0,
-            n: (4 * b.ctrl().len()).clamp(16, 256),
+            n,
+            samples,
+            line_goes_on: true,
         }
     }
 
@@ -153,41 +169,69 @@ impl<'a> Seg<'a> {
         if u1 <= u0 {
             return (self.dist(u0, p), u0);
         }
-        let step = (u1 - u0) / self.n as f64;
-        let at = |i: usize| {
-            if i == self.n {
-                u1
-            } else {
-                u0 + step * i as f64
-            }
-        };
-        let d: Vec<f64> = (0..=self.n).map(|i| self.dist(at(i), p)).collect();
+        let at = |i: usize| sample_u(u0, u1, self.n, i);
+        let d = |i: usize| dist3(self.samples[i].p, p);
         // Refine from every sampled local minimum, not only the smallest sample: on a
         // curve that comes back near itself (a closed NURBS) the nearest sample can sit in
         // the wrong basin.
         let mut best = (f64::INFINITY, u0);
+        let (mut prev, mut cur) = (f64::INFINITY, d(0));
         for i in 0..=self.n {
-            let left = i == 0 || d[i] <= d[i - 1];
-            let right = i == self.n || d[i] <= d[i + 1];
-            if left && right {
+            let next = if i == self.n { f64::INFINITY } else { d(i + 1) };
+            if (i == 0 || cur <= prev) && (i == self.n || cur <= next) {
                 let a = at(i.saturating_sub(1));
                 let b = at((i + 1).min(self.n));
-                let r = self.refine(p, (d[i], at(i)), a, b);
+                let r = self.refine(p, (cur, at(i)), self.samples[i], a, b);
                 if r.0 < best.0 {
                     best = r;
                 }
             }
+            (prev, cur) = (cur, next);
         }
         best
     }
 
+    /// Whether `s` lies within `tol` of the block, by a few Newton steps from where the
+    /// last set-point on it lay (consecutive set-points are close along the path). A
+    /// `true` is certain (a point of the curve that close was found); a `false` only
+    /// means this quick look found none.
+    fn near_last(&self, s: [f64; 3], tol: f64, last_u: &mut f64) -> bool {
+        if self.u1 <= self.u0 {
+            return false;
+        }
+        let mut u = last_u.clamp(self.u0, self.u1);
+        for _ in 0..6 {
+            let e = eval(self.b, u);
+            if dist3(e.p, s) <= tol {
+                *last_u = u;
+                return true;
+            }
+            let r = [e.p[0] - s[0], e.p[1] - s[1], e.p[2] - s[2]];
+            let dg = dot(e.d1, e.d1) + dot(r, e.d2);
+            if dg <= 0.0 || !dg.is_finite() {
+                return false;
+            }
+            u = (u - dot(r, e.d1) / dg).clamp(self.u0, self.u1);
+        }
+        false
+    }
+
     /// Newton's method on `g(u) = (C(u) − p)·C'(u)` inside `[a, b]`, from `start`; keeps
     /// the best point seen, so it never does worse than its start.
-    fn refine(&self, p: [f64; 3], start: (f64, f64), a: f64, b: f64) -> (f64, f64) {
+    fn refine(
+        &self,
+        p: [f64; 3],
+        start: (f64, f64),
+        at_start: CurvePoint,
+        a: f64,
+        b: f64,
+    ) -> (f64, f64) {
         let mut best = start;
         let mut u = start.1;
+        // One evaluation per step: the point that measures a step's distance also gives
+        // the next step's derivatives (and the start's is the coarse sample's).
+        let mut e = at_start;
         for _ in 0..30 {
-            let e = eval(self.b, u);
             let r = [e.p[0] - p[0], e.p[1] - p[1], e.p[2] - p[2]];
             let g = dot(r, e.d1);
             let dg = dot(e.d1, e.d1) + dot(r, e.d2);
@@ -195,7 +239,8 @@ impl<'a> Seg<'a> {
                 break;
             }
             let next = (u - g / dg).clamp(a, b);
-            let d = self.dist(next, p);
+            let en = eval(self.b, next);
+            let d = dist3(en.p, p);
             if d < best.0 {
                 best = (d, next);
             }
@@ -203,6 +248,7 @@ impl<'a> Seg<'a> {
                 break;
             }
             u = next;
+            e = en;
         }
         best
     }
@@ -213,6 +259,15 @@ impl<'a> Seg<'a> {
 
     fn end(&self) -> [f64; 3] {
         eval(self.b, self.u1).p
+    }
+}
+
+/// The parameter of coarse sample `i` of `n` over `[u0, u1]`.
+fn sample_u(u0: f64, u1: f64, n: usize, i: usize) -> f64 {
+    if i == n {
+        u1
+    } else {
+        u0 + (u1 - u0) / n as f64 * i as f64
     }
 }
 
@@ -230,47 +285,73 @@ const ON_PATH_MM: f64 = 1e-6;
 
 /// Measures the run. `blocks` are the validated command blocks in sending order.
 pub fn analyse(blocks: &[CommandBlock], t: &Traces) -> Contour {
-    let segs: Vec<Seg> = blocks
+    let mut segs: Vec<Seg> = blocks
         .iter()
         .filter(|b| b.kind() == Some(BlockKind::Motion) && b.n_ctrl > 0)
         .map(Seg::new)
         .collect();
+    for i in 0..segs.len() {
+        let line = segs[i].b.source_line;
+        let end = segs.len().min(i + LOCATE_AHEAD);
+        segs[i].line_goes_on = segs[i + 1..end].iter().any(|g| g.b.source_line == line);
+    }
     let n_fb = t.fb_cycle.len();
-    let mut error_um = vec![None; n_fb];
-    // The motion block of each feedback row's set-point (None: no set-point that cycle).
+    // Pass 1, in order (the search for each set-point's block goes forward from the last
+    // one): the block of each feedback row's set-point (None: no set-point that cycle),
+    // and for the rows counted (not on a rapid) the following error, in mm.
     let mut seg_of: Vec<Option<usize>> = vec![None; n_fb];
+    let mut error_um: Vec<Option<f64>> = vec![None; n_fb];
+    // Where the last set-point on each block lay, to find the next one quickly.
+    let mut last_u: Vec<f64> = segs.iter().map(|g| g.u0).collect();
+    let mut cursor = 0usize;
+    if !segs.is_empty() {
+        for_each_setpoint(t, |i, sp_i| {
+            let (s, line) = (t.sp_pos_mm[sp_i], t.sp_line[sp_i]);
+            cursor = locate(&segs, &mut last_u, cursor, s, line);
+            seg_of[i] = Some(cursor);
+            if !segs[cursor].rapid {
+                error_um[i] = Some(dist3(t.fb_pos_mm[i], s));
+            }
+        });
+    }
+    // Pass 2: the distance of every counted row to the path, each on its own, so spread
+    // over the cores (a one-hour run has 3.6 million rows).
+    let threads = std::thread::available_parallelism()
+        .map_or(1, |n| n.get())
+        .clamp(1, 8);
+    let chunk = n_fb.div_ceil(threads).max(4096);
+    std::thread::scope(|scope| {
+        for ((err, seg), pos) in error_um
+            .chunks_mut(chunk)
+            .zip(seg_of.chunks(chunk))
+            .zip(t.fb_pos_mm.chunks(chunk))
+        {
+            let segs = &segs;
+            scope.spawn(move || {
+                for ((e, g), &p) in err.iter_mut().zip(seg).zip(pos) {
+                    if let (Some(ferr), Some(at)) = (*e, *g) {
+                        *e = Some(distance(segs, at, p, ferr) * 1e3);
+                    }
+                }
+            });
+        }
+    });
+    // Pass 3, in order: the figures.
     let mut worst: Option<Worst> = None;
     let (mut sum_sq, mut count) = (0.0f64, 0u64);
-    let mut cursor = 0usize;
-    let mut sp_i = 0usize;
-    if !segs.is_empty() {
-        for (i, (&cyc, &p)) in t.fb_cycle.iter().zip(t.fb_pos_mm).enumerate() {
-            while sp_i < t.sp_cycle.len() && t.sp_cycle[sp_i] < cyc {
-                sp_i += 1;
-            }
-            if t.sp_cycle.get(sp_i) != Some(&cyc) {
-                continue;
-            }
-            let (s, line) = (t.sp_pos_mm[sp_i], t.sp_line[sp_i]);
-            cursor = locate(&segs, cursor, s, line);
-            seg_of[i] = Some(cursor);
-            if segs[cursor].rapid {
-                continue;
-            }
-            let d = distance(&segs, cursor, p, dist3(p, s));
-            let um = d * 1e3;
-            error_um[i] = Some(um);
+    for_each_setpoint(t, |i, sp_i| {
+        if let Some(um) = error_um[i] {
             sum_sq += um * um;
             count += 1;
             if worst.is_none_or(|w| um > w.um) {
                 worst = Some(Worst {
                     um,
-                    cycle: cyc,
-                    line,
+                    cycle: t.fb_cycle[i],
+                    line: t.sp_line[sp_i],
                 });
             }
         }
-    }
+    });
     let roundness = roundness(&segs, &seg_of, t);
     Contour {
         error_um,
@@ -280,19 +361,44 @@ pub fn analyse(blocks: &[CommandBlock], t: &Traces) -> Contour {
     }
 }
 
+/// Calls `f(feedback row, set-point row)` for each feedback row that has a set-point of
+/// the same cycle, in order.
+fn for_each_setpoint(t: &Traces, mut f: impl FnMut(usize, usize)) {
+    let mut sp_i = 0usize;
+    for (i, &cyc) in t.fb_cycle.iter().enumerate() {
+        while sp_i < t.sp_cycle.len() && t.sp_cycle[sp_i] < cyc {
+            sp_i += 1;
+        }
+        if t.sp_cycle.get(sp_i) == Some(&cyc) {
+            f(i, sp_i);
+        }
+    }
+}
+
+/// How many blocks [`locate`] looks at, from the current one on.
+const LOCATE_AHEAD: usize = 65;
+
 /// The block the set-point `s` (from source line `line`) lies on, searching forward from
 /// `cursor` (set-points only move forward along the path); `cursor` when none is found
 /// nearby (a dwell, or a set-point off the logged path).
-fn locate(segs: &[Seg], cursor: usize, s: [f64; 3], line: u32) -> usize {
-    let on = |j: usize| {
+fn locate(segs: &[Seg], last_u: &mut [f64], cursor: usize, s: [f64; 3], line: u32) -> usize {
+    let mut on = |j: usize| {
         let g = &segs[j];
-        g.bound(s) <= ON_PATH_MM && g.closest(s).0 <= ON_PATH_MM
+        // The quick look first; the full search only when it finds nothing (the same
+        // answer, without searching the whole block for nearly every set-point).
+        g.bound(s) <= ON_PATH_MM
+            && (g.near_last(s, ON_PATH_MM, &mut last_u[j]) || g.closest(s).0 <= ON_PATH_MM)
     };
     let same_line = segs[cursor].b.source_line == line;
+    if same_line && !segs[cursor].line_goes_on {
+        // No other block of this line ahead: whether the set-point lies on this one or
+        // not, the answer below is this block.
+        return cursor;
+    }
     if same_line && on(cursor) {
         return cursor;
     }
-    let end = segs.len().min(cursor + 65);
+    let end = segs.len().min(cursor + LOCATE_AHEAD);
     if let Some(j) = (cursor + 1..end).find(|&j| segs[j].b.source_line == line && on(j)) {
         return j;
     }
@@ -387,12 +493,22 @@ fn roundness(segs: &[Seg], seg_of: &[Option<usize>], t: &Traces) -> Result<Round
             (radius(*p, centre) - r) * 1e3,
         )
     };
-    let measured: Vec<(f64, f64)> = meas.iter().map(dev).collect();
-    let commanded: Vec<(f64, f64)> = cmd.iter().map(dev).collect();
-    let about_commanded: Vec<(f64, f64)> = cmd
+    // The set-points' deviation about the commanded circle only for its spread; then each
+    // position list becomes its deviations in place (`into_iter().map().collect()` reuses
+    // the buffer): on a one-hour circle these are millions of points each.
+    let about_commanded: (f64, f64) = cmd
         .iter()
-        .map(|p| (0.0, (radius(*p, cc) - cr) * 1e3))
-        .collect();
+        .map(|p| (radius(*p, cc) - cr) * 1e3)
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), d| {
+            (a.min(d), b.max(d))
+        });
+    let commanded_roundness_um = if about_commanded.1 >= about_commanded.0 {
+        about_commanded.1 - about_commanded.0
+    } else {
+        0.0
+    };
+    let measured: Vec<(f64, f64)> = meas.into_iter().map(|p| dev(&p)).collect();
+    let commanded: Vec<(f64, f64)> = cmd.into_iter().map(|p| dev(&p)).collect();
     Ok(Roundness {
         axes,
         centre_mm: centre,
@@ -400,7 +516,7 @@ fn roundness(segs: &[Seg], seg_of: &[Option<usize>], t: &Traces) -> Result<Round
         commanded_centre_mm: cc,
         commanded_radius_mm: cr,
         roundness_um: spread(&measured),
-        commanded_roundness_um: spread(&about_commanded),
+        commanded_roundness_um,
         lines: (segs[first].b.source_line, segs[last].b.source_line),
         measured,
         commanded,

@@ -123,42 +123,52 @@ impl Run {
     pub fn load(dir: &Path) -> Run {
         let mut problems = Vec::new();
         let report = load_report(&dir.join("report.json"), &mut problems);
-        let setpoints = load_csv(
-            &dir.join("setpoints.csv"),
-            &["cycle", "x_mm", "y_mm", "z_mm", "line"],
-            &mut problems,
-        )
-        .map(|rows| {
-            let mut s = Setpoints::default();
-            for r in rows.chunks_exact(5) {
-                s.cycle.push(r[0] as u64);
-                s.pos_mm.push([r[1], r[2], r[3]]);
-                s.line.push(r[4] as u32);
-            }
-            s
-        });
-        let feedback = load_csv(
-            &dir.join("feedback.csv"),
-            &[
-                "cycle",
-                "x_mm",
-                "y_mm",
-                "z_mm",
-                "ferr_x_um",
-                "ferr_y_um",
-                "ferr_z_um",
-            ],
-            &mut problems,
-        )
-        .map(|rows| {
+        // The two traces are read side by side (each is hundreds of MB on a long run).
+        let ((setpoints, sp_problems), (feedback, fb_problems)) = std::thread::scope(|scope| {
+            let sp = scope.spawn(|| {
+                let mut problems = Vec::new();
+                let mut s = Setpoints::default();
+                let ok = load_csv(
+                    &dir.join("setpoints.csv"),
+                    &["cycle", "x_mm", "y_mm", "z_mm", "line"],
+                    &mut problems,
+                    |r| {
+                        s.cycle.push(r[0] as u64);
+                        s.pos_mm.push([r[1], r[2], r[3]]);
+                        s.line.push(r[4] as u32);
+                    },
+                );
+                (ok.map(|()| s), problems)
+            });
+            let mut problems = Vec::new();
             let mut f = Feedback::default();
-            for r in rows.chunks_exact(7) {
-                f.cycle.push(r[0] as u64);
-                f.pos_mm.push([r[1], r[2], r[3]]);
-                f.ferr_um.push([r[4] as f32, r[5] as f32, r[6] as f32]);
-            }
-            f
+            let ok = load_csv(
+                &dir.join("feedback.csv"),
+                &[
+                    "cycle",
+                    "x_mm",
+                    "y_mm",
+                    "z_mm",
+                    "ferr_x_um",
+                    "ferr_y_um",
+                    "ferr_z_um",
+                ],
+                &mut problems,
+                |r| {
+                    f.cycle.push(r[0] as u64);
+                    f.pos_mm.push([r[1], r[2], r[3]]);
+                    f.ferr_um.push([r[4] as f32, r[5] as f32, r[6] as f32]);
+                },
+            );
+            let fb = (ok.map(|()| f), problems);
+            (
+                sp.join()
+                    .unwrap_or_else(|_| (None, vec!["setpoints.csv: reader failed".into()])),
+                fb,
+            )
         });
+        problems.extend(sp_problems);
+        problems.extend(fb_problems);
         let log = dir.join("commands.log");
         let blocks = match shared::cmdlog::read(&log) {
             Ok(parsed) => {
@@ -311,10 +321,17 @@ fn period_from_csv(path: &Path) -> Option<u64> {
     None
 }
 
-/// Reads the named columns of a CSV file. Stops at the first bad row (recording a problem
-/// naming file and line) and returns the rows before it, flat (`want.len()` values per
-/// row); `None` when the file or its header is unusable.
-fn load_csv(path: &Path, want: &[&str], problems: &mut Vec<String>) -> Option<Vec<f64>> {
+/// Reads the named columns of a CSV file, handing each row's values (in `want` order) to
+/// `row_out` as it is read: a one-hour file has 3.6 million rows, so nothing is kept here
+/// and nothing is allocated per row. Stops at the first bad row (recording a problem naming
+/// file and line), the rows before it having been handed over; `None` when the file or
+/// its header is unusable or it has no data rows.
+fn load_csv(
+    path: &Path,
+    want: &[&str],
+    problems: &mut Vec<String>,
+    mut row_out: impl FnMut(&[f64]),
+) -> Option<()> {
     let name = file_name(path);
     let f = match File::open(path) {
         Ok(f) => f,
@@ -323,7 +340,7 @@ fn load_csv(path: &Path, want: &[&str], problems: &mut Vec<String>) -> Option<Ve
             return None;
         }
     };
-    let mut reader = BufReader::new(f);
+    let mut reader = BufReader::with_capacity(1 << 20, f);
     let mut header = String::new();
     match reader.read_line(&mut header) {
         Ok(0) => {
@@ -349,15 +366,17 @@ fn load_csv(path: &Path, want: &[&str], problems: &mut Vec<String>) -> Option<Ve
             }
         }
     }
-    // One reused line buffer and cell list, a flat output: a one-hour file has 3.6
-    // million rows, so no allocation per row.
-    let mut rows: Vec<f64> = Vec::new();
-    let mut buf = String::new();
-    let mut cells: Vec<(usize, usize)> = Vec::with_capacity(cols.len() + 1);
-    let mut row = Vec::with_capacity(want.len());
+    // The column each cell goes to (`usize::MAX`: not wanted).
+    let mut slot = vec![usize::MAX; cols.len()];
+    for (k, &c) in idx.iter().enumerate() {
+        slot[c] = k;
+    }
+    let mut rows = 0usize;
+    let mut buf: Vec<u8> = Vec::new();
+    let mut row = vec![0.0f64; want.len()];
     for lineno in 2.. {
         buf.clear();
-        match reader.read_line(&mut buf) {
+        match reader.read_until(b'\n', &mut buf) {
             Ok(0) => break,
             Ok(_) => {}
             Err(e) => {
@@ -365,48 +384,95 @@ fn load_csv(path: &Path, want: &[&str], problems: &mut Vec<String>) -> Option<Ve
                 break;
             }
         }
-        let l = buf.trim();
+        let Ok(l) = std::str::from_utf8(&buf) else {
+            problems.push(format!(
+                "{name}:{lineno}: stream did not contain valid UTF-8; rows from here on not drawn"
+            ));
+            break;
+        };
+        let l = l.trim();
         if l.is_empty() {
             continue;
         }
-        cells.clear();
-        let mut at = 0;
-        for part in l.split(',') {
-            cells.push((at, at + part.len()));
-            at += part.len() + 1;
+        // One pass over the cells; a wrong number of cells is reported before a bad value.
+        let mut bad = None;
+        let mut n_cells = 0;
+        for cell in l.split(',') {
+            let k = slot.get(n_cells).copied().unwrap_or(usize::MAX);
+            n_cells += 1;
+            if k == usize::MAX {
+                continue;
+            }
+            match parse_f64(cell) {
+                Some(v) if v.is_finite() => row[k] = v,
+                _ => {
+                    // The first bad value in `want` order, as the message names it.
+                    if bad.is_none_or(|(b, _)| k < b) {
+                        bad = Some((k, cell));
+                    }
+                }
+            }
         }
-        if cells.len() != cols.len() {
+        if n_cells != cols.len() {
             problems.push(format!(
-                "{name}:{lineno}: {} of {} columns (row cut off?); rows from here on not drawn",
-                cells.len(),
+                "{name}:{lineno}: {n_cells} of {} columns (row cut off?); rows from here on not drawn",
                 cols.len()
             ));
             break;
         }
-        row.clear();
-        for &c in &idx {
-            let (a, b) = cells[c];
-            match l[a..b].parse::<f64>() {
-                Ok(v) if v.is_finite() => row.push(v),
-                _ => break,
-            }
-        }
-        if row.len() != want.len() {
-            let bad = want[row.len()];
-            let (a, b) = cells[idx[row.len()]];
+        if let Some((k, cell)) = bad {
             problems.push(format!(
-                "{name}:{lineno}: column `{bad}`: `{}` is not a number; rows from here on not drawn",
-                &l[a..b]
+                "{name}:{lineno}: column `{}`: `{cell}` is not a number; rows from here on not drawn",
+                want[k]
             ));
             break;
         }
-        rows.extend_from_slice(&row);
+        row_out(&row);
+        rows += 1;
     }
-    if rows.is_empty() {
+    if rows == 0 {
         problems.push(format!("{name}: no data rows"));
         return None;
     }
-    Some(rows)
+    Some(())
+}
+
+/// `s` as an `f64`, exactly as `str::parse` reads it. Plain decimals of at most 15
+/// significant digits and 22 decimals (every number the run writes) take a fast path: the
+/// digits as an integer and the power of ten are both exact in an `f64`, so one division
+/// rounds correctly, the same value the full parser gives. Anything else goes to it.
+fn parse_f64(s: &str) -> Option<f64> {
+    const POW10: [f64; 23] = [
+        1e0, 1e1, 1e2, 1e3, 1e4, 1e5, 1e6, 1e7, 1e8, 1e9, 1e10, 1e11, 1e12, 1e13, 1e14, 1e15, 1e16,
+        1e17, 1e18, 1e19, 1e20, 1e21, 1e22,
+    ];
+    let b = s.as_bytes();
+    let (neg, digits) = match b.first() {
+        Some(b'-') => (true, &b[1..]),
+        _ => (false, b),
+    };
+    let (mut m, mut n, mut frac, mut dot) = (0u64, 0usize, 0usize, false);
+    for &c in digits {
+        match c {
+            b'0'..=b'9' => {
+                m = m * 10 + u64::from(c - b'0');
+                n += 1;
+                if dot {
+                    frac += 1;
+                }
+                if n > 15 {
+                    return s.parse().ok();
+                }
+            }
+            b'.' if !dot => dot = true,
+            _ => return s.parse().ok(),
+        }
+    }
+    if n == 0 || frac >= POW10.len() {
+        return s.parse().ok();
+    }
+    let v = m as f64 / POW10[frac];
+    Some(if neg { -v } else { v })
 }
 
 fn file_name(path: &Path) -> String {
@@ -558,6 +624,63 @@ impl Fields<'_> {
                 self.absent.push(key);
                 None
             }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::parse_f64;
+
+    /// The fast path gives exactly what `str::parse` gives, and the rest goes to it.
+    #[test]
+    fn parse_f64_is_str_parse() {
+        let cases = [
+            "0",
+            "-0",
+            "-0.000000",
+            "3",
+            "1.",
+            ".5",
+            "10.000000",
+            "-9.999999",
+            "0.1",
+            "0.3",
+            "123456.789012",
+            "9007199254740993",
+            "1e-3",
+            "-2.5E2",
+            "inf",
+            "NaN",
+            "",
+            "-",
+            ".",
+            "1.2.3",
+            "+1",
+            " 1",
+            "0.0000000000000000000001",
+            "999999999999999",
+            "1234567890123456",
+            "0.30000000000000004",
+            "-7.071068",
+        ];
+        for c in cases {
+            let want = c.parse::<f64>().ok();
+            let got = parse_f64(c);
+            assert_eq!(
+                got.map(f64::to_bits),
+                want.map(f64::to_bits),
+                "{c:?}: {got:?} vs {want:?}"
+            );
+        }
+        // Every 6-decimal number the traces hold, over a range.
+        for k in -2_000_000i64..2_000_000 {
+            let s = format!("{:.6}", k as f64 * 7.123e-4);
+            assert_eq!(
+                parse_f64(&s).map(f64::to_bits),
+                s.parse::<f64>().ok().map(f64::to_bits),
+                "{s}"
+            );
         }
     }
 }
