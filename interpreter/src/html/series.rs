@@ -148,18 +148,31 @@ pub fn motion(run: &Run, out: &mut String) {
         ],
     );
 
+    let jmax = run.machine.path_jerk_mm_per_s3;
     let (_, jhi) = y_extent(&jerk);
     let c = chart(
         "jerk-plot",
-        "Path jerk over time (third difference of the set-points)",
+        "Path jerk over time (third difference of the set-points), with the machine limit",
         "jerk (mm/s³)",
         tr,
-        pad_range(0.0, jhi, true),
+        pad_range(0.0, jhi.max(jmax * 1.05), true),
     );
     c.open(out);
     draw(&c, &jerk, &SOLID, out);
-    c.close(out, &[("|j| of the set-points", SOLID)]);
-    out.push_str("<p class=\"note\">The machine file sets no jerk limit: the profile is acceleration-limited, so jerk peaks where the acceleration switches (corners, ramps, exact stops). Each pixel column shows the minimum and maximum of the cycles in it, so no single-cycle spike is hidden.</p></section>");
+    c.hline(
+        out,
+        jmax,
+        &LIMIT,
+        &format!("path_jerk_mm_per_s3 = {}", num(jmax)),
+    );
+    c.close(
+        out,
+        &[
+            ("|j| of the set-points", SOLID),
+            ("machine limit path_jerk_mm_per_s3", LIMIT),
+        ],
+    );
+    out.push_str("<p class=\"note\">The profile is jerk-limited (an S-curve along the path). Jerk can still peak above the limit where the path itself has a kink (a corner taken at speed, whose direction no finite jerk can follow exactly). Each pixel column shows the minimum and maximum of the cycles in it, so no single-cycle spike is hidden.</p></section>");
 }
 
 /// Following error per axis and the contour error (distance from the measured position to
