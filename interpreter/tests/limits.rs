@@ -166,37 +166,35 @@ proptest! {
     #![proptest_config(ProptestConfig::with_cases(32))]
 
     // NOT MET YET, so not run by default (`cargo test --release -p interpreter --test
-    // limits -- --ignored`): random rational NURBS still find cycles over the limits,
-    // the worst seen 1.66 J of jerk and the feed cap by 0.008 % (F3000, degree 2,
-    // weights up to 2). Lines, arcs and the LinuxCNC programs stay within them.
+    // limits -- --ignored`): random rational NURBS keep acceleration and jerk (within
+    // 1 %) but some still exceed the feed cap of a block by up to 1.8 % in a few cycles
+    // (F3000; not found yet). Lines, arcs and the LinuxCNC programs stay within all.
     #[test]
     #[ignore]
     fn random_nurbs_keep_every_limit(
         order in 3usize..=6,
-        pts in prop::collection::vec((-40.0f64..40.0, -40.0f64..40.0, 0.5f64..2.0), 7..12),
+        // The control polygon as a walk: leg length, turn from the last leg, weight.
+        legs in prop::collection::vec((1.0f64..25.0, -2.0f64..2.0, 0.5f64..2.0), 6..11),
         feed in prop::sample::select(vec![600.0, 3000.0, 6000.0]),
     ) {
-        // Control points 1 mm apart at least: coincident ones make spans where the curve
-        // stands still (see the engine's `advance`).
-        prop_assume!(pts.windows(2).all(|w| (w[1].0 - w[0].0).hypot(w[1].1 - w[0].1) > 1.0));
-        // And no leg of the control polygon turning back by more than 120° on the last:
-        // such a curve nearly stops and turns in a spot shorter than the planner's
-        // sampling of the span sees (a known gap: the cap then misses the curvature peak).
-        prop_assume!(pts.windows(3).all(|w| {
-            let (a, b) = ((w[1].0 - w[0].0, w[1].1 - w[0].1), (w[2].0 - w[1].0, w[2].1 - w[1].1));
-            (a.0 * b.0 + a.1 * b.1) / (a.0.hypot(a.1) * b.0.hypot(b.1)) > -0.5
-        }));
+        // No leg turns back by more than about 115° on the last: a curve that nearly
+        // reverses stops and turns in a spot shorter than the planner's sampling of the
+        // span sees (a known gap: the cap then misses the curvature peak).
+        let mut pts = vec![(0.0, 0.0, 1.0)];
+        let (mut x, mut y, mut heading) = (0.0f64, 0.0f64, 0.0f64);
+        for (len, turn, w) in &legs {
+            heading += turn;
+            x += len * heading.cos();
+            y += len * heading.sin();
+            pts.push((x, y, *w));
+        }
         let machine = Machine::default();
         let text = nurbs_program(order, &pts, feed);
         let (blocks, cycles) = step(&text, &machine);
         let w = check(&blocks, &cycles, &machine);
         prop_assert!(w.speed <= 1.0 + 1e-6, "speed {w:?}\n{text}");
         prop_assert!(w.acc <= 1.0 + 1e-3, "acceleration {w:?}\n{text}");
-        // NOT MET YET: the jerk limit. On random NURBS the worst cycle seen reaches 1.17 J
-        // (F3000, degree 2: the curvature jumps at its knots are where to look). This
-        // bound catches regressions (the profile before this one spiked to 9-40 J)
-        // while that is open; lines and the LinuxCNC programs stay within 1 %.
-        prop_assert!(w.jerk <= 1.25, "jerk {w:?}\n{text}");
+        prop_assert!(w.jerk <= 1.0 + 1e-2, "jerk {w:?}\n{text}");
         prop_assert!(w.chord <= 1.0 + 1e-3, "chord {w:?}\n{text}");
     }
 
