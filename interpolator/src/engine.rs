@@ -40,9 +40,6 @@ use shared::Machine;
 /// Most blocks one cycle may pass through (tiny CAM segments shorter than one step).
 const MAX_BLOCKS_PER_CYCLE: usize = 64;
 
-/// Most Newton steps on the chord of one cycle's step.
-const MAX_NEWTON: usize = 4;
-
 /// Most speed limits ahead tested per cycle; further ones are merged into the last kept
 /// (its distance with the lower speed: stricter than both).
 const MAX_AHEAD: usize = 16;
@@ -698,38 +695,13 @@ impl Engine {
             let end = at(t);
             let mut first: Option<(usize, f64, f64)> = None;
             for c in 0..=n {
-                // A limit the motion passes in this cycle is judged where it is passed:
-                // there the speed, and the peak its acceleration still adds, must be
-                // within it. (After it, the next block's own limits apply.)
-                let passed = c
-                    .checked_sub(1)
-                    .and_then(|i| ahead.get(i))
-                    .filter(|l| end.s > l.d)
-                    .map(|l| {
-                        let (mut lo, mut hi) = (t0, t);
-                        for _ in 0..SWITCH_BISECTIONS {
-                            let mid = 0.5 * (lo + hi);
-                            if at(mid).s <= l.d {
-                                lo = mid;
-                            } else {
-                                hi = mid;
-                            }
-                        }
-                        let x = at(lo);
-                        let peak = x.v + x.a.max(0.0).powi(2) / (2.0 * l.lim.jerk);
-                        (lo, l.v - peak)
-                    });
-                let (t_end, room_end) = match passed {
-                    Some((tp, r)) => (tp, r),
-                    None => (t, room(c, end)),
-                };
-                if room_end >= -eps {
+                if room(c, end) >= -eps {
                     continue;
                 }
                 let tau = if room(c, at(t0)) < -eps {
                     t0
                 } else {
-                    let (mut lo, mut hi) = (t0, t_end);
+                    let (mut lo, mut hi) = (t0, t);
                     for _ in 0..SWITCH_BISECTIONS {
                         let mid = 0.5 * (lo + hi);
                         if room(c, at(mid)) >= -eps {
@@ -1001,43 +973,13 @@ fn advance(
         }
     };
     let mut u1 = (u + du.max(0.0)).min(u_end);
-    // The profile plans arc length; the chord of an arc `ds` on curvature `κ` is
-    // `ds·(1 - (ds·κ)²/24)` to fourth order. Stepping the arc keeps the distances the
-    // profile brakes on exact over thousands of cycles (a chord per cycle would fall
-    // behind by `ds³κ²/24` each).
-    let kappa = if sp > 1e-12 {
-        let c = [
-            e.d1[1] * e.d2[2] - e.d1[2] * e.d2[1],
-            e.d1[2] * e.d2[0] - e.d1[0] * e.d2[2],
-            e.d1[0] * e.d2[1] - e.d1[1] * e.d2[0],
-        ];
-        norm(c) / (sp * sp * sp)
-    } else {
-        0.0
-    };
-    let ds = ds * (1.0 - (ds * kappa).powi(2) / 24.0).max(0.5);
-    // Newton on the chord itself, f(u) = |C(u) - P| - ds with f' = (C - P)·C' / |C - P|:
-    // usually one step brings the chord within 1e-10 of the plan; a few more where the
-    // curvature changes fast inside the step.
-    let mut e1 = eval(curve, block, u1);
-    for _ in 0..MAX_NEWTON {
-        let r = [e1.p[0] - e.p[0], e1.p[1] - e.p[1], e1.p[2] - e.p[2]];
-        let chord = norm(r);
-        if (chord - ds).abs() <= 1e-10 * ds + 1e-13 || chord <= 0.0 {
-            break;
-        }
-        let slope = dot(r, e1.d1) / chord;
-        if slope <= 1e-12 {
-            break;
-        }
-        let next = (u1 + (ds - chord) / slope).clamp(u, u_end);
-        if next == u1 {
-            break;
-        }
-        u1 = next;
-        e1 = eval(curve, block, u1);
+    let e1 = eval(curve, block, u1);
+    let sp1 = norm(e1.d1);
+    if sp1 > 1e-12 {
+        let chord = dist(e1.p, e.p);
+        u1 = (u1 + (ds - chord) / sp1).clamp(u, u_end);
     }
-    let e2 = e1;
+    let e2 = eval(curve, block, u1);
     if dist(e2.p, e.p) <= ds * (1.0 + 1e-6) + 1e-12 {
         return (u1, e2);
     }
