@@ -105,7 +105,9 @@ fn arc_blocks(
     out
 }
 
-fn sweep_of(
+/// The signed angle an arc sweeps (negative clockwise), full turns included. The
+/// G93 feed (`program::feed`) measures arcs with it too, so time and motion agree.
+pub(crate) fn sweep_of(
     from: [f64; 3],
     to: [f64; 3],
     center: [f64; 3],

@@ -2,7 +2,9 @@
 //! mm/min, so each move gets the feed that covers its exact length in that time:
 //! `length_mm × F`. Rapids keep their rapid rate.
 
-use super::{Move, Plane};
+use super::Move;
+#[cfg(test)]
+use super::Plane;
 use shared::nurbs;
 
 /// Turns the inverse-time `feed` (1/min) of each feed move into mm/min.
@@ -33,7 +35,7 @@ pub(super) fn length_mm(m: &Move) -> f64 {
             turns,
             ..
         } => {
-            let sweep = sweep(*from, *to, *center, *plane, *ccw, *turns);
+            let sweep = crate::blocks::sweep_of(*from, *to, *center, *plane, *ccw, *turns).abs();
             let (a, b) = plane.axes();
             let r = (from[a] - center[a]).hypot(from[b] - center[b]);
             let n = plane.normal();
@@ -61,27 +63,6 @@ pub(super) fn length_mm(m: &Move) -> f64 {
 
 fn sub(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
     [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
-}
-
-/// The angle an arc sweeps, in radians, full turns included.
-fn sweep(
-    from: [f64; 3],
-    to: [f64; 3],
-    center: [f64; 3],
-    plane: Plane,
-    ccw: bool,
-    turns: u32,
-) -> f64 {
-    use core::f64::consts::TAU;
-    let (a, b) = plane.axes();
-    let t0 = (from[b] - center[b]).atan2(from[a] - center[a]);
-    let t1 = (to[b] - center[b]).atan2(to[a] - center[a]);
-    let mut s = if ccw { t1 - t0 } else { t0 - t1 };
-    s = s.rem_euclid(TAU);
-    if s < 1e-12 {
-        s = TAU; // end at the start: a full circle
-    }
-    s + TAU * f64::from(turns.saturating_sub(1))
 }
 
 #[cfg(test)]
