@@ -40,6 +40,14 @@ use shared::Machine;
 /// Most blocks one cycle may pass through (tiny CAM segments shorter than one step).
 const MAX_BLOCKS_PER_CYCLE: usize = 64;
 
+/// Most evaluations spent finding the end of one cycle's step on the curve (Newton
+/// steps, and bisections where Newton fails: 64 halvings exhaust an `f64` interval).
+const MAX_CHORD_STEPS: usize = 80;
+
+/// Seconds a motion may stand still mid-block, not stopping, before the watchdog calls
+/// it a [`Fault::Stalled`].
+pub const STALL_SECONDS: u64 = 2;
+
 /// Most speed limits ahead tested per cycle; further ones are merged into the last kept
 /// (its distance with the lower speed: stricter than both).
 const MAX_AHEAD: usize = 16;
@@ -78,6 +86,14 @@ pub enum Fault {
     },
     /// SIGTERM/SIGINT: the launcher stops the stack (a peer failed) or the operator did.
     StopRequested,
+    /// The engine's own watchdog: in the middle of a motion block the set-point has not
+    /// moved for [`STALL_SECONDS`] although nothing asked it to stop. A planning error
+    /// (a profile that cannot reach its next limit) would otherwise hold the machine
+    /// there for ever; as a fault it ends the run with a report that names the block.
+    Stalled {
+        line: u32,
+        seq: u64,
+    },
 }
 
 /// The processes the interpolator watches.
@@ -111,6 +127,7 @@ impl Fault {
             Fault::PeerSilent { .. } => "peer_silent",
             Fault::PeerGone { .. } => "peer_gone",
             Fault::StopRequested => "stop_requested",
+            Fault::Stalled { .. } => "stalled",
         }
     }
 }
@@ -132,6 +149,10 @@ impl core::fmt::Display for Fault {
                 ferr_mm
             ),
             Fault::Feedback(e) => write!(f, "bad feedback: {e}"),
+            Fault::Stalled { line, seq } => write!(
+                f,
+                "line {line} (block {seq}): the path stood still for {STALL_SECONDS} s inside a motion block (an interpolator error: please report the program)"
+            ),
             Fault::StopRequested => write!(f, "stopped on request (SIGTERM/SIGINT): holding position"),
             Fault::PeerSilent { cycle } => {
                 write!(f, "cycle {cycle}: the servo-sim did not answer the set-point (dead or stalled)")
@@ -276,6 +297,10 @@ struct Ahead {
     d: f64,
     v: f64,
     lim: Jerk,
+    /// The limits of the block beyond the point: the speed reached there must not rise
+    /// above `v` afterwards either, with the acceleration it carries over that block's
+    /// jerk.
+    next: Jerk,
 }
 
 fn is_motion(b: &CommandBlock) -> bool {
@@ -325,6 +350,8 @@ pub struct Engine {
     /// Times the engine came to a stop for want of a block (not counting the program end).
     starvations: u64,
     starved: bool,
+    /// Consecutive ticks a motion stood still mid-block while not stopping.
+    still_ticks: u64,
     /// Feed fluctuation: relative difference of the chord actually stepped and the step
     /// the profile planned, over the cycles that stay inside one block.
     fluct_max: f64,
@@ -388,6 +415,7 @@ impl Engine {
             deferred: None,
             starvations: 0,
             starved: false,
+            still_ticks: 0,
             fluct_max: 0.0,
             fluct_sum_sq: 0.0,
             fluct_n: 0,
@@ -572,12 +600,37 @@ impl Engine {
         let mut v = self.exit_speed(m);
         let mut n = 0usize;
         let mut lowest = f64::INFINITY;
+        // The last low seen (distance, speed) and the limits of the blocks since it: a
+        // lower limit further on that those blocks alone can brake for from the last low
+        // needs no braking before it (keeping the last low keeps it too), so it is left
+        // out (when there is room to spare). Without this, its braking would be judged under the lowest limits of the
+        // whole way, including blocks before the last low where the machine may brake
+        // harder, and could look lost long before it is.
+        let mut last_low: Option<(f64, f64)> = None;
+        let mut since_low: Option<Jerk> = None;
         let mut i = 0usize;
         loop {
             if v < lowest {
                 lowest = v;
-                let a = Ahead { d, v, lim };
-                if n < MAX_AHEAD {
+                let implied = match (last_low, since_low) {
+                    // With two cycles' travel to spare: the braking for it then starts
+                    // a full cycle after the last low is passed, not inside the cycle
+                    // that crosses it.
+                    (Some((dl, vl)), Some(seg)) => {
+                        seg.change_distance(v, vl) + 2.0 * v_top * self.t_s <= d - dl
+                    }
+                    _ => false,
+                };
+                last_low = Some((d, v));
+                since_low = None;
+                let next = match self.window.get(i) {
+                    Some(b) if is_motion(b) => block_jerk(b),
+                    _ => lim,
+                };
+                let a = Ahead { d, v, lim, next };
+                if implied {
+                    // Kept by keeping the last low.
+                } else if n < MAX_AHEAD {
                     if let Some(slot) = out.get_mut(n) {
                         *slot = a;
                     }
@@ -585,6 +638,7 @@ impl Engine {
                 } else if let Some(last) = out.get_mut(MAX_AHEAD - 1) {
                     last.v = v;
                     last.lim = min_lim(last.lim, lim);
+                    last.next = min_lim(last.next, next);
                 }
             }
             // Beyond the stopping distance nothing can bind, and nothing is below zero.
@@ -598,6 +652,7 @@ impl Engine {
                 break;
             }
             lim = min_lim(lim, block_jerk(b));
+            since_low = Some(since_low.map_or(block_jerk(b), |l| min_lim(l, block_jerk(b))));
             d += b.length_mm;
             v = match self.window.get(i + 1) {
                 Some(nb) if is_motion(nb) => b.end_feed_mm_per_min / 60.0,
@@ -635,6 +690,7 @@ impl Engine {
             d: 0.0,
             v: 0.0,
             lim: own,
+            next: own,
         }; MAX_AHEAD];
         let mut n = self.limits_ahead(m, v_top, &mut ahead);
         if self.stopping {
@@ -644,11 +700,29 @@ impl Engine {
                     d: self.stop_left_mm,
                     v: 0.0,
                     lim: own,
+                    next: own,
                 };
                 n = (n + 1).min(MAX_AHEAD);
             }
         }
         let cap = m.feed_mm_per_s;
+        // Past the end of this block (a step that crosses it), the next block's feed and
+        // limits cap the speed for the rest of the cycle.
+        let end_here = ahead
+            .get(..n)
+            .and_then(|a| a.first())
+            .map_or(f64::INFINITY, |l| l.d);
+        let (cap_next, own_next) = match self.window.get(0) {
+            Some(b) if is_motion(b) => (b.feed_mm_per_min / 60.0, block_jerk(b)),
+            _ => (0.0, own),
+        };
+        let cap_at = |x: &profile::Motion| {
+            if x.s > end_here {
+                (cap_next, own_next)
+            } else {
+                (cap, own)
+            }
+        };
         let preferred: profile::Phases = if self.stopping {
             own.brake(x0, 0.0)
         } else if x0.a <= own.acc {
@@ -669,7 +743,8 @@ impl Engine {
         // `x`: negative when the quickest braking from there can no longer keep it.
         let room = |c: usize, x: profile::Motion| -> f64 {
             if c == 0 {
-                return cap - (x.v + x.a.max(0.0).powi(2) / (2.0 * own.jerk));
+                let (cap, lim) = cap_at(&x);
+                return cap - (x.v + x.a.max(0.0).powi(2) / (2.0 * lim.jerk));
             }
             match ahead.get(c - 1) {
                 // A limit passed in this cycle was kept on passing (the room was not
@@ -682,7 +757,10 @@ impl Engine {
         let brake_for =
             |c: usize, x: profile::Motion| match c.checked_sub(1).and_then(|i| ahead.get(i)) {
                 Some(l) => l.lim.brake(x, l.v),
-                None => own.brake(x, cap),
+                None => {
+                    let (cap, lim) = cap_at(&x);
+                    lim.brake(x, cap)
+                }
             };
         let eps = 1e-12;
         // The cycle's motion is pieced together: the preferred motion, and from the first
@@ -695,13 +773,38 @@ impl Engine {
             let end = at(t);
             let mut first: Option<(usize, f64, f64)> = None;
             for c in 0..=n {
-                if room(c, end) >= -eps {
+                // A limit the motion passes in this cycle is judged where it is passed:
+                // there the speed, and the peak its acceleration still adds, must be
+                // within it. (After it, the next block's own limits apply.)
+                let passed = c
+                    .checked_sub(1)
+                    .and_then(|i| ahead.get(i))
+                    .filter(|l| end.s > l.d)
+                    .map(|l| {
+                        let (mut lo, mut hi) = (t0, t);
+                        for _ in 0..SWITCH_BISECTIONS {
+                            let mid = 0.5 * (lo + hi);
+                            if at(mid).s <= l.d {
+                                lo = mid;
+                            } else {
+                                hi = mid;
+                            }
+                        }
+                        let x = at(lo);
+                        let peak = x.v + x.a.max(0.0).powi(2) / (2.0 * l.next.jerk);
+                        (lo, l.v - peak)
+                    });
+                let (t_end, room_end) = match passed {
+                    Some((tp, r)) => (tp, r),
+                    None => (t, room(c, end)),
+                };
+                if room_end >= -eps {
                     continue;
                 }
                 let tau = if room(c, at(t0)) < -eps {
                     t0
                 } else {
-                    let (mut lo, mut hi) = (t0, t);
+                    let (mut lo, mut hi) = (t0, t_end);
                     for _ in 0..SWITCH_BISECTIONS {
                         let mid = 0.5 * (lo + hi);
                         if room(c, at(mid)) >= -eps {
@@ -749,6 +852,13 @@ impl Engine {
         if !self.stopping {
             if let Some(f) = self.deferred.take() {
                 return Err(f);
+            }
+            if self.still_ticks as f64 * self.t_s >= STALL_SECONDS as f64 {
+                self.still_ticks = 0;
+                return Err(Fault::Stalled {
+                    line: self.line,
+                    seq: self.seq,
+                });
             }
             self.fill(src)?;
         }
@@ -910,6 +1020,11 @@ impl Engine {
             self.fluct_sum_sq += f * f;
             self.fluct_n += 1;
         }
+        let stood_still = self.pos == prev_pos
+            && matches!(self.cur, Current::Motion(_))
+            && state == TickState::Running
+            && !self.stopping;
+        self.still_ticks = if stood_still { self.still_ticks + 1 } else { 0 };
         // A starvation is a stop for want of a block mid-program, counted once per stop.
         let starved = state == TickState::Starved && !self.stopping;
         if starved && !self.starved {
@@ -973,28 +1088,64 @@ fn advance(
         }
     };
     let mut u1 = (u + du.max(0.0)).min(u_end);
-    let e1 = eval(curve, block, u1);
-    let sp1 = norm(e1.d1);
-    if sp1 > 1e-12 {
-        let chord = dist(e1.p, e.p);
-        u1 = (u1 + (ds - chord) / sp1).clamp(u, u_end);
-    }
-    let e2 = eval(curve, block, u1);
-    if dist(e2.p, e.p) <= ds * (1.0 + 1e-6) + 1e-12 {
-        return (u1, e2);
-    }
-    // The correction overshot: where the curve (nearly) stands still, C' is no guide.
-    // Bisect for the chord `ds` between `u` and `u1`; never step further than planned.
-    let (mut lo, mut hi) = (u, u1);
-    for _ in 0..60 {
-        let mid = 0.5 * (lo + hi);
-        if dist(eval(curve, block, mid).p, e.p) <= ds {
-            lo = mid;
-        } else {
-            hi = mid;
+    // The profile plans arc length; the chord of an arc `ds` on curvature `κ` is
+    // `ds·(1 - (ds·κ)²/24)` to fourth order. Stepping the arc keeps the distances the
+    // profile brakes on exact over thousands of cycles (a chord per cycle would fall
+    // behind by `ds³κ²/24` each).
+    let kappa = if sp > 1e-12 {
+        let c = [
+            e.d1[1] * e.d2[2] - e.d1[2] * e.d2[1],
+            e.d1[2] * e.d2[0] - e.d1[0] * e.d2[2],
+            e.d1[0] * e.d2[1] - e.d1[1] * e.d2[0],
+        ];
+        norm(c) / (sp * sp * sp)
+    } else {
+        0.0
+    };
+    let ds = ds * (1.0 - (ds * kappa).powi(2) / 24.0).max(0.5);
+    // Newton on the chord itself, f(u) = |C(u) - P| - ds with f' = (C - P)·C' / |C - P|,
+    // kept inside a bracket [lo, hi] with f(lo) < 0 < f(hi) and bisecting whenever a
+    // Newton step would leave it: usually one step brings the chord within 1e-10 of the
+    // plan, a few more where the curvature changes fast inside the step, and where the
+    // curve (nearly) stands still (a cusp, where C' is no guide) bisection still makes
+    // progress. Never steps further than planned: unconverged, it keeps `lo`.
+    let (mut lo, mut e_lo) = (u, *e);
+    let mut hi = u_end;
+    let mut e1 = eval(curve, block, u1);
+    for _ in 0..MAX_CHORD_STEPS {
+        let r = [e1.p[0] - e.p[0], e1.p[1] - e.p[1], e1.p[2] - e.p[2]];
+        let chord = norm(r);
+        if (chord - ds).abs() <= 1e-10 * ds + 1e-13 {
+            return (u1, e1);
         }
+        if chord < ds {
+            if u1 >= u_end {
+                // The block ends within the step.
+                return (u1, e1);
+            }
+            lo = u1;
+            e_lo = e1;
+        } else {
+            hi = u1;
+        }
+        let slope = if chord > 0.0 {
+            dot(r, e1.d1) / chord
+        } else {
+            0.0
+        };
+        let newton = u1 + (ds - chord) / slope;
+        let next = if slope > 1e-12 && newton > lo && newton < hi {
+            newton
+        } else {
+            0.5 * (lo + hi)
+        };
+        if next <= lo || next >= hi {
+            break;
+        }
+        u1 = next;
+        e1 = eval(curve, block, u1);
     }
-    (lo, eval(curve, block, lo))
+    (lo, e_lo)
 }
 
 /// The block's path at `u`: its NURBS by the moving-data evaluator, plus any helix.

@@ -335,3 +335,33 @@ fn starvations_are_counted_once_per_stop_and_the_engine_resumes() {
     }
     assert_eq!(e.starvations(), 1);
 }
+
+#[test]
+fn a_motion_that_cannot_move_is_a_stall_fault_not_a_hang() {
+    // A valid block whose jerk budget is so small that a cycle's step rounds to nothing:
+    // the set-point stands still mid-block, and the watchdog ends it.
+    let mut b = line(0, [0.0; 3], [10.0, 0.0, 0.0], 600.0, 0.0, 0.0);
+    b.jerk_mm_per_s3 = 1e-300;
+    let mut e = Engine::new(limits(), [0.0; 3]);
+    let mut src = Blocks(vec![b, CommandBlock::empty(BlockKind::ProgramEnd, 1, 2)], 0);
+    let mut fault = None;
+    let mut ticks = 0u64;
+    for _ in 0..10_000 {
+        ticks += 1;
+        match e.tick(&mut src) {
+            Ok(t) => assert_eq!(t.pos_mm, [0.0; 3]),
+            Err(f) => {
+                fault = Some(f);
+                break;
+            }
+        }
+    }
+    assert_eq!(fault, Some(Fault::Stalled { line: 1, seq: 0 }));
+    assert_eq!(fault.map(|f| f.kind()), Some("stalled"));
+    // After STALL_SECONDS of 1 ms cycles (the tick that reports it moves nothing).
+    assert_eq!(ticks, STALL_SECONDS * 1000 + 1);
+    // The caller stops and keeps ticking: the engine stays at rest and at the same spot.
+    e.stop();
+    let t = e.tick(&mut src).unwrap();
+    assert_eq!(t.pos_mm, [0.0; 3]);
+}
