@@ -232,7 +232,7 @@ pub fn main() -> ExitCode {
                         src.name
                     ));
                 }
-                return match crate::step::check::check_part(&src.name, &src.text) {
+                return match crate::step::check::check_part(&src.name, &src.text, &machine) {
                     Ok(report) => {
                         print!("{report}");
                         ExitCode::SUCCESS

@@ -29,4 +29,5 @@ pub mod publish;
 pub mod replay;
 pub mod report;
 pub mod step;
+pub mod surface_blocks;
 pub mod surface_path;

@@ -247,6 +247,15 @@ fn distinct(knots: &[f64]) -> Vec<f64> {
     out
 }
 
+/// `lo`, the knots strictly between, `hi`: the pieces a quadrature must not straddle.
+pub fn breaks_between(knots: &[f64], lo: f64, hi: f64) -> Vec<f64> {
+    let mut out = vec![lo];
+    out.extend(knots.iter().copied().filter(|&k| k > lo && k < hi));
+    out.push(hi);
+    out.dedup();
+    out
+}
+
 /// The samples along a pass: `SAMPLES_PER_SPAN` per knot span.
 fn samples(breaks: &[f64]) -> Vec<f64> {
     let mut out = Vec::new();
@@ -447,7 +456,7 @@ pub fn plan(step: &FreeformStep) -> Result<SurfacePath, StepError> {
         for w in passes.windows(2) {
             let a = w[0].to;
             let (lo, hi) = (w[0].fixed.min(w[1].fixed), w[0].fixed.max(w[1].fixed));
-            length += shared::nurbs::arc_length(&[lo, hi], 4, |b| {
+            length += shared::nurbs::arc_length(&breaks_between(&b_breaks, lo, hi), 4, |b| {
                 let d = at(a, b);
                 norm(match st.passes {
                     Passes::AlongU => d.sv,

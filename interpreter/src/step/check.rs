@@ -31,7 +31,7 @@ pub fn plan_part(text: &str) -> Result<Vec<(super::FreeformStep, SurfacePath)>, 
 
 /// The report `cnc check` prints for a STEP file, or every error as
 /// `FILE:LINE: #ID: rule: message` lines.
-pub fn check_part(name: &str, text: &str) -> Result<String, String> {
+pub fn check_part(name: &str, text: &str, machine: &shared::Machine) -> Result<String, String> {
     let planned = plan_part(text).map_err(|e| format_errors(name, &e))?;
     let mut o = String::new();
     let n = planned.len();
@@ -41,6 +41,12 @@ pub fn check_part(name: &str, text: &str) -> Result<String, String> {
         if n == 1 { "" } else { "s" }
     );
     for (s, p) in &planned {
+        let cmds = crate::surface_blocks::surface_commands(s, p, machine)
+            .map_err(|e| format_errors(name, &[e]))?;
+        let n_surf = cmds
+            .iter()
+            .filter(|c| matches!(c, crate::surface_blocks::SurfaceCommand::Surface(_)))
+            .count();
         let sf = &s.surface;
         let _ = writeln!(o, "  #{} '{}' (line {}):", s.id, s.name, s.line);
         let _ = writeln!(
@@ -102,6 +108,12 @@ pub fn check_part(name: &str, text: &str) -> Result<String, String> {
             p.length_mm,
             minutes * 60.0
         );
+        let _ = writeln!(
+            o,
+            "    {} blocks: {n_surf} surface blocks, {} rapid lines",
+            cmds.len(),
+            cmds.len() - n_surf
+        );
     }
     Ok(o)
 }
@@ -113,7 +125,7 @@ mod tests {
     #[test]
     fn check_reports_the_example_and_the_errors() {
         let text = include_str!("../../../examples/seed-surface.stp");
-        let out = check_part("seed-surface.stp", text).unwrap();
+        let out = check_part("seed-surface.stp", text, &shared::Machine::default()).unwrap();
         assert!(out.starts_with("seed-surface.stp: ok, STEP-NC, 1 free-form workingstep\n"));
         assert!(
             out.contains("degrees p=2 q=2, 10 x 10 control points"),
@@ -121,7 +133,7 @@ mod tests {
         );
         assert!(out.contains("D 6 mm (R 3 mm), length H 100 mm"), "{out}");
         let bad = text.replace("BALL_ENDMILL(", "BALL_ENDMILL(#999,");
-        let err = check_part("x.stp", &bad).unwrap_err();
+        let err = check_part("x.stp", &bad, &shared::Machine::default()).unwrap_err();
         assert!(err.starts_with("x.stp:"), "{err}");
         assert!(is_step_file("a.STP", ""));
         assert!(is_step_file("a", text));
