@@ -41,7 +41,7 @@ pub const SAFETY: f64 = 0.9;
 /// Samples per knot span along a pass where the curvature is looked at.
 const SAMPLES_PER_SPAN: usize = 16;
 /// More passes than this means the tolerance is unreasonably small for the surface.
-pub const MAX_PASSES: usize = 100_000;
+pub const MAX_PASSES: usize = 20_000;
 
 /// One pass: the cross parameter is held at `fixed`; the pass runs from `from` to `to`
 /// in the along parameter.
