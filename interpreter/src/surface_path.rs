@@ -64,7 +64,7 @@ pub struct SurfacePath {
     /// Ball radius `R`.
     pub radius_mm: f64,
     /// Spacings between neighbouring passes on the surface (smallest and largest of the
-    /// per-pass worst case).
+    /// per-pass widest; the last gap, which closes the domain, is left out of the smallest).
     pub min_spacing_mm: f64,
     pub max_spacing_mm: f64,
     /// The largest scallop height the spacing formula predicts (at the chosen spacings).
@@ -409,7 +409,10 @@ pub fn plan(step: &FreeformStep) -> Result<SurfacePath, StepError> {
             b_next = b_end;
         }
         let (w_used, h) = predicted(b, b_next);
-        min_w = min_w.min(w_used);
+        // The gap that closes the domain is narrower by design: not a spacing.
+        if b_next != b_end || fixed.len() == 1 {
+            min_w = min_w.min(w_used);
+        }
         max_w = max_w.max(w_used);
         worst_h = worst_h.max(h);
         fixed.push(b_next);
