@@ -28,9 +28,11 @@ pub enum Command {
     /// Run a program (or the built-in demo) through the three-process stack.
     Run(launch::RunArgs),
     /// Check a program without running it: exit 0 if fine, else one `FILE:LINE:COL: message`
-    /// line per problem on stderr and exit 1.
+    /// line per problem on stderr and exit 1. A STEP-NC file (`.stp`, `.step`, `.p21` or an
+    /// `ISO-10303-21;` header) is read as ISO 14649 free-form workingsteps and planned.
     Check {
-        /// The NC program (RS274/NGC with LinuxCNC splines and NURBS, or Fanuc G06.2).
+        /// The NC program (RS274/NGC with LinuxCNC splines and NURBS, or Fanuc G06.2), or a
+        /// STEP-NC part (ISO 10303-21 with ISO 14649 free-form workingsteps).
         program: PathBuf,
         /// Machine file (TOML) whose limits apply.
         #[arg(long)]
@@ -223,6 +225,24 @@ pub fn main() -> ExitCode {
                 Ok(s) => s,
                 Err(e) => return fail(e),
             };
+            if crate::step::check::is_step_file(&src.name, &src.text) {
+                if estimate {
+                    return fail(format!(
+                        "{}: --estimate is not available for STEP-NC surface workingsteps yet",
+                        src.name
+                    ));
+                }
+                return match crate::step::check::check_part(&src.name, &src.text, &machine) {
+                    Ok(report) => {
+                        print!("{report}");
+                        ExitCode::SUCCESS
+                    }
+                    Err(errors) => {
+                        eprint!("{errors}");
+                        ExitCode::FAILURE
+                    }
+                };
+            }
             let period_ns = period_us * 1000;
             let opts = crate::program::Options { dialect };
             match process::compile_with(&src.text, &opts, &machine, period_ns) {

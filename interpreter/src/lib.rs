@@ -9,6 +9,8 @@
 //!   each one as sent in the command log ([`shared::cmdlog`]);
 //! * [`estimate`] steps the planned blocks through the interpolator's engine in-process
 //!   for a machining-time estimate (`cnc check --estimate`);
+//! * [`step`] reads STEP-NC (ISO 10303-21 files with the ISO 14649 free-form subset)
+//!   and [`surface_path`] plans the ball-nose passes over their surfaces;
 //! * [`process`] is the interpreter process; [`launch`] starts all three processes for
 //!   `cnc run` and folds their summaries into the run's [`report`]; [`replay`] runs a
 //!   command log again (`cnc replay`) and prints one (`cnc log show`).
@@ -26,3 +28,6 @@ pub mod program;
 pub mod publish;
 pub mod replay;
 pub mod report;
+pub mod step;
+pub mod surface_blocks;
+pub mod surface_path;

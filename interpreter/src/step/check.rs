@@ -1,0 +1,142 @@
+//! `cnc check part.stp`: what the file holds and what the planner makes of it.
+
+use super::{format_errors, read_part, PathMode, StepError};
+use crate::surface_path::{plan, SurfacePath};
+use shared::nurbs::surface::Passes;
+use std::fmt::Write;
+
+/// Whether `name` or `text` says the file is a STEP exchange file rather than G-code.
+pub fn is_step_file(name: &str, text: &str) -> bool {
+    let lower = name.to_ascii_lowercase();
+    [".stp", ".step", ".p21"].iter().any(|e| lower.ends_with(e)) || super::looks_like_part21(text)
+}
+
+/// Every free-form workingstep of the file with its plan, as [`check_part`] describes it.
+pub fn plan_part(text: &str) -> Result<Vec<(super::FreeformStep, SurfacePath)>, Vec<StepError>> {
+    let steps = read_part(text)?;
+    let mut out = Vec::new();
+    let mut errs = Vec::new();
+    for s in steps {
+        match plan(&s) {
+            Ok(p) => out.push((s, p)),
+            Err(e) => errs.push(e),
+        }
+    }
+    if errs.is_empty() {
+        Ok(out)
+    } else {
+        Err(errs)
+    }
+}
+
+/// The report `cnc check` prints for a STEP file, or every error as
+/// `FILE:LINE: #ID: rule: message` lines.
+pub fn check_part(name: &str, text: &str, machine: &shared::Machine) -> Result<String, String> {
+    let planned = plan_part(text).map_err(|e| format_errors(name, &e))?;
+    let mut o = String::new();
+    let n = planned.len();
+    let _ = writeln!(
+        o,
+        "{name}: ok, STEP-NC, {n} free-form workingstep{}",
+        if n == 1 { "" } else { "s" }
+    );
+    for (s, p) in &planned {
+        let cmds = crate::surface_blocks::surface_commands(s, p, machine)
+            .map_err(|e| format_errors(name, &[e]))?;
+        let n_surf = cmds
+            .iter()
+            .filter(|c| matches!(c, crate::surface_blocks::SurfaceCommand::Surface(_)))
+            .count();
+        let sf = &s.surface;
+        let _ = writeln!(o, "  #{} '{}' (line {}):", s.id, s.name, s.line);
+        let _ = writeln!(
+            o,
+            "    surface #{}: {}B-spline, degrees p={} q={}, {} x {} control points, knots {} + {}",
+            sf.id,
+            if sf.rational { "rational " } else { "" },
+            sf.degree_u,
+            sf.degree_v,
+            sf.n_u,
+            sf.n_v,
+            sf.knots_u.len(),
+            sf.knots_v.len()
+        );
+        let _ = writeln!(
+            o,
+            "    tool #{} '{}': ball end mill D {} mm (R {} mm), length H {} mm",
+            s.tool.id,
+            s.tool.name,
+            s.tool.diameter_mm,
+            s.tool.radius_mm(),
+            s.tool.length_mm
+        );
+        let spindle = s
+            .technology
+            .spindle_rpm
+            .map_or("unset".to_string(), |r| format!("{r:.0} rpm"));
+        let _ = writeln!(
+            o,
+            "    feed {:.1} mm/min, spindle {spindle}",
+            s.technology.feed_mm_per_min
+        );
+        let st = &s.strategy;
+        let _ = writeln!(
+            o,
+            "    strategy #{}: UV {}, passes along {}, scallop tolerance {} mm, stepover cap {}",
+            st.id,
+            match st.mode {
+                PathMode::Zigzag => "zig-zag",
+                PathMode::Forward => "forward",
+            },
+            match st.passes {
+                Passes::AlongU => "u",
+                Passes::AlongV => "v",
+            },
+            st.scallop_mm,
+            st.stepover_mm
+                .map_or("none".to_string(), |c| format!("{c} mm"))
+        );
+        let minutes = p.length_mm / s.technology.feed_mm_per_min;
+        let _ = writeln!(
+            o,
+            "    {} passes, spacing {:.3}..{:.3} mm, predicted scallop {:.2} µm; path {:.3} mm, \
+             {:.1} s at the programmed feed",
+            p.passes.len(),
+            p.min_spacing_mm,
+            p.max_spacing_mm,
+            p.predicted_scallop_mm * 1e3,
+            p.length_mm,
+            minutes * 60.0
+        );
+        let _ = writeln!(
+            o,
+            "    {} blocks: {n_surf} surface blocks, {} rapid lines",
+            cmds.len(),
+            cmds.len() - n_surf
+        );
+    }
+    Ok(o)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn check_reports_the_example_and_the_errors() {
+        let text = include_str!("../../../examples/seed-surface.stp");
+        let out = check_part("seed-surface.stp", text, &shared::Machine::default()).unwrap();
+        assert!(out.starts_with("seed-surface.stp: ok, STEP-NC, 1 free-form workingstep\n"));
+        assert!(
+            out.contains("degrees p=2 q=2, 10 x 10 control points"),
+            "{out}"
+        );
+        assert!(out.contains("D 6 mm (R 3 mm), length H 100 mm"), "{out}");
+        let bad = text.replace("BALL_ENDMILL(", "BALL_ENDMILL(#999,");
+        let err = check_part("x.stp", &bad, &shared::Machine::default()).unwrap_err();
+        assert!(err.starts_with("x.stp:"), "{err}");
+        assert!(is_step_file("a.STP", ""));
+        assert!(is_step_file("a", text));
+        assert!(!is_step_file("a.ngc", "G1 X1\n"));
+    }
+}
