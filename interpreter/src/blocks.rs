@@ -342,59 +342,26 @@ const NORMAL_SHARE: f64 = 0.5;
 /// chord tolerance (exact form: a chord `c` of a circle of radius `r` deviates
 /// `r - sqrt(r² - c²/4)`). The tangential limits are what is left at the cap speed.
 fn shape(b: &CommandBlock, machine: &Machine, period_s: f64, feed_mm_s: f64) -> Shape {
-    let (u0, u1) = path::domain(b);
-    let samples = (16 * b.n_ctrl.max(2) as usize).max(32);
     let axes = machine.axes.as_array();
     let a_path = machine.path_acc_mm_per_s2;
     let j_path = machine.path_jerk_mm_per_s3;
-    // Distinct knots: dk/ds is taken by differences inside one span (where the curve is
-    // smooth), and the curvature jump at a knot of continuity below C² is a junction of
-    // its own.
-    let mut spans: Vec<f64> = b.knots().to_vec();
-    spans.dedup();
-    let span_of = |u: f64| {
-        let i = spans
-            .partition_point(|k| *k <= u)
-            .clamp(1, spans.len().max(2) - 1);
-        (spans[i - 1], spans[i.min(spans.len() - 1)])
-    };
-    let mut pts: Vec<([f64; 3], [f64; 3])> = Vec::with_capacity(samples + 1);
-    let mut dk: Vec<[f64; 3]> = Vec::with_capacity(samples + 1);
-    for i in 0..=samples {
-        let u = u0 + (u1 - u0) * i as f64 / samples as f64;
-        let Some((t, k)) = frame(b, u) else {
-            continue;
-        };
-        pts.push((t, k));
-        let (lo, hi) = span_of(u);
-        let h = 1e-4 * (hi - lo);
-        let (ua, ub) = ((u - h).max(lo), (u + h).min(hi));
-        let d = match (frame(b, ua), frame(b, ub)) {
-            (Some((_, ka)), Some((_, kb))) if ub > ua => {
-                let ds = path::norm(sub(path::eval(b, ub).p, path::eval(b, ua).p));
-                if ds > 1e-15 {
-                    sub(kb, ka).map(|x| x / ds)
-                } else {
-                    [0.0; 3]
-                }
-            }
-            _ => [0.0; 3],
-        };
-        dk.push(d);
-    }
-    // Curvature jumps at interior knots where the curve is only C¹ (or less).
-    let mut jumps: Vec<f64> = Vec::new();
-    let degree = b.degree as usize;
-    for w in spans.windows(2).skip(1) {
-        let knot = w[0];
-        let mult = b.knots().iter().filter(|k| **k == knot).count();
-        if degree < mult + 2 {
-            let eps = 1e-9 * (u1 - u0);
-            if let (Some((_, ka)), Some((_, kb))) = (frame(b, knot - eps), frame(b, knot + eps)) {
-                jumps.push(path::norm(sub(kb, ka)));
+    let (pts, dk, jumps) = match straight(b) {
+        // A straight segment has one tangent and no curvature: one sample says it all
+        // (the samples below would each find the same, at a hundred times the cost).
+        Some(d) => {
+            let len = path::norm(d);
+            if len > 0.0 {
+                (
+                    vec![(d.map(|x| x / len), [0.0; 3])],
+                    vec![[0.0; 3]],
+                    Vec::new(),
+                )
+            } else {
+                (Vec::new(), Vec::new(), Vec::new())
             }
         }
-    }
+        None => samples(b),
+    };
     let first = pts.first().copied().unwrap_or(([1.0, 0.0, 0.0], [0.0; 3]));
     let last = pts.last().copied().unwrap_or(first);
     let mut v = feed_mm_s;
@@ -473,6 +440,74 @@ fn shape(b: &CommandBlock, machine: &Machine, period_s: f64, feed_mm_s: f64) -> 
     }
 }
 
+/// The chord of a block that is a straight segment (degree 1, two control points, no
+/// helix; whatever the weights, such a curve runs straight from one to the other).
+fn straight(b: &CommandBlock) -> Option<[f64; 3]> {
+    let c = b.ctrl();
+    (b.degree == 1 && c.len() == 2 && b.helix.axis == Helix::NONE.axis)
+        .then(|| [c[1][0] - c[0][0], c[1][1] - c[0][1], c[1][2] - c[0][2]])
+}
+
+/// Unit tangents with curvature vectors, curvature derivatives, curvature jumps.
+type Samples = (Vec<([f64; 3], [f64; 3])>, Vec<[f64; 3]>, Vec<f64>);
+
+/// Samples of a curved block for [`shape`]: unit tangent and curvature vector at each,
+/// the curvature's derivative along the path at each, and the curvature jumps at its
+/// interior knots.
+fn samples(b: &CommandBlock) -> Samples {
+    let (u0, u1) = path::domain(b);
+    let samples = (16 * b.n_ctrl.max(2) as usize).max(32);
+    // Distinct knots: dk/ds is taken by differences inside one span (where the curve is
+    // smooth), and the curvature jump at a knot of continuity below C² is a junction of
+    // its own.
+    let mut spans: Vec<f64> = b.knots().to_vec();
+    spans.dedup();
+    let span_of = |u: f64| {
+        let i = spans
+            .partition_point(|k| *k <= u)
+            .clamp(1, spans.len().max(2) - 1);
+        (spans[i - 1], spans[i.min(spans.len() - 1)])
+    };
+    let mut pts: Vec<([f64; 3], [f64; 3])> = Vec::with_capacity(samples + 1);
+    let mut dk: Vec<[f64; 3]> = Vec::with_capacity(samples + 1);
+    for i in 0..=samples {
+        let u = u0 + (u1 - u0) * i as f64 / samples as f64;
+        let Some((t, k)) = frame(b, u) else {
+            continue;
+        };
+        pts.push((t, k));
+        let (lo, hi) = span_of(u);
+        let h = 1e-4 * (hi - lo);
+        let (ua, ub) = ((u - h).max(lo), (u + h).min(hi));
+        let d = match (frame(b, ua), frame(b, ub)) {
+            (Some((_, ka)), Some((_, kb))) if ub > ua => {
+                let ds = path::norm(sub(path::eval(b, ub).p, path::eval(b, ua).p));
+                if ds > 1e-15 {
+                    sub(kb, ka).map(|x| x / ds)
+                } else {
+                    [0.0; 3]
+                }
+            }
+            _ => [0.0; 3],
+        };
+        dk.push(d);
+    }
+    // Curvature jumps at interior knots where the curve is only C¹ (or less).
+    let mut jumps: Vec<f64> = Vec::new();
+    let degree = b.degree as usize;
+    for w in spans.windows(2).skip(1) {
+        let knot = w[0];
+        let mult = b.knots().iter().filter(|k| **k == knot).count();
+        if degree < mult + 2 {
+            let eps = 1e-9 * (u1 - u0);
+            if let (Some((_, ka)), Some((_, kb))) = (frame(b, knot - eps), frame(b, knot + eps)) {
+                jumps.push(path::norm(sub(kb, ka)));
+            }
+        }
+    }
+    (pts, dk, jumps)
+}
+
 /// Speed (mm/s) at which the junction between two motions with these shapes can be
 /// passed: the lower cap; at a kink (tangent turning by `θ`), the speed whose direction
 /// change in one period stays within the acceleration (`2·v·sin(θ/2) <= A·T`); where the
@@ -514,7 +549,7 @@ pub fn plan(blocks: &mut [CommandBlock], machine: &Machine, period_ns: u64) {
         if !motion(b) {
             continue;
         }
-        b.length_mm = path::length(b);
+        b.length_mm = straight(b).map_or_else(|| path::length(b), path::norm);
         let shp = shape(b, machine, period_s, b.feed_mm_per_min / 60.0);
         b.feed_mm_per_min = b.feed_mm_per_min.min(shp.v_cap * 60.0);
         b.acc_mm_per_s2 = shp.acc;

@@ -53,10 +53,11 @@ impl Cursor {
         }
     }
 
-    pub fn err(&self, col: u32, message: impl Into<String>) -> Diagnostic {
+    pub fn err(&self, rule: &'static str, col: u32, message: impl Into<String>) -> Diagnostic {
         Diagnostic {
             line: self.line,
             col,
+            rule,
             message: message.into(),
         }
     }
@@ -80,8 +81,13 @@ impl Cursor {
                 self.pos += 1;
                 Ok(())
             }
-            Some(found) => Err(self.err(self.col(), format!("expected {what}, found `{found}`"))),
+            Some(found) => Err(self.err(
+                "syntax",
+                self.col(),
+                format!("expected {what}, found `{found}`"),
+            )),
             None => Err(self.err(
+                "syntax",
                 self.col(),
                 format!("expected {what}, found the end of the line"),
             )),
@@ -283,12 +289,13 @@ fn value(cur: &mut Cursor, params: &Params, depth: u32) -> Result<f64, Diagnosti
     let col = cur.col();
     if depth > MAX_DEPTH {
         return Err(cur.err(
+            "expression",
             col,
             format!("value nested more than {MAX_DEPTH} deep (brackets, signs or #)"),
         ));
     }
     match cur.peek() {
-        None => Err(cur.err(col, "expected a value, found the end of the line")),
+        None => Err(cur.err("syntax", col, "expected a value, found the end of the line")),
         Some('[') => {
             cur.pos += 1;
             bracketed(cur, params, col, depth + 1)
@@ -297,9 +304,13 @@ fn value(cur: &mut Cursor, params: &Params, depth: u32) -> Result<f64, Diagnosti
             cur.pos += 1;
             match param(cur, params, depth + 1)? {
                 Param::Numbered(n) => Ok(params.numbered(n)),
-                Param::Named(name) => params
-                    .named(&name)
-                    .ok_or_else(|| cur.err(col, format!("Named parameter #<{name}> not defined"))),
+                Param::Named(name) => params.named(&name).ok_or_else(|| {
+                    cur.err(
+                        "parameter",
+                        col,
+                        format!("Named parameter #<{name}> not defined"),
+                    )
+                }),
             }
         }
         Some('-') => {
@@ -312,7 +323,7 @@ fn value(cur: &mut Cursor, params: &Params, depth: u32) -> Result<f64, Diagnosti
         }
         Some('A'..='Z') => function(cur, params, depth + 1),
         Some('0'..='9' | '.') => number(cur),
-        Some(c) => Err(cur.err(col, format!("expected a value, found `{c}`"))),
+        Some(c) => Err(cur.err("syntax", col, format!("expected a value, found `{c}`"))),
     }
 }
 
@@ -330,10 +341,12 @@ fn bracketed(
             Ok(v)
         }
         Some(c) => Err(cur.err(
+            "syntax",
             cur.col(),
             format!("expected an operator or `]`, found `{c}`"),
         )),
         None => Err(cur.err(
+            "syntax",
             open_col,
             "`[` is not closed with `]` before the end of the line",
         )),
@@ -353,7 +366,9 @@ fn binary(cur: &mut Cursor, params: &Params, min: u8, depth: u32) -> Result<f64,
         let col = cur.col();
         cur.pos += text.len();
         let rhs = binary(cur, params, op.precedence() + 1, depth)?;
-        lhs = op.apply(lhs, rhs).map_err(|m| cur.err(col, m))?;
+        lhs = op
+            .apply(lhs, rhs)
+            .map_err(|m| cur.err("expression", col, m))?;
     }
 }
 
@@ -370,12 +385,12 @@ fn function(cur: &mut Cursor, params: &Params, depth: u32) -> Result<f64, Diagno
             .map(|c| c.0)
             .take_while(char::is_ascii_uppercase)
             .collect();
-        return Err(cur.err(col, format!("unknown function or value `{word}`")));
+        return Err(cur.err("syntax", col, format!("unknown function or value `{word}`")));
     };
     cur.pos += name.len();
     let open = cur.col();
     if cur.peek() != Some('[') {
-        return Err(cur.err(open, format!("`[` missing after {name}")));
+        return Err(cur.err("syntax", open, format!("`[` missing after {name}")));
     }
     cur.pos += 1;
     match f {
@@ -397,12 +412,16 @@ fn function(cur: &mut Cursor, params: &Params, depth: u32) -> Result<f64, Diagno
         Func::Atan => {
             let y = bracketed(cur, params, open, depth + 1)?;
             if cur.peek() != Some('/') {
-                return Err(cur.err(cur.col(), "ATAN needs two arguments: ATAN[y]/[x]"));
+                return Err(cur.err("syntax", cur.col(), "ATAN needs two arguments: ATAN[y]/[x]"));
             }
             cur.pos += 1;
             let open_x = cur.col();
             if cur.peek() != Some('[') {
-                return Err(cur.err(open_x, "`[` missing after the slash of ATAN[y]/[x]"));
+                return Err(cur.err(
+                    "syntax",
+                    open_x,
+                    "`[` missing after the slash of ATAN[y]/[x]",
+                ));
             }
             cur.pos += 1;
             let x = bracketed(cur, params, open_x, depth + 1)?;
@@ -410,7 +429,7 @@ fn function(cur: &mut Cursor, params: &Params, depth: u32) -> Result<f64, Diagno
         }
         _ => {
             let x = bracketed(cur, params, open, depth + 1)?;
-            f.apply(x).map_err(|m| cur.err(col, m))
+            f.apply(x).map_err(|m| cur.err("expression", col, m))
         }
     }
 }
@@ -419,10 +438,16 @@ fn param(cur: &mut Cursor, params: &Params, depth: u32) -> Result<Param, Diagnos
     let col = cur.col();
     if cur.peek() != Some('<') {
         let v = value(cur, params, depth)?;
-        let n = whole(v)
-            .ok_or_else(|| cur.err(col, format!("parameter number {v} is not a whole number")))?;
+        let n = whole(v).ok_or_else(|| {
+            cur.err(
+                "parameter",
+                col,
+                format!("parameter number {v} is not a whole number"),
+            )
+        })?;
         if !(1.0..=MAX_NUMBERED as f64).contains(&n) {
             return Err(cur.err(
+                "parameter",
                 col,
                 format!("parameter number {n} is outside #1..#{MAX_NUMBERED}"),
             ));
@@ -441,11 +466,13 @@ fn param(cur: &mut Cursor, params: &Params, depth: u32) -> Result<Param, Diagnos
                 name.push(c.to_ascii_lowercase());
                 cur.pos += 1;
             }
-            None => return Err(cur.err(col, "named parameter is not closed with `>`")),
+            None => {
+                return Err(cur.err("parameter", col, "named parameter is not closed with `>`"))
+            }
         }
     }
     if name.is_empty() {
-        return Err(cur.err(col, "empty parameter name `#<>`"));
+        return Err(cur.err("parameter", col, "empty parameter name `#<>`"));
     }
     Ok(Param::Named(name))
 }
@@ -473,12 +500,12 @@ fn number(cur: &mut Cursor) -> Result<f64, Diagnostic> {
         cur.pos += 1;
     }
     if digits == 0 {
-        return Err(cur.err(col, format!("`{text}` is not a number")));
+        return Err(cur.err("syntax", col, format!("`{text}` is not a number")));
     }
     match text.parse::<f64>() {
         Ok(v) if v.is_finite() => Ok(v),
-        Ok(_) => Err(cur.err(col, "number is too large")),
-        Err(_) => Err(cur.err(col, format!("`{text}` is not a number"))),
+        Ok(_) => Err(cur.err("syntax", col, "number is too large")),
+        Err(_) => Err(cur.err("syntax", col, format!("`{text}` is not a number"))),
     }
 }
 

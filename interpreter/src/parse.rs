@@ -8,12 +8,31 @@ use std::collections::HashMap;
 
 use crate::expr::{at_function, param_ref, real_value, Cursor, MAX_NUMBERED};
 
-/// One problem in a program, at `line:col` (both 1-based).
+/// One problem in a program, at `line:col` (both 1-based), shown as
+/// `line:col: rule: message` (after the file name in `cnc check`).
 #[derive(Debug, Clone, PartialEq)]
 pub struct Diagnostic {
     pub line: u32,
     pub col: u32,
+    /// What the program broke, in the words of the manual a machinist would open: the
+    /// code whose rules it is (`G2`…: `arc`, `G5`, `G5.2`, `G6.2`, `G06.2`, `G64`, `G93`,
+    /// …), or `syntax` (characters that make no words), `expression` (arithmetic that
+    /// fails), `parameter`, `word` (unknown or repeated words), `modal` (codes that
+    /// conflict or are not supported), `feed`, `O-word` (subroutines and control flow),
+    /// `dialect`, `line-length`, `internal` (a block this program made that the
+    /// interpolator would refuse: a bug here, not in the program).
+    pub rule: &'static str,
     pub message: String,
+}
+
+impl core::fmt::Display for Diagnostic {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        write!(
+            f,
+            "{}:{}: {}: {}",
+            self.line, self.col, self.rule, self.message
+        )
+    }
 }
 
 /// One word: a letter and its value, with the column of the letter.
@@ -206,6 +225,7 @@ fn significant(text: &str, line: u32, messages: &mut Vec<String>) -> Result<Curs
                         return Err(Diagnostic {
                             line,
                             col,
+                            rule: "syntax",
                             message: "comment opened inside a comment".into(),
                         });
                     }
@@ -215,6 +235,7 @@ fn significant(text: &str, line: u32, messages: &mut Vec<String>) -> Result<Curs
                     return Err(Diagnostic {
                         line,
                         col: start,
+                        rule: "syntax",
                         message: "comment is not closed with `)`".into(),
                     });
                 }
@@ -247,13 +268,18 @@ pub fn read_line(text: &str, line: u32, params: &Params) -> Result<Line, Diagnos
         match c {
             'O' => {
                 if out.words.iter().any(|w| w.letter != 'N') || out.o_word.is_some() {
-                    return Err(cur.err(col, "an O-word must start its line (after N at most)"));
+                    return Err(cur.err(
+                        "O-word",
+                        col,
+                        "an O-word must start its line (after N at most)",
+                    ));
                 }
                 let mut o = o_head(&mut cur, col)?;
                 let (least, most) = o.kind.arity();
                 while let Some('[') = cur.peek() {
                     if o.args.len() == most {
                         return Err(cur.err(
+                            "O-word",
                             cur.col(),
                             format!("too many values for O {:?} (at most {most})", o.kind),
                         ));
@@ -262,14 +288,17 @@ pub fn read_line(text: &str, line: u32, params: &Params) -> Result<Line, Diagnos
                 }
                 if let Some(c) = cur.peek() {
                     return Err(cur.err(
+                        "O-word",
                         cur.col(),
                         format!("`{c}` after an O-word: nothing but [values] may follow it"),
                     ));
                 }
                 if o.args.len() < least {
-                    return Err(
-                        cur.err(cur.col(), format!("O {:?} needs its value in [ ]", o.kind))
-                    );
+                    return Err(cur.err(
+                        "O-word",
+                        cur.col(),
+                        format!("O {:?} needs its value in [ ]", o.kind),
+                    ));
                 }
                 out.o_word = Some(o);
             }
@@ -282,7 +311,7 @@ pub fn read_line(text: &str, line: u32, params: &Params) -> Result<Line, Diagnos
                     Some(_) => true,
                 };
                 if !starts_value {
-                    return Err(cur.err(col, format!("{c} word has no value")));
+                    return Err(cur.err("syntax", col, format!("{c} word has no value")));
                 }
                 let value = real_value(&mut cur, params)?;
                 out.words.push(Word {
@@ -297,6 +326,7 @@ pub fn read_line(text: &str, line: u32, params: &Params) -> Result<Line, Diagnos
                     Some('=') => cur.pos += 1,
                     _ => {
                         return Err(cur.err(
+                            "parameter",
                             col,
                             "parameter without `=`: a parameter alone is not a word",
                         ))
@@ -307,11 +337,12 @@ pub fn read_line(text: &str, line: u32, params: &Params) -> Result<Line, Diagnos
             }
             '[' => {
                 return Err(cur.err(
+                    "syntax",
                     col,
                     "expression where a word is expected: give it a letter, as in X[1+2]",
                 ))
             }
-            _ => return Err(cur.err(col, format!("unexpected `{c}`"))),
+            _ => return Err(cur.err("syntax", col, format!("unexpected `{c}`"))),
         }
     }
     Ok(out)
@@ -326,13 +357,13 @@ fn o_head(cur: &mut Cursor, col: u32) -> Result<OWord, Diagnostic> {
             match cur.peek() {
                 Some('>') => break,
                 Some(c) => label.push(c.to_ascii_lowercase()),
-                None => return Err(cur.err(col, "O-word name is not closed with `>`")),
+                None => return Err(cur.err("O-word", col, "O-word name is not closed with `>`")),
             }
             cur.pos += 1;
         }
         cur.pos += 1;
         if label.is_empty() {
-            return Err(cur.err(col, "empty O-word name `o<>`"));
+            return Err(cur.err("O-word", col, "empty O-word name `o<>`"));
         }
         label = format!("<{label}>");
     } else {
@@ -341,7 +372,7 @@ fn o_head(cur: &mut Cursor, col: u32) -> Result<OWord, Diagnostic> {
             cur.pos += 1;
         }
         if label.is_empty() {
-            return Err(cur.err(col, "O-word needs a number or a <name>"));
+            return Err(cur.err("O-word", col, "O-word needs a number or a <name>"));
         }
         // `o0100` and `o100` are the same label.
         label = match label.trim_start_matches('0') {
@@ -359,7 +390,7 @@ fn o_head(cur: &mut Cursor, col: u32) -> Result<OWord, Diagnostic> {
         });
     }
     let Some(&(text, kind)) = O_KEYWORDS.iter().find(|(k, _)| cur.at(k)) else {
-        return Err(cur.err(
+        return Err(cur.err("O-word",
             at,
             "O-word needs sub, endsub, call, return, if, elseif, else, endif, do, while, endwhile, repeat, endrepeat, break or continue",
         ));
@@ -432,6 +463,7 @@ pub fn flow(o_words: &[Option<OWord>]) -> (Flow, Vec<Diagnostic>) {
         let err = |m: String| Diagnostic {
             line: i as u32 + 1,
             col: o.col,
+            rule: "O-word",
             message: m,
         };
         let name = format!("o{} {:?}", o.label, o.kind).to_lowercase();
@@ -523,6 +555,7 @@ pub fn flow(o_words: &[Option<OWord>]) -> (Flow, Vec<Diagnostic>) {
         errors.push(Diagnostic {
             line: t.at as u32 + 1,
             col: o_words[t.at].as_ref().map_or(1, |o| o.col),
+            rule: "O-word",
             message: format!("o{} {:?} is never closed", t.label, t.kind).to_lowercase(),
         });
     }

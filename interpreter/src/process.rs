@@ -41,12 +41,9 @@ impl Source {
     }
 }
 
-/// Every problem of a program as `NAME:LINE:COL: message` lines.
+/// Every problem of a program as `NAME:LINE:COL: RULE: message` lines.
 pub fn format_diagnostics(name: &str, diags: &[Diagnostic]) -> String {
-    diags
-        .iter()
-        .map(|d| format!("{name}:{}:{}: {}\n", d.line, d.col, d.message))
-        .collect()
+    diags.iter().map(|d| format!("{name}:{d}\n")).collect()
 }
 
 /// Reads, checks, builds and plans: the blocks as they will be sent.
@@ -75,7 +72,8 @@ pub fn compile_with(
             b.validate().err().map(|e| Diagnostic {
                 line: b.source_line,
                 col: 1,
-                message: format!("internal: {e}"),
+                rule: "internal",
+                message: e.to_string(),
             })
         })
         .collect();

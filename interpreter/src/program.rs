@@ -235,10 +235,11 @@ impl LineWords<'_> {
     fn first_col(&self) -> u32 {
         self.words.first().map_or(1, |w| w.col)
     }
-    fn err(&self, col: u32, message: impl Into<String>) -> Diagnostic {
+    fn err(&self, rule: &'static str, col: u32, message: impl Into<String>) -> Diagnostic {
         Diagnostic {
             line: self.line,
             col,
+            rule,
             message: message.into(),
         }
     }
@@ -298,6 +299,10 @@ pub fn interpret_with(text: &str, opts: &Options) -> Result<Program, Vec<Diagnos
         }
         let here = pc;
         pc += 1;
+        if let Err(d) = run.count_line(here) {
+            errors.push(d);
+            break;
+        }
         if lines[here].len() > MAX_LINE_BYTES {
             let col = lines[here]
                 .char_indices()
@@ -306,6 +311,7 @@ pub fn interpret_with(text: &str, opts: &Options) -> Result<Program, Vec<Diagnos
             errors.push(Diagnostic {
                 line,
                 col: col as u32 + 1,
+                rule: "line-length",
                 message: format!(
                     "line longer than {MAX_LINE_BYTES} characters (LinuxCNC's limit, \"Command too long\"): split it"
                 ),
@@ -363,6 +369,7 @@ pub fn interpret_with(text: &str, opts: &Options) -> Result<Program, Vec<Diagnos
         errors.push(Diagnostic {
             line: n.line,
             col: n.col,
+            rule: "G6.2",
             message: format!(
                 "G6.2 NURBS is never closed: {} knot-only `G6.2 K…` lines of {} follow its control points",
                 n.closing, n.order
@@ -376,6 +383,7 @@ pub fn interpret_with(text: &str, opts: &Options) -> Result<Program, Vec<Diagnos
         errors.push(Diagnostic {
             line: n.line,
             col: n.col,
+            rule: "G5.2",
             message: "G5.2 NURBS is never closed with G5.3".into(),
         });
     }
@@ -414,6 +422,7 @@ fn execute(st: &mut State, lw: &LineWords, moves: &mut Vec<Move>) -> Result<(), 
         if w.letter != 'G' && w.letter != 'M' && lw.words[..i].iter().any(|o| o.letter == w.letter)
         {
             return Err(lw.err(
+                "word",
                 w.col,
                 format!("{} word appears twice on one line", w.letter),
             ));
@@ -423,11 +432,12 @@ fn execute(st: &mut State, lw: &LineWords, moves: &mut Vec<Move>) -> Result<(), 
             | 'T' | 'Q' => {}
             'A' | 'B' | 'C' | 'U' | 'V' | 'W' => {
                 return Err(lw.err(
+                    "word",
                     w.col,
                     format!("{} axis: this machine has only X, Y and Z", w.letter),
                 ))
             }
-            c => return Err(lw.err(w.col, format!("{c} word is not supported"))),
+            c => return Err(lw.err("word", w.col, format!("{c} word is not supported"))),
         }
     }
     let codes = g_codes(st, lw)?;
@@ -448,7 +458,7 @@ fn execute(st: &mut State, lw: &LineWords, moves: &mut Vec<Move>) -> Result<(), 
     }
     if let Some(f) = lw.get('F') {
         if f.value < 0.0 {
-            return Err(lw.err(f.col, "F must not be negative"));
+            return Err(lw.err("feed", f.col, "F must not be negative"));
         }
         // In G93, F is the inverse of the move's time: no length unit.
         st.feed = if st.inverse_time {
@@ -462,7 +472,7 @@ fn execute(st: &mut State, lw: &LineWords, moves: &mut Vec<Move>) -> Result<(), 
     let mut spindle = st.spindle;
     if let Some(s) = lw.get('S') {
         if s.value < 0.0 {
-            return Err(lw.err(s.col, "S (spindle speed) must not be negative"));
+            return Err(lw.err("spindle", s.col, "S (spindle speed) must not be negative"));
         }
         spindle.1 = s.value;
     }
@@ -476,12 +486,13 @@ fn execute(st: &mut State, lw: &LineWords, moves: &mut Vec<Move>) -> Result<(), 
             Some(50) => spindle.0 = SpindleDir::Off,
             // tool change, coolant: accepted, nothing of ours depends on them
             Some(60 | 70 | 80 | 90) => {}
-            _ => return Err(lw.err(w.col, format!("M{} is not supported", w.value))),
+            _ => return Err(lw.err("modal", w.col, format!("M{} is not supported", w.value))),
         }
     }
     let curve_open = st.g62.is_some() || st.nurbs.is_some();
     if curve_open && (spindle != st.spindle || stop.is_some() || codes.path.is_some()) {
         return Err(lw.err(
+            "NURBS",
             lw.first_col(),
             "spindle, stop or path-mode change inside an open NURBS: close the curve first",
         ));
@@ -522,8 +533,8 @@ fn g_codes<'a>(st: &mut State, lw: &'a LineWords) -> Result<LineCodes<'a>, Diagn
     let mut c = LineCodes::default();
     let mut groups: Vec<(u8, &Word)> = Vec::new();
     for w in lw.words.iter().filter(|w| w.letter == 'G') {
-        let code =
-            gcode(w).ok_or_else(|| lw.err(w.col, format!("G{} is not a G-code", w.value)))?;
+        let code = gcode(w)
+            .ok_or_else(|| lw.err("modal", w.col, format!("G{} is not a G-code", w.value)))?;
         let group = match code {
             0 | 10 | 20 | 30 | 52 | 53 | 62 | 800 => 1,
             // G5 and G5.1 are motions in LinuxCNC, one-shot mode switches in Fanuc.
@@ -540,10 +551,11 @@ fn g_codes<'a>(st: &mut State, lw: &'a LineWords) -> Result<LineCodes<'a>, Diagn
             540..=590 => 12,
             610 | 611 | 640 => 13,
             960 | 970 => 14,
-            _ => return Err(lw.err(w.col, format!("G{} is not supported", w.value))),
+            _ => return Err(lw.err("modal", w.col, format!("G{} is not supported", w.value))),
         };
         if let Some((_, other)) = groups.iter().find(|(g, _)| *g == group && group != 0) {
             return Err(lw.err(
+                "modal",
                 w.col,
                 format!(
                     "G{} and G{} are in the same modal group",
@@ -586,7 +598,7 @@ fn g_codes<'a>(st: &mut State, lw: &'a LineWords) -> Result<LineCodes<'a>, Diagn
             410 | 420 => {
                 // Remembered so that a G06.2 can name Fanuc's PS1006, then refused.
                 st.cutter_comp = true;
-                return Err(lw.err(
+                return Err(lw.err("G41/G42",
                     w.col,
                     format!(
                         "G{}: cutter radius compensation is not supported yet; program the tool centre path with G40",
@@ -605,8 +617,9 @@ fn path_control(lw: &LineWords, w: &Word, code: u32, unit: f64) -> Result<PathCo
     let tol = |letter: char| -> Result<Option<f64>, Diagnostic> {
         match lw.get(letter) {
             Some(p) if p.value < 0.0 => Err(lw.err(
+                "G64",
                 p.col,
-                format!("G64 {letter} (a tolerance) must not be negative"),
+                format!("{letter} (a tolerance) must not be negative"),
             )),
             Some(p) => Ok(Some(p.value * unit)),
             None => Ok(None),
@@ -619,7 +632,7 @@ fn path_control(lw: &LineWords, w: &Word, code: u32, unit: f64) -> Result<PathCo
             let tolerance_mm = tol('P')?;
             let naive_cam_mm = tol('Q')?;
             if naive_cam_mm.is_some() && tolerance_mm.is_none() {
-                return Err(lw.err(w.col, "G64 Q needs P too (Q is only read after P)"));
+                return Err(lw.err("G64", w.col, "Q needs P too (Q is only read after P)"));
             }
             PathControl::Blend {
                 tolerance_mm,
@@ -682,14 +695,14 @@ fn motion(
         );
     }
     if let Some(w) = codes.nurbs_close {
-        return Err(lw.err(w.col, "G5.3 without an open G5.2 NURBS"));
+        return Err(lw.err("G5.3", w.col, "no G5.2 NURBS is open for it to close"));
     }
     if let Some(w) = codes.dwell {
         let p = lw
             .value('P')
-            .ok_or_else(|| lw.err(w.col, "G4 dwell needs P (seconds)"))?;
+            .ok_or_else(|| lw.err("G4", w.col, "dwell needs P (seconds)"))?;
         if p < 0.0 {
-            return Err(lw.err(w.col, "G4 dwell time P must not be negative"));
+            return Err(lw.err("G4", w.col, "dwell time P must not be negative"));
         }
         moves.push(Move::Dwell {
             line: lw.line,
@@ -712,7 +725,11 @@ fn motion(
         }
         match st.motion {
             Motion::None | Motion::FanucNurbs => {
-                return Err(lw.err(col, "axis words without an active motion (G0, G1, G2, G3)"))
+                return Err(lw.err(
+                    "modal",
+                    col,
+                    "axis words without an active motion (G0, G1, G2, G3)",
+                ))
             }
             Motion::Rapid => push_line(moves, lw.line, st.pos, target, true, 0.0),
             Motion::Linear => {
@@ -732,10 +749,11 @@ fn motion(
         st.pos = target;
     } else if let Some((w, Motion::Arc { .. } | Motion::Linear | Motion::Rapid)) = codes.motion {
         if lw.has_any("IJKR") {
-            return Err(lw.err(w.col, "arc without any axis word for its end point"));
+            return Err(lw.err("arc", w.col, "arc without any axis word for its end point"));
         }
     } else if let Some((w, Motion::Cubic | Motion::Quadratic)) = codes.motion {
         return Err(lw.err(
+            "spline",
             w.col,
             format!("G{} spline without its end point (X and Y)", w.value),
         ));
@@ -749,21 +767,22 @@ fn need_feed(st: &State, lw: &LineWords, col: u32) -> Result<(), Diagnostic> {
         match lw.get('F') {
             Some(f) if f.value > 0.0 => return Ok(()),
             Some(f) => {
-                return Err(lw.err(
+                return Err(lw.err("G93",
                     f.col,
-                    "G93 inverse time: F must be > 0 (the move takes 1/F minutes)",
+                    "inverse time: F must be > 0 (the move takes 1/F minutes)",
                 ))
             }
             None => {
-                return Err(lw.err(
+                return Err(lw.err("G93",
                     col,
-                    "G93 inverse time: F word missing on this feed move (in G93 every feed move needs its own F; the move takes 1/F minutes)",
+                    "inverse time: F word missing on this feed move (in G93 every feed move needs its own F; the move takes 1/F minutes)",
                 ))
             }
         }
     }
     if st.feed <= 0.0 {
         return Err(lw.err(
+            "feed",
             col,
             "feed move with no feed rate: program F before (or on) this line",
         ));

@@ -18,12 +18,12 @@ fn moves(text: &str) -> Vec<Move> {
     interpret(text).unwrap_or_else(|e| panic!("{e:?}")).moves
 }
 
-/// The errors of a program as `(line, col, message)`.
+/// The errors of a program as `(line, col, "rule: message")`.
 fn errors_as(text: &str, dialect: Option<Dialect>) -> Vec<(u32, u32, String)> {
     interpret_with(text, &Options { dialect })
         .expect_err("the program should be refused")
         .into_iter()
-        .map(|d| (d.line, d.col, d.message))
+        .map(|d| (d.line, d.col, format!("{}: {}", d.rule, d.message)))
         .collect()
 }
 

@@ -10,7 +10,7 @@ use tests::{cnc_exe, csv, report, temp_dir};
 /// `g5_curva_stella.ngc` opens its NURBS with `G2.2`, a G-code that does not exist (the
 /// `G5.3` on line 31 closes a `G5.2` that was meant). A control must refuse it; we do,
 /// before any motion, naming the line.
-const BROKEN: &[(&str, &str)] = &[("g5_curva_stella.ngc", ":12:1: G2.2 is not supported")];
+const BROKEN: &[(&str, &str)] = &[("g5_curva_stella.ngc", ":12:1: modal: G2.2 is not supported")];
 
 #[test]
 fn every_linuxcnc_program_checks_clean_and_runs() {

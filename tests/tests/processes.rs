@@ -194,10 +194,19 @@ fn check_reports_every_problem_with_file_line_and_column() {
     let lines: Vec<_> = err.lines().collect();
     let name = prog.display().to_string();
     assert_eq!(lines.len(), 4, "{err}");
-    assert!(lines[0].starts_with(&format!("{name}:2:1: ")), "{err}");
-    assert!(lines[1].starts_with(&format!("{name}:3:1: ")), "{err}");
-    assert!(lines[2].starts_with(&format!("{name}:4:7: ")), "{err}");
-    assert!(lines[3].starts_with(&format!("{name}:5:1: ")), "{err}");
+    assert!(
+        lines[0].starts_with(&format!("{name}:2:1: feed: ")),
+        "{err}"
+    );
+    assert!(lines[1].starts_with(&format!("{name}:3:1: arc: ")), "{err}");
+    assert!(
+        lines[2].starts_with(&format!("{name}:4:7: word: ")),
+        "{err}"
+    );
+    assert!(
+        lines[3].starts_with(&format!("{name}:5:1: G5.3: ")),
+        "{err}"
+    );
 
     let good = dir.join("good.ngc");
     std::fs::write(&good, "G1 X1 F100\nM2\n").unwrap();

@@ -3,6 +3,11 @@
 use super::{LineWords, Move, State, ARC_RADIUS_TOL_MM, ARC_RADIUS_TOL_REL, OFFSETS};
 use crate::parse::Diagnostic;
 
+/// Most full turns one arc may make (`P`). LinuxCNC sets no limit, but every turn
+/// becomes blocks: without one, `P99999999` would keep the checker busy for hours. Ten
+/// thousand turns is a thread milled far longer than any machine's Z travel allows.
+const MAX_TURNS: u32 = 10_000;
+
 pub(super) fn arc(
     st: &State,
     lw: &LineWords,
@@ -16,6 +21,7 @@ pub(super) fn arc(
     let from = st.pos;
     if let Some(w) = lw.get(OFFSETS[n]) {
         return Err(lw.err(
+            "arc",
             w.col,
             format!(
                 "{} offset given for an arc in the {:?} plane",
@@ -25,8 +31,16 @@ pub(super) fn arc(
     }
     let turns = match lw.get('P') {
         None => 1,
-        Some(p) if p.value >= 1.0 && p.value.fract() == 0.0 => p.value as u32,
-        Some(p) => return Err(lw.err(p.col, "arc turn count P must be a positive integer")),
+        Some(p) if (1.0..=MAX_TURNS as f64).contains(&p.value) && p.value.fract() == 0.0 => {
+            p.value as u32
+        }
+        Some(p) => {
+            return Err(lw.err(
+                "arc",
+                p.col,
+                format!("arc turn count P must be a whole number from 1 to {MAX_TURNS}"),
+            ))
+        }
     };
     let (da, db) = (to[a] - from[a], to[b] - from[b]);
     let chord = (da * da + db * db).sqrt();
@@ -34,15 +48,20 @@ pub(super) fn arc(
     center[n] = from[n];
     if let Some(rw) = lw.get('R') {
         if lw.get(OFFSETS[a]).is_some() || lw.get(OFFSETS[b]).is_some() {
-            return Err(lw.err(rw.col, "arc has both R and centre offsets; give one form"));
+            return Err(lw.err(
+                "arc",
+                rw.col,
+                "arc has both R and centre offsets; give one form",
+            ));
         }
         let r = rw.value * unit;
         if chord < 1e-9 {
-            return Err(lw.err(rw.col, "R-form arc with its end at its start: a full circle needs the centre form (I, J, K)"));
+            return Err(lw.err("arc", rw.col, "R-form arc with its end at its start: a full circle needs the centre form (I, J, K)"));
         }
         let half = chord / 2.0;
         if r.abs() < half - ARC_RADIUS_TOL_MM {
             return Err(lw.err(
+                "arc",
                 rw.col,
                 format!(
                     "arc radius {:.4} mm is too small to reach an end point {:.4} mm away",
@@ -62,6 +81,7 @@ pub(super) fn arc(
         let (ia, ib) = (lw.value(OFFSETS[a]), lw.value(OFFSETS[b]));
         if ia.is_none() && ib.is_none() {
             return Err(lw.err(
+                "arc",
                 col,
                 format!(
                     "arc needs R or a centre ({} and {})",
@@ -78,11 +98,11 @@ pub(super) fn arc(
         let r0 = ((from[a] - ca).powi(2) + (from[b] - cb).powi(2)).sqrt();
         let r1 = ((to[a] - ca).powi(2) + (to[b] - cb).powi(2)).sqrt();
         if r0 < 1e-9 {
-            return Err(lw.err(col, "arc centre coincides with its start point"));
+            return Err(lw.err("arc", col, "arc centre coincides with its start point"));
         }
         let diff = (r1 - r0).abs();
         if diff > ARC_RADIUS_TOL_MM && diff > ARC_RADIUS_TOL_REL * r0 {
-            return Err(lw.err(
+            return Err(lw.err("arc",
                 col,
                 format!("radius to the end of the arc ({r1:.4} mm) differs from the radius to its start ({r0:.4} mm)"),
             ));

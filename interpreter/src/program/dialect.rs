@@ -94,11 +94,16 @@ impl DialectState {
         col: u32,
         what: &'static str,
     ) -> Result<(), Diagnostic> {
-        let err = |message: String| Diagnostic { line, col, message };
+        let err = |message: String| Diagnostic {
+            line,
+            col,
+            rule: "dialect",
+            message,
+        };
         if let Some(forced) = self.forced {
             if forced != d {
                 return Err(err(format!(
-                    "dialect: {what} is {d}'s, but the program is read as {forced} (--dialect {forced}); use --dialect {d} or drop the option"
+                    "{what} is {d}'s, but the program is read as {forced} (--dialect {forced}); use --dialect {d} or drop the option"
                 )));
             }
             return Ok(());
@@ -110,7 +115,7 @@ impl DialectState {
             }
             Some((other, _, _)) if other == d => Ok(()),
             Some((other, at, by)) => Err(err(format!(
-                "dialect: {what} is {d}'s, but line {at} already used {by} ({other}'s): a program speaks one dialect"
+                "{what} is {d}'s, but line {at} already used {by} ({other}'s): a program speaks one dialect"
             ))),
         }
     }

@@ -93,8 +93,9 @@ impl FanucOpen {
         Some(Diagnostic {
             line,
             col,
+            rule: "G06.2",
             message: format!(
-                "G06.2: {} knots for {n} control points of rank {k}, expected {}: {what} came after {} of the {k} knot-only `K` blocks that close the curve of line {} (Fanuc alarm {alarm})",
+                "{} knots for {n} control points of rank {k}, expected {}: {what} came after {} of the {k} knot-only `K` blocks that close the curve of line {} (Fanuc alarm {alarm})",
                 self.n_knots(),
                 n + k,
                 self.closing,
@@ -126,20 +127,26 @@ pub(super) fn precision_mode(st: &mut State, lw: &LineWords, w: &Word) -> Result
     match lw.get(letter) {
         Some(v) if allowed.contains(&v.value) => Ok(()),
         Some(v) if hpcc => Err(lw.err(
+            "G05",
             v.col,
             format!(
-                "G05 P{}: only P10000 (high-precision contour control on) and P0 (off) are supported; G05 high-speed cycles are not",
+                "P{}: only P10000 (high-precision contour control on) and P0 (off) are supported; G05 high-speed cycles are not",
                 v.value
             ),
         )),
         Some(v) => Err(lw.err(
+            "G05.1",
             v.col,
             format!(
-                "G05.1 Q{}: only Q1 (AI contour control on) and Q0 (off) are supported",
+                "Q{}: only Q1 (AI contour control on) and Q0 (off) are supported",
                 v.value
             ),
         )),
-        None => Err(lw.err(w.col, format!("{name} needs its {letter}"))),
+        None => Err(lw.err(
+            if hpcc { "G05" } else { "G05.1" },
+            w.col,
+            format!("{name} needs its {letter}"),
+        )),
     }
 }
 
@@ -185,20 +192,23 @@ fn only_nurbs_words(lw: &LineWords, first: bool) -> Result<(), Diagnostic> {
             'P' | 'F' if first => {}
             'P' => {
                 return Err(lw.err(
+                    "G06.2",
                     w.col,
-                    "G06.2: the rank P belongs on the first block of the curve only",
+                    "the rank P belongs on the first block of the curve only",
                 ))
             }
             'F' => {
                 return Err(lw.err(
+                    "G06.2",
                     w.col,
-                    "G06.2: the feed F belongs on the first block of the curve only",
+                    "the feed F belongs on the first block of the curve only",
                 ))
             }
             c => {
                 return Err(lw.err(
+                    "G06.2",
                     w.col,
-                    format!("G06.2: {c} is not a word of a NURBS block (P K X Y Z R F)"),
+                    format!("{c} is not a word of a NURBS block (P K X Y Z R F)"),
                 ))
             }
         }
@@ -210,7 +220,7 @@ fn weight(lw: &LineWords) -> Result<f64, Diagnostic> {
     match lw.get('R') {
         None => Ok(1.0),
         Some(r) if r.value > 0.0 => Ok(r.value),
-        Some(r) => Err(lw.err(r.col, "G06.2: weight R must be > 0")),
+        Some(r) => Err(lw.err("G06.2", r.col, "weight R must be > 0")),
     }
 }
 
@@ -222,12 +232,12 @@ pub(super) fn open(st: &mut State, lw: &LineWords, g: &Word, unit: f64) -> Resul
     if modal && !has_point {
         let (col, k) = lw.get('K').map_or((g.col, 0.0), |k| (k.col, k.value));
         let Some(c) = st.fanuc_closed else {
-            return Err(lw.err(col, "G06.2: knot-only block without a curve"));
+            return Err(lw.err("G06.2", col, "knot-only block without a curve"));
         };
-        return Err(lw.err(
+        return Err(lw.err("G06.2",
             col,
             format!(
-                "G06.2: knot K{k} after the curve of line {} was closed: its {} control points of rank {} take {} knots, the last {} on knot-only blocks",
+                "knot K{k} after the curve of line {} was closed: its {} control points of rank {} take {} knots, the last {} on knot-only blocks",
                 c.line,
                 c.n_ctrl,
                 c.rank,
@@ -237,7 +247,7 @@ pub(super) fn open(st: &mut State, lw: &LineWords, g: &Word, unit: f64) -> Resul
         ));
     }
     if modal && lw.get('K').is_none() {
-        return Err(lw.err(
+        return Err(lw.err("G06.2",
             lw.first_col(),
             "G06.2 is still the motion: a block with coordinates is the first control point of a new curve and needs its knot K (Fanuc alarm PS1002); give G1 or G0 for a straight move",
         ));
@@ -248,7 +258,7 @@ pub(super) fn open(st: &mut State, lw: &LineWords, g: &Word, unit: f64) -> Resul
         } else {
             "inverse-time feed (G93) is active: switch to G94 and give F in mm/min"
         };
-        return Err(lw.err(g.col, format!("G06.2: {why} (Fanuc alarm PS1006)")));
+        return Err(lw.err("G06.2", g.col, format!("{why} (Fanuc alarm PS1006)")));
     }
     only_nurbs_words(lw, true)?;
     let rank = match lw.get('P') {
@@ -257,10 +267,10 @@ pub(super) fn open(st: &mut State, lw: &LineWords, g: &Word, unit: f64) -> Resul
             p.value as usize
         }
         Some(p) => {
-            return Err(lw.err(
+            return Err(lw.err("G06.2",
                 p.col,
                 format!(
-                    "G06.2: rank P{} is out of range: give an integer from 2 to {MAX_RANK} (order = degree + 1; standard Fanuc option 2 to 4)",
+                    "rank P{} is out of range: give an integer from 2 to {MAX_RANK} (order = degree + 1; standard Fanuc option 2 to 4)",
                     p.value
                 ),
             ))
@@ -268,7 +278,7 @@ pub(super) fn open(st: &mut State, lw: &LineWords, g: &Word, unit: f64) -> Resul
     };
     if let Some(f) = lw.get('F') {
         if f.value < 0.0 {
-            return Err(lw.err(f.col, "F must not be negative"));
+            return Err(lw.err("G06.2", f.col, "F must not be negative"));
         }
         st.feed = f.value * unit;
     }
@@ -282,10 +292,10 @@ pub(super) fn open(st: &mut State, lw: &LineWords, g: &Word, unit: f64) -> Resul
             .iter()
             .find(|w| AXES.contains(&w.letter))
             .map_or(g.col, |w| w.col);
-        return Err(lw.err(
+        return Err(lw.err("G06.2",
             at,
             format!(
-                "G06.2: the first control point must be the current position ({:.4}, {:.4}, {:.4}); it is {gap:.4} mm away (Fanuc alarm PS1009)",
+                "the first control point must be the current position ({:.4}, {:.4}, {:.4}); it is {gap:.4} mm away (Fanuc alarm PS1009)",
                 st.pos[0], st.pos[1], st.pos[2]
             ),
         ));
@@ -330,7 +340,7 @@ fn block_inner(
     let knot = lw.get('K');
     if !has_point && knot.is_none() {
         if let Some(r) = lw.get('R') {
-            return Err(lw.err(r.col, "G06.2: weight R without a control point"));
+            return Err(lw.err("G06.2", r.col, "weight R without a control point"));
         }
         return Ok(()); // a comment or an N word alone
     }
@@ -342,15 +352,16 @@ fn block_inner(
     };
     let Some(k) = knot else {
         return Err(lw.err(
+            "G06.2",
             lw.first_col(),
-            "G06.2: a control point block needs its knot K (Fanuc alarm PS1002)",
+            "a control point block needs its knot K (Fanuc alarm PS1002)",
         ));
     };
     if has_point && n.closing > 0 {
-        return Err(lw.err(
+        return Err(lw.err("G06.2",
             lw.first_col(),
             format!(
-                "G06.2: control point after {} of the closing knot-only blocks: all control points come first, then {} blocks of K alone",
+                "control point after {} of the closing knot-only blocks: all control points come first, then {} blocks of K alone",
                 n.closing, n.rank
             ),
         ));
@@ -361,10 +372,10 @@ fn block_inner(
     }
     if let Some(&before) = n.knots.last() {
         if k.value < before {
-            return Err(lw.err(
+            return Err(lw.err("G06.2",
                 k.col,
                 format!(
-                    "G06.2: knot K{} is smaller than the knot before it (K{before}); knots must not decrease",
+                    "knot K{} is smaller than the knot before it (K{before}); knots must not decrease",
                     k.value
                 ),
             ));
@@ -372,10 +383,10 @@ fn block_inner(
     }
     // The first `rank` knots must be equal: said at the first one that is not.
     if n.knots.len() < n.rank && n.knots.first().is_some_and(|&f| f != k.value) {
-        return Err(lw.err(
+        return Err(lw.err("G06.2",
             k.col,
             format!(
-                "G06.2: knot K{} differs from the first knot K{}; a curve of rank {} starts with {} equal knots, so that it starts at its first control point (Fanuc alarm PS1007)",
+                "knot K{} differs from the first knot K{}; a curve of rank {} starts with {} equal knots, so that it starts at its first control point (Fanuc alarm PS1007)",
                 k.value, n.knots[0], n.rank, n.rank
             ),
         ));
@@ -401,7 +412,7 @@ fn block_inner(
     if n.broken {
         return Ok(());
     }
-    let curve = close(&n, st.feed).map_err(|m| lw.err(k.col, m))?;
+    let curve = close(&n, st.feed).map_err(|m| lw.err("G06.2", k.col, m))?;
     moves.push(curve);
     Ok(())
 }
@@ -412,7 +423,7 @@ fn close(n: &FanucOpen, feed: f64) -> Result<Move, String> {
     let of_line = format!("the curve of line {}", n.line);
     if count < k {
         return Err(format!(
-            "G06.2: {of_line} has {count} control points, too few for rank {k} (at least {k})"
+            "{of_line} has {count} control points, too few for rank {k} (at least {k})"
         ));
     }
     let knots = &n.knots;
@@ -420,14 +431,14 @@ fn close(n: &FanucOpen, feed: f64) -> Result<Move, String> {
     if knots[..k].iter().any(|&x| x != first) || knots[knots.len() - k..].iter().any(|&x| x != last)
     {
         return Err(format!(
-            "G06.2: {of_line} must start and end with {k} equal knots (its rank), so that it starts at its first control point and ends at its last; it has {:?} … {:?} (Fanuc alarm PS1007)",
+            "{of_line} must start and end with {k} equal knots (its rank), so that it starts at its first control point and ends at its last; it has {:?} … {:?} (Fanuc alarm PS1007)",
             &knots[..k],
             &knots[knots.len() - k..]
         ));
     }
     if first == last {
         return Err(format!(
-            "G06.2: {of_line} has all knots equal ({first}): it spans no parameter range"
+            "{of_line} has all knots equal ({first}): it spans no parameter range"
         ));
     }
     // Fanuc's PS1008 names a knot repeated more than the rank. Inside the curve exactly
@@ -439,7 +450,7 @@ fn close(n: &FanucOpen, feed: f64) -> Result<Move, String> {
         let inside = i > 0 && i + run < knots.len();
         if run > k || (inside && run == k) {
             return Err(format!(
-                "G06.2: knot {} appears {run} times in {of_line}; at most {k} (the rank) at its ends and {} inside (Fanuc alarm PS1008)",
+                "knot {} appears {run} times in {of_line}; at most {k} (the rank) at its ends and {} inside (Fanuc alarm PS1008)",
                 knots[i],
                 k - 1
             ));
@@ -447,7 +458,7 @@ fn close(n: &FanucOpen, feed: f64) -> Result<Move, String> {
         i += run;
     }
     shared::nurbs::validate(k - 1, knots, &n.ctrl, usize::MAX)
-        .map_err(|e| format!("G06.2: {of_line}: {e}"))?;
+        .map_err(|e| format!("{of_line}: {e}"))?;
     Ok(Move::Nurbs {
         line: n.line,
         degree: k - 1,

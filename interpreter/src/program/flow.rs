@@ -21,6 +21,11 @@ const MAX_CALL_DEPTH: usize = 50;
 /// endless. LinuxCNC would run on forever; a checker must answer.
 const MAX_JUMPS: u64 = 1_000_000;
 
+/// Lines a program may run beyond its own length (lines run again by loops and calls).
+/// Turns alone do not bound the work: a million turns of a loop with a hundred lines
+/// in it would keep `check` busy for minutes. Five million lines take a few seconds.
+const MAX_LINES_AGAIN: usize = 5_000_000;
+
 /// The O-word flow of a running program: how its blocks connect (see [`Flow`]), and the
 /// calls and repeat loops in progress.
 pub(super) struct Runner {
@@ -32,6 +37,8 @@ pub(super) struct Runner {
     /// The `elseif`/`else` line a false condition jumped to, to be tested or entered.
     branch: Option<usize>,
     jumps: u64,
+    /// Lines run so far, the first time and again.
+    lines_run: usize,
 }
 
 impl Runner {
@@ -43,7 +50,25 @@ impl Runner {
             repeats: Vec::new(),
             branch: None,
             jumps: 0,
+            lines_run: 0,
         }
+    }
+
+    /// Counts line `here` (0-based) as run; the error that stops the program when it
+    /// has run too many lines again (an endless loop, or one far too long to check).
+    pub(super) fn count_line(&mut self, here: usize) -> Result<(), Diagnostic> {
+        self.lines_run += 1;
+        if self.lines_run <= self.o_words.len().saturating_add(MAX_LINES_AGAIN) {
+            return Ok(());
+        }
+        Err(Diagnostic {
+            line: here as u32 + 1,
+            col: 1,
+            rule: "O-word",
+            message: format!(
+                "more than {MAX_LINES_AGAIN} lines run again by loops and calls: is a loop endless?"
+            ),
+        })
     }
 
     /// Where to go after line `here` (0-based) could not be read.
@@ -107,11 +132,13 @@ impl Runner {
                 None => errors.push(Diagnostic {
                     line,
                     col: o.col,
+                    rule: "O-word",
                     message: format!("o{} call: no subroutine o{} in this file", o.label, o.label),
                 }),
                 Some(_) if self.calls.len() >= MAX_CALL_DEPTH => errors.push(Diagnostic {
                     line,
                     col: o.col,
+                    rule: "O-word",
                     message: format!("subroutines nested more than {MAX_CALL_DEPTH} deep"),
                 }),
                 Some(&sub) => {
@@ -209,6 +236,7 @@ impl Runner {
                 errors.push(Diagnostic {
                     line,
                     col: o.col,
+                    rule: "O-word",
                     message: format!(
                         "more than {MAX_JUMPS} loop turns and calls: is this loop endless?"
                     ),

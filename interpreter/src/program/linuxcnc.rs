@@ -43,36 +43,38 @@ pub(super) fn bezier(
     let name = if cubic { "G5" } else { "G5.1" };
     if st.plane != super::Plane::XY {
         return Err(lw.err(
+            name,
             col,
             format!("{name} splines must be in the XY plane (G17), as in LinuxCNC 2.9"),
         ));
     }
     if let Some(z) = lw.get('Z') {
         return Err(lw.err(
+            name,
             z.col,
             format!("{name} spline in the XY plane cannot move Z; move Z on its own line"),
         ));
     }
     if let Some(w) = lw.words.iter().find(|w| "KRL".contains(w.letter)) {
-        return Err(lw.err(w.col, format!("{} is not a word of {name}", w.letter)));
+        return Err(lw.err(name, w.col, format!("{} is not a word of {name}", w.letter)));
     }
     let from = st.pos;
     let ij = match (lw.get('I'), lw.get('J')) {
         (Some(i), Some(j)) => [i.value * unit, j.value * unit],
         (None, None) if cubic => st.g5_tangent.ok_or_else(|| {
-            lw.err(
+            lw.err(name,
                 col,
                 "G5 needs I and J (offset of its first control point from the start); only a G5 right after another G5 may leave them out",
             )
         })?,
         (Some(w), None) | (None, Some(w)) => {
-            return Err(lw.err(
+            return Err(lw.err(name,
                 w.col,
                 format!("{name} needs both I and J, or neither (G5 after G5 only)"),
             ))
         }
         (None, None) => {
-            return Err(lw.err(
+            return Err(lw.err(name,
                 col,
                 "G5.1 needs I and J (offset of its control point from the start)",
             ))
@@ -82,6 +84,7 @@ pub(super) fn bezier(
     let (ctrl, knots) = if cubic {
         let (Some(p), Some(q)) = (lw.get('P'), lw.get('Q')) else {
             return Err(lw.err(
+                name,
                 col,
                 "G5 needs both P and Q (offset of its second control point from the end)",
             ));
@@ -100,7 +103,7 @@ pub(super) fn bezier(
         )
     } else {
         if let Some(w) = lw.words.iter().find(|w| "PQ".contains(w.letter)) {
-            return Err(lw.err(w.col, format!("{} is not a word of G5.1", w.letter)));
+            return Err(lw.err(name, w.col, format!("{} is not a word of G5.1", w.letter)));
         }
         (
             vec![
@@ -134,6 +137,7 @@ pub(super) fn nurbs_line(
     let (a, b) = st.plane.axes();
     if let Some(m) = motion {
         return Err(lw.err(
+            "G5.2",
             m.col,
             format!("G{} inside a G5.2 NURBS: close it with G5.3 first", m.value),
         ));
@@ -146,13 +150,14 @@ pub(super) fn nurbs_line(
             .map(|w| w.col)
             .unwrap_or(1);
         return Err(lw.err(
+            "G5.2",
             col,
             "program end inside a G5.2 NURBS: close it with G5.3 first",
         ));
     }
     if let Some(w) = open {
         if st.nurbs.is_some() {
-            return Err(lw.err(w.col, "G5.2 inside an open G5.2 NURBS"));
+            return Err(lw.err("G5.2", w.col, "G5.2 inside an open G5.2 NURBS"));
         }
         need_feed(st, lw, w.col)?;
         let order = match lw.get('L') {
@@ -160,7 +165,13 @@ pub(super) fn nurbs_line(
             Some(l) if l.value.fract() == 0.0 && l.value >= 2.0 && l.value <= 10.0 => {
                 (l.value as usize).max(3)
             }
-            Some(l) => return Err(lw.err(l.col, "NURBS order L must be an integer from 2 to 10")),
+            Some(l) => {
+                return Err(lw.err(
+                    "G5.2",
+                    l.col,
+                    "NURBS order L must be an integer from 2 to 10",
+                ))
+            }
         };
         let has_point = lw.get(AXES[a]).is_some() || lw.get(AXES[b]).is_some();
         // `G5.2 P.. L..` alone: P is the weight of the first control point (the current
@@ -171,6 +182,7 @@ pub(super) fn nurbs_line(
         };
         if w0 <= 0.0 {
             return Err(lw.err(
+                "G5.2",
                 lw.get('P').map(|p| p.col).unwrap_or(w.col),
                 "weight P must be > 0",
             ));
@@ -191,6 +203,7 @@ pub(super) fn nurbs_line(
     let normal = st.plane.normal();
     if let Some(w) = lw.get(AXES[normal]) {
         return Err(lw.err(
+            "G5.2",
             w.col,
             format!(
                 "{} is not a word of the NURBS plane {:?}",
@@ -202,12 +215,13 @@ pub(super) fn nurbs_line(
         (Some(_), Some(_)) => {
             let p = lw.get('P').ok_or_else(|| {
                 lw.err(
+                    "G5.2",
                     lw.words[0].col,
                     "every NURBS control point needs its weight P",
                 )
             })?;
             if p.value <= 0.0 {
-                return Err(lw.err(p.col, "weight P must be > 0"));
+                return Err(lw.err("G5.2", p.col, "weight P must be > 0"));
             }
             // The normal axis word was refused above, so this moves only the plane's two.
             let pt = target(st, lw, unit);
@@ -218,6 +232,7 @@ pub(super) fn nurbs_line(
         }
         (Some(w), None) | (None, Some(w)) => {
             return Err(lw.err(
+                "G5.2",
                 w.col,
                 format!("NURBS control point needs both {} and {}", AXES[a], AXES[b]),
             ));
@@ -226,11 +241,12 @@ pub(super) fn nurbs_line(
     }
     if let Some(w) = close {
         let Some(n) = st.nurbs.take() else {
-            return Err(lw.err(w.col, "G5.3 without an open G5.2 NURBS"));
+            return Err(lw.err("G5.2", w.col, "no G5.2 NURBS is open for G5.3 to close"));
         };
         let count = n.ctrl.len();
         if count < n.order {
             return Err(lw.err(
+                "G5.2",
                 w.col,
                 format!(
                     "NURBS of order {} needs at least {} control points, got {count}",
@@ -276,6 +292,7 @@ pub(super) fn g62_line(
     let first_col = lw.words.first().map_or(1, |w| w.col);
     if let Some(m) = motion {
         return Err(lw.err(
+            "G6.2",
             m.col,
             format!(
                 "G{} inside a G6.2 NURBS: give its closing knots first",
@@ -285,6 +302,7 @@ pub(super) fn g62_line(
     }
     if end {
         return Err(lw.err(
+            "G6.2",
             first_col,
             "program end inside a G6.2 NURBS: give its closing knots first",
         ));
@@ -292,6 +310,7 @@ pub(super) fn g62_line(
     let point = lw.get(AXES[a]).is_some() || lw.get(AXES[b]).is_some();
     if let Some(w) = lw.get(AXES[st.plane.normal()]) {
         return Err(lw.err(
+            "G6.2",
             w.col,
             format!(
                 "{} is not a word of the NURBS plane {:?}",
@@ -306,21 +325,27 @@ pub(super) fn g62_line(
             Some(p) if p.value.fract() == 0.0 && (2.0..=10.0).contains(&p.value) => {
                 p.value as usize
             }
-            Some(p) => return Err(lw.err(p.col, "G6.2 order P must be an integer from 2 to 10")),
-            None => return Err(lw.err(g.col, "the first G6.2 block needs the order P")),
+            Some(p) => {
+                return Err(lw.err("G6.2", p.col, "order P must be an integer from 2 to 10"))
+            }
+            None => return Err(lw.err("G6.2", g.col, "the first G6.2 block needs the order P")),
         };
         match lw.get('Q') {
             Some(q) if [1.0, 2.0, 3.0].contains(&q.value) => {} // LinuxCNC's method; we run the exact curve
-            Some(q) => return Err(lw.err(q.col, "G6.2 method Q must be 1, 2 or 3")),
+            Some(q) => return Err(lw.err("G6.2", q.col, "method Q must be 1, 2 or 3")),
             None => {
-                return Err(lw.err(
+                return Err(lw.err("G6.2",
                     g.col,
                     "the first G6.2 block needs the method Q (1, 2 or 3); a Fanuc G06.2 has none: read it with --dialect fanuc",
                 ))
             }
         }
         if !point {
-            return Err(lw.err(g.col, "the first G6.2 block needs its first control point"));
+            return Err(lw.err(
+                "G6.2",
+                g.col,
+                "the first G6.2 block needs its first control point",
+            ));
         }
         st.g62 = Some(G62Open {
             line: lw.line,
@@ -335,16 +360,18 @@ pub(super) fn g62_line(
     if point {
         let (Some(_), Some(_)) = (lw.get(AXES[a]), lw.get(AXES[b])) else {
             return Err(lw.err(
+                "G6.2",
                 first_col,
-                format!("G6.2 control point needs both {} and {}", AXES[a], AXES[b]),
+                format!("control point needs both {} and {}", AXES[a], AXES[b]),
             ));
         };
-        let k = knot.ok_or_else(|| lw.err(first_col, "G6.2 control point needs its knot K"))?;
+        let k = knot.ok_or_else(|| lw.err("G6.2", first_col, "control point needs its knot K"))?;
         let weight = lw.get('R').map_or(1.0, |r| r.value);
         if weight <= 0.0 {
             return Err(lw.err(
+                "G6.2",
                 lw.get('R').map_or(first_col, |r| r.col),
-                "G6.2 weight R must be > 0",
+                "weight R must be > 0",
             ));
         }
         // The normal axis word was refused above, so this moves only the plane's two.
@@ -353,12 +380,12 @@ pub(super) fn g62_line(
             return Ok(());
         };
         if n.closing > 0 {
-            return Err(lw.err(first_col, "G6.2 control point after the closing knots"));
+            return Err(lw.err("G6.2", first_col, "control point after the closing knots"));
         }
         if n.ctrl.is_empty() {
             let gap = ((pt[a] - st.pos[a]).powi(2) + (pt[b] - st.pos[b]).powi(2)).sqrt();
             if gap > 1e-6 {
-                return Err(lw.err(
+                return Err(lw.err("G6.2",
                     first_col,
                     format!("the first G6.2 control point must be the current position (it is {gap:.4} mm away)"),
                 ));
@@ -377,7 +404,11 @@ pub(super) fn g62_line(
             let n = st.g62.take().unwrap_or_else(|| unreachable!());
             let degree = n.order - 1;
             if let Err(e) = shared::nurbs::validate(degree, &n.knots, &n.ctrl, usize::MAX) {
-                return Err(lw.err(k.col, format!("G6.2 NURBS opened on line {}: {e}", n.line)));
+                return Err(lw.err(
+                    "G6.2",
+                    k.col,
+                    format!("NURBS opened on line {}: {e}", n.line),
+                ));
             }
             moves.push(Move::Nurbs {
                 line: n.line,
