@@ -339,8 +339,13 @@ mod tests {
             + 8
             + core::mem::size_of::<Helix>()
             + 8 * crate::nurbs::MAX_KNOTS
-            + 32 * crate::nurbs::MAX_CTRL;
+            + 32 * crate::nurbs::MAX_CTRL
+            + core::mem::size_of::<crate::protocol::SurfacePass>();
         assert_eq!(fields, BLOCK_SIZE);
+        assert_eq!(
+            core::mem::size_of::<crate::protocol::SurfacePass>(),
+            4 + 4 + 16 + 16 + 8 + 8
+        );
         assert_eq!(core::mem::size_of::<Helix>(), 4 + 4 + 24 + 8 * 3);
     }
 

@@ -12,7 +12,7 @@ mod surface;
 pub use surface::{SurfaceBlock, SurfaceSection, SurfaceTool, SURFACE_KIND};
 
 /// Bumped whenever a payload's layout or meaning changes.
-pub const PROTOCOL_VERSION: u32 = 2;
+pub const PROTOCOL_VERSION: u32 = 3;
 
 /// What a command block asks for.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -51,6 +51,11 @@ pub const FLAG_RAPID: u32 = 1;
 /// or a programmed stop `M0`/`M1` follows).
 pub const FLAG_STOP_AT_END: u32 = 2;
 
+/// `CommandBlock::flags`: a surface block. The motion is the cutter-contact point moving
+/// on a Bézier surface patch along a straight line of its `(u, v)` domain, and the
+/// set-point is the ball-nose tool's reference point (see [`SurfacePass`]).
+pub const FLAG_SURFACE: u32 = 4;
+
 /// Axis code meaning "no helical axis".
 pub const NO_AXIS: u32 = 3;
 
@@ -72,6 +77,43 @@ pub struct Helix {
     pub seg_rad: f64,
 }
 
+/// The surface part of a surface block (`FLAG_SURFACE`; seed 000).
+///
+/// The block's curve fields then hold a rational Bézier patch instead of a curve: `degree`
+/// is its degree `p` along `u`, [`degree_v`](Self::degree_v) its degree `q` along `v`,
+/// `n_ctrl = (p + 1)(q + 1)` and `ctrl[i·(q + 1) + j]` (`i` along `u`) its control points
+/// `[x, y, z, w]`; the patch's domain is `[0, 1]²` and its knots are not carried. The
+/// cutter-contact point runs `C(t) = S(u(t), v(t))` for `t` in `[0, 1]`, with `(u, v)`
+/// moving in a straight line from `uv_start` to `uv_end`; `length_mm` and the feeds are
+/// those of the contact point. The set-point is the tool reference point
+/// `M = C + R·n + (H − R)·z`, with `n` the unit normal `normal_sign·(S_u × S_v)/|…|`
+/// and `z` the tool axis `+Z` (3-axis machining).
+#[repr(C)]
+#[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend)]
+pub struct SurfacePass {
+    /// Degree `q` along `v` (1..=[`MAX_SURF_DEGREE`](crate::nurbs::surface::MAX_SURF_DEGREE)).
+    pub degree_v: u32,
+    /// `+1` or `-1`: the side of the surface the tool is on, as a factor on `S_u × S_v`.
+    pub normal_sign: i32,
+    pub uv_start: [f64; 2],
+    pub uv_end: [f64; 2],
+    /// Ball radius `R`.
+    pub tool_radius_mm: f64,
+    /// Distance `H` from the ball's tip to the tool reference point (`H >= R`).
+    pub tool_length_mm: f64,
+}
+
+impl SurfacePass {
+    pub const NONE: SurfacePass = SurfacePass {
+        degree_v: 0,
+        normal_sign: 1,
+        uv_start: [0.0; 2],
+        uv_end: [0.0; 2],
+        tool_radius_mm: 0.0,
+        tool_length_mm: 0.0,
+    };
+}
+
 impl Helix {
     pub const NONE: Helix = Helix {
         axis: NO_AXIS,
@@ -86,7 +128,7 @@ impl Helix {
 /// One command from the interpreter to the interpolator.
 #[repr(C)]
 #[derive(Debug, Clone, Copy, ZeroCopySend)]
-#[type_name("cnc::CommandBlockV2")]
+#[type_name("cnc::CommandBlockV3")]
 pub struct CommandBlock {
     pub protocol: u32,
     /// A [`BlockKind`] code.
@@ -117,6 +159,8 @@ pub struct CommandBlock {
     pub knots: [f64; MAX_KNOTS],
     /// `[x, y, z, w]` in mm, weight `w > 0`.
     pub ctrl: [[f64; 4]; MAX_CTRL],
+    /// Surface blocks only (`FLAG_SURFACE`), else [`SurfacePass::NONE`].
+    pub surface: SurfacePass,
 }
 
 impl CommandBlock {
@@ -140,7 +184,13 @@ impl CommandBlock {
             helix: Helix::NONE,
             knots: [0.0; MAX_KNOTS],
             ctrl: [[0.0; 4]; MAX_CTRL],
+            surface: SurfacePass::NONE,
         }
+    }
+
+    /// Is this a surface block (`FLAG_SURFACE`)?
+    pub fn is_surface(&self) -> bool {
+        self.flags & FLAG_SURFACE != 0
     }
 
     /// The used knots (meaningful once validated).
@@ -158,6 +208,89 @@ impl CommandBlock {
         BlockKind::from_code(self.kind)
     }
 
+    /// The curve of a motion block: counts within capacity, finite numbers, a valid NURBS.
+    fn validate_curve(&self) -> Result<(), ProtocolError> {
+        let (degree, n) = (self.degree as usize, self.n_ctrl as usize);
+        if n > MAX_CTRL || degree > nurbs::MAX_DEGREE {
+            let err = if n > MAX_CTRL {
+                CurveError::TooManyControlPoints {
+                    n_ctrl: self.n_ctrl,
+                    max: MAX_CTRL as u32,
+                }
+            } else {
+                CurveError::DegreeOutOfRange {
+                    degree: self.degree,
+                }
+            };
+            return Err(ProtocolError::Curve { seq: self.seq, err });
+        }
+        // Name the very number that is not finite (the curve check only says that
+        // one is).
+        let not_finite = |field: &'static str, index: usize| ProtocolError::NotFinite {
+            seq: self.seq,
+            field,
+            index: index as u32,
+        };
+        if let Some(i) = self.knots().iter().position(|k| !k.is_finite()) {
+            return Err(not_finite("knots", i));
+        }
+        if let Some(i) = self
+            .ctrl()
+            .iter()
+            .position(|c| c.iter().any(|v| !v.is_finite()))
+        {
+            return Err(not_finite("ctrl", i));
+        }
+        nurbs::validate(degree, self.knots(), self.ctrl(), MAX_CTRL)
+            .map_err(|err| ProtocolError::Curve { seq: self.seq, err })?;
+        Ok(())
+    }
+
+    /// The patch and pass of a surface block (see [`SurfacePass`]).
+    fn validate_patch(&self) -> Result<(), ProtocolError> {
+        use crate::nurbs::surface::MAX_SURF_DEGREE;
+        let bad = |field: &'static str| ProtocolError::BadField {
+            seq: self.seq,
+            field,
+        };
+        let sp = &self.surface;
+        let (p, q) = (self.degree as usize, sp.degree_v as usize);
+        if !(1..=MAX_SURF_DEGREE).contains(&p) || !(1..=MAX_SURF_DEGREE).contains(&q) {
+            return Err(bad("degree"));
+        }
+        if self.n_ctrl as usize != (p + 1) * (q + 1) || self.n_ctrl as usize > MAX_CTRL {
+            return Err(bad("n_ctrl"));
+        }
+        for (i, c) in self.ctrl().iter().enumerate() {
+            if let Some(k) = c.iter().position(|v| !v.is_finite()) {
+                return Err(ProtocolError::NotFinite {
+                    seq: self.seq,
+                    field: "ctrl",
+                    index: (4 * i + k) as u32,
+                });
+            }
+            if c[3] <= 0.0 {
+                return Err(bad("ctrl weight"));
+            }
+        }
+        let uv_ok = sp
+            .uv_start
+            .iter()
+            .chain(sp.uv_end.iter())
+            .all(|x| x.is_finite() && (0.0..=1.0).contains(x));
+        if !uv_ok {
+            return Err(bad("surface uv"));
+        }
+        let (r, h) = (sp.tool_radius_mm, sp.tool_length_mm);
+        if !(r.is_finite() && h.is_finite() && r > 0.0 && h >= r) {
+            return Err(bad("surface tool"));
+        }
+        if sp.normal_sign != 1 && sp.normal_sign != -1 {
+            return Err(bad("surface normal_sign"));
+        }
+        Ok(())
+    }
+
     /// Checks everything a receiver relies on. Never panics, whatever the bytes.
     pub fn validate(&self) -> Result<BlockKind, ProtocolError> {
         if self.protocol != PROTOCOL_VERSION {
@@ -169,39 +302,11 @@ impl CommandBlock {
         })?;
         match kind {
             BlockKind::Motion => {
-                let (degree, n) = (self.degree as usize, self.n_ctrl as usize);
-                if n > MAX_CTRL || degree > nurbs::MAX_DEGREE {
-                    let err = if n > MAX_CTRL {
-                        CurveError::TooManyControlPoints {
-                            n_ctrl: self.n_ctrl,
-                            max: MAX_CTRL as u32,
-                        }
-                    } else {
-                        CurveError::DegreeOutOfRange {
-                            degree: self.degree,
-                        }
-                    };
-                    return Err(ProtocolError::Curve { seq: self.seq, err });
+                if self.is_surface() {
+                    self.validate_patch()?;
+                } else {
+                    self.validate_curve()?;
                 }
-                // Name the very number that is not finite (the curve check only says that
-                // one is).
-                let not_finite = |field: &'static str, index: usize| ProtocolError::NotFinite {
-                    seq: self.seq,
-                    field,
-                    index: index as u32,
-                };
-                if let Some(i) = self.knots().iter().position(|k| !k.is_finite()) {
-                    return Err(not_finite("knots", i));
-                }
-                if let Some(i) = self
-                    .ctrl()
-                    .iter()
-                    .position(|c| c.iter().any(|v| !v.is_finite()))
-                {
-                    return Err(not_finite("ctrl", i));
-                }
-                nurbs::validate(degree, self.knots(), self.ctrl(), MAX_CTRL)
-                    .map_err(|err| ProtocolError::Curve { seq: self.seq, err })?;
                 let feeds = [
                     ("feed_mm_per_min", self.feed_mm_per_min),
                     ("start_feed_mm_per_min", self.start_feed_mm_per_min),
@@ -233,6 +338,12 @@ impl CommandBlock {
                     }
                 }
                 let h = &self.helix;
+                if h.axis != NO_AXIS && self.is_surface() {
+                    return Err(ProtocolError::BadField {
+                        seq: self.seq,
+                        field: "helix",
+                    });
+                }
                 if h.axis != NO_AXIS {
                     let finite = h
                         .center_mm

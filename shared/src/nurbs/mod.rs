@@ -20,7 +20,7 @@ pub use length::arc_length;
 /// The highest degree a block may carry (order 10: Fanuc's G06.2 rank limit we accept).
 pub const MAX_DEGREE: usize = 9;
 /// The most control points one command block carries; larger curves are split exactly.
-pub const MAX_CTRL: usize = 32;
+pub const MAX_CTRL: usize = 36;
 /// Knots for `MAX_CTRL` control points at `MAX_DEGREE`.
 pub const MAX_KNOTS: usize = MAX_CTRL + MAX_DEGREE + 1;
 
