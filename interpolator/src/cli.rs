@@ -24,6 +24,9 @@ pub struct Args {
     /// Scheduling: `auto` tries SCHED_FIFO and falls back with a warning.
     #[arg(long, value_enum, default_value_t = SchedMode::Auto)]
     pub sched: SchedMode,
+    /// SCHED_FIFO priority (1..=99) when real-time scheduling is granted.
+    #[arg(long, default_value_t = crate::rt::sched::DEFAULT_PRIORITY, value_parser = clap::value_parser!(i32).range(1..=99))]
+    pub rt_priority: i32,
     /// `real` (wall time) or `sim` (as fast as the drives answer, same set-points).
     #[arg(long, default_value_t = ClockMode::Real)]
     pub clock: ClockMode,
@@ -50,6 +53,9 @@ pub struct LatencyArgs {
     /// Scheduling, as `cnc run --sched`.
     #[arg(long, value_enum, default_value_t = SchedMode::Auto)]
     pub sched: SchedMode,
+    /// SCHED_FIFO priority (1..=99), as `cnc run --rt-priority`.
+    #[arg(long, default_value_t = crate::rt::sched::DEFAULT_PRIORITY, value_parser = clap::value_parser!(i32).range(1..=99))]
+    pub rt_priority: i32,
     /// Where to write the result [default: $CNC_LATENCY_FILE, else runs/latency-test.json];
     /// runs look for it there and compare their wake-up lateness with it.
     #[arg(long)]
@@ -68,7 +74,12 @@ pub fn latency_test(args: &LatencyArgs) -> anyhow::Result<()> {
         "cnc latency-test: measuring wake-up lateness for {} s at a {} µs period (no work per cycle)...",
         args.seconds, args.period_us
     );
-    let r = crate::rt::latency::measure(args.period_us * 1000, args.seconds, args.sched)?;
+    let r = crate::rt::latency::measure(
+        args.period_us * 1000,
+        args.seconds,
+        args.sched,
+        args.rt_priority,
+    )?;
     print!("{}", r.text());
     let path = args
         .out
@@ -92,6 +103,7 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
         period_ns: args.period_us * 1000,
         machine: shared::machine::load(args.machine.as_deref()).map_err(anyhow::Error::msg)?,
         sched: args.sched,
+        rt_priority: args.rt_priority,
         clock: args.clock,
         start_timeout: Duration::from_secs(20),
     };

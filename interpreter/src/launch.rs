@@ -57,6 +57,10 @@ pub struct RunArgs {
     /// Scheduling of the interpolator: `auto` tries SCHED_FIFO and falls back with a warning.
     #[arg(long, value_enum, default_value_t = interpolator::rt::sched::SchedMode::Auto)]
     pub sched: interpolator::rt::sched::SchedMode,
+    /// SCHED_FIFO priority of the interpolator's cycle thread (1..=99) when it gets
+    /// real-time scheduling; above most kernel threads and IRQ threads (50) by default.
+    #[arg(long, default_value_t = interpolator::rt::sched::DEFAULT_PRIORITY, value_parser = clap::value_parser!(i32).range(1..=99))]
+    pub rt_priority: i32,
     /// Do not write report.html at the end (see `cnc report`).
     #[arg(long)]
     pub no_report: bool,
@@ -290,6 +294,7 @@ fn run_inner(args: &RunArgs) -> Result<bool, String> {
         period_ns,
         clock: args.clock,
         sched: args.sched,
+        rt_priority: args.rt_priority,
         html: !args.no_report,
         expected_cycles: expected_cycles.flatten(),
         servo_clock: args.servo_clock,
@@ -305,6 +310,7 @@ pub struct Stack {
     pub period_ns: u64,
     pub clock: ClockMode,
     pub sched: interpolator::rt::sched::SchedMode,
+    pub rt_priority: i32,
     /// Write report.html after report.json (after every process has ended, so it never
     /// touches a cycle).
     pub html: bool,
@@ -450,7 +456,17 @@ impl Stack {
             "servo-sim",
             vec!["--servo-clock".into(), self.servo_clock.to_string()],
         )
-        .and_then(|_| start("interpolator", vec!["--sched".into(), sched.into()]))
+        .and_then(|_| {
+            start(
+                "interpolator",
+                vec![
+                    "--sched".into(),
+                    sched.into(),
+                    "--rt-priority".into(),
+                    self.rt_priority.to_string(),
+                ],
+            )
+        })
         .and_then(|_| start("interpreter", input));
         let mut launcher_fault = started.err();
         if launcher_fault.is_none() {

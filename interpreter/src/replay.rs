@@ -32,6 +32,10 @@ pub struct ReplayArgs {
     /// Scheduling of the interpolator.
     #[arg(long, value_enum, default_value_t = interpolator::rt::sched::SchedMode::Auto)]
     pub sched: interpolator::rt::sched::SchedMode,
+    /// SCHED_FIFO priority of the interpolator's cycle thread (1..=99) when it gets
+    /// real-time scheduling; above most kernel threads and IRQ threads (50) by default.
+    #[arg(long, default_value_t = interpolator::rt::sched::DEFAULT_PRIORITY, value_parser = clap::value_parser!(i32).range(1..=99))]
+    pub rt_priority: i32,
     /// Do not write report.html at the end.
     #[arg(long)]
     pub no_report: bool,
@@ -101,6 +105,7 @@ fn replay_inner(args: &ReplayArgs) -> Result<bool, String> {
         period_ns: header.period_ns,
         clock: args.clock,
         sched: args.sched,
+        rt_priority: args.rt_priority,
         html: !args.no_report,
         expected_cycles,
         // A replay reproduces a run bit for bit: lock-step.

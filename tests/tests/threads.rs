@@ -37,6 +37,7 @@ fn run_stack(
         period_ns,
         machine: Machine::default(),
         sched: SchedMode::Other,
+        rt_priority: interpolator::rt::sched::DEFAULT_PRIORITY,
         clock: ClockMode::Real,
         start_timeout: Duration::from_secs(20),
     };

@@ -41,6 +41,8 @@ pub struct Config {
     pub period_ns: u64,
     pub machine: Machine,
     pub sched: SchedMode,
+    /// SCHED_FIFO priority when real-time scheduling is granted.
+    pub rt_priority: i32,
     pub clock: ClockMode,
     /// How long to wait for the servo-sim and the first block before giving up.
     pub start_timeout: Duration,
@@ -301,7 +303,7 @@ pub fn run_with<S: Service>(cfg: &Config, hooks: Hooks) -> Result<Summary, RunEr
     let mut feed = FeedStats::starting_at(engine.position());
     // Spinning at SCHED_FIFO invites RT throttling: the simulated clock runs plain.
     let sched_mode = if sim { SchedMode::Other } else { cfg.sched };
-    let sched_report: SchedReport = sched::setup(sched_mode, 80);
+    let sched_report: SchedReport = sched::setup(sched_mode, cfg.rt_priority);
     for w in &sched_report.warnings {
         tracing::warn!("{w}");
     }

@@ -142,13 +142,18 @@ pub fn sched_words(s: &SchedReport) -> String {
 
 /// Measures wake-up lateness for `seconds` at `period_ns` on a thread of its own, with the
 /// scheduling the interpolator would get (`mode`).
-pub fn measure(period_ns: u64, seconds: f64, mode: SchedMode) -> std::io::Result<LatencyResult> {
+pub fn measure(
+    period_ns: u64,
+    seconds: f64,
+    mode: SchedMode,
+    priority: i32,
+) -> std::io::Result<LatencyResult> {
     let period_ns = period_ns.max(1);
     let cycles = ((seconds * 1e9) / period_ns as f64).ceil().max(1.0) as u64;
     let handle = std::thread::Builder::new()
         .name("latency-test".into())
         .spawn(move || {
-            let sched = sched::setup(mode, 80);
+            let sched = sched::setup(mode, priority);
             let mut h = Histogram::new();
             let mut later = 0u64;
             // The very loop of the cycle, with nothing to do: release, sleep, measure.
@@ -201,7 +206,7 @@ mod tests {
 
     #[test]
     fn a_short_measurement_round_trips_through_its_file() {
-        let r = measure(1_000_000, 0.05, SchedMode::Other).unwrap();
+        let r = measure(1_000_000, 0.05, SchedMode::Other, sched::DEFAULT_PRIORITY).unwrap();
         assert_eq!(r.cycles, 50);
         assert_eq!(r.histogram.iter().map(|b| b.count).sum::<u64>(), 50);
         let path = std::env::temp_dir().join(format!("cnc-latency-{}.json", std::process::id()));

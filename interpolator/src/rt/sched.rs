@@ -31,6 +31,10 @@ fn errno_text() -> String {
     std::io::Error::last_os_error().to_string()
 }
 
+/// SCHED_FIFO priority of the cycle thread unless configured (`--rt-priority`): above
+/// the threaded IRQ handlers (50) and most kernel threads, below the watchdogs (99).
+pub const DEFAULT_PRIORITY: i32 = 80;
+
 pub fn setup(mode: SchedMode, priority: i32) -> SchedReport {
     let mut rep = SchedReport {
         policy: "other".into(),
