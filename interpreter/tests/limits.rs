@@ -273,3 +273,81 @@ fn butterfly_at_f600_reaches_99_percent_of_the_feed() {
     );
     assert!(avg >= 0.99 * 600.0, "average feed {avg}");
 }
+
+/// The F6000 figure: the butterfly's NURBS at F6000 take their time against a
+/// lower bound from the limits alone, `∫ ds / v_max(s)` with `v_max` the lowest of the
+/// feed, the centripetal limit `√(A·ρ)` under the whole path acceleration, the chord
+/// tolerance at this period, and each axis's velocity along the tangent (it leaves out
+/// every speed change, so no profile can beat it). A time below it would mean a limit
+/// broken.
+#[test]
+fn butterfly_at_f6000_against_the_lower_bound_from_the_limits() {
+    let peers = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../tests/peers/linuxcnc");
+    let text = std::fs::read_to_string(peers.join("g5_butterfly-xy.ngc"))
+        .unwrap()
+        .replace("F300", "F6000");
+    let machine = Machine::default();
+    let program = interpret(&text).unwrap();
+    let mut blocks = build(&program.moves, &machine);
+    plan(&mut blocks, &machine, PERIOD_NS);
+    let est = interpreter::estimate::estimate(&blocks, &machine, PERIOD_NS).unwrap();
+    let src: Vec<&str> = text.lines().collect();
+    let nurbs_line = |line: u32| src[line as usize - 1].contains("G5.2");
+    let (mut len, mut time) = (0.0, 0.0);
+    for m in est.moves.iter().filter(|m| nurbs_line(m.line)) {
+        len += m.length_mm;
+        time += m.time_s;
+    }
+    let axes = machine.axes.as_array();
+    let tol = machine.chord_tolerance_mm;
+    let (mut bound, mut bound_len) = (0.0, 0.0);
+    for b in blocks
+        .iter()
+        .filter(|b| b.kind == BlockKind::Motion as u32 && nurbs_line(b.source_line))
+    {
+        let (u0, u1) = shared::path::domain(b);
+        let n = 4000;
+        let h = (u1 - u0) / n as f64;
+        for i in 0..n {
+            let e = shared::path::eval(b, u0 + (i as f64 + 0.5) * h);
+            let speed = norm(e.d1);
+            let ds = speed * h;
+            if ds <= 0.0 {
+                continue;
+            }
+            let c = [
+                e.d1[1] * e.d2[2] - e.d1[2] * e.d2[1],
+                e.d1[2] * e.d2[0] - e.d1[0] * e.d2[2],
+                e.d1[0] * e.d2[1] - e.d1[1] * e.d2[0],
+            ];
+            let rho = speed.powi(3) / norm(c);
+            let mut v = 6000.0_f64.min(machine.max_feed_mm_per_min) / 60.0;
+            v = v.min((machine.path_acc_mm_per_s2 * rho).sqrt());
+            v = v.min(2.0 * (2.0 * rho * tol - tol * tol).max(0.0).sqrt() / T);
+            for (k, ax) in axes.iter().enumerate() {
+                let t = (e.d1[k] / speed).abs();
+                if t > 0.0 {
+                    v = v.min(ax.max_vel_mm_per_min / 60.0 / t);
+                }
+            }
+            bound += ds / v;
+            bound_len += ds;
+        }
+    }
+    // The same integral over the planner's own per-block speed caps (which keep half
+    // the path acceleration and jerk for the normal direction, and the jerk of the
+    // curvature's change): how much of the gap the caps make, and how much the speed
+    // changes between them.
+    let capped: f64 = blocks
+        .iter()
+        .filter(|b| b.kind == BlockKind::Motion as u32 && nurbs_line(b.source_line))
+        .map(|b| b.length_mm / (b.feed_mm_per_min / 60.0))
+        .sum();
+    println!(
+        "butterfly F6000: {len:.2} mm of NURBS in {time:.3} s (average {:.0} mm/min); lower bound from the limits {bound:.3} s over {bound_len:.2} mm: {:.2} times the bound; at the planner's block caps without speed changes {capped:.3} s",
+        len / time * 60.0,
+        time / bound
+    );
+    assert!((len - bound_len).abs() < 1e-3 * len, "{len} vs {bound_len}");
+    assert!(time >= bound, "{time} s beats the lower bound {bound} s");
+}
