@@ -345,6 +345,17 @@ fn shape(b: &CommandBlock, machine: &Machine, period_s: f64, feed_mm_s: f64) -> 
     let axes = machine.axes.as_array();
     let a_path = machine.path_acc_mm_per_s2;
     let j_path = machine.path_jerk_mm_per_s3;
+    // A surface block is planned on its tool reference point `M`, the path the machine
+    // follows, at the fastest `M` moves for the contact feed (`ratio` = max |M'|/|C'|);
+    // the caps and limits found for `M` are scaled back to the contact path, along which
+    // the feed is programmed and the profile runs (conservative where the ratio varies;
+    // the ratio's own change along the block is left out of the tangential terms).
+    let ratio = if b.is_surface() {
+        surface_speed_ratio(b)
+    } else {
+        1.0
+    };
+    let feed_mm_s = feed_mm_s * ratio;
     let (pts, dk, jumps) = match straight(b) {
         // A straight segment has one tangent and no curvature: one sample says it all
         // (the samples below would each find the same, at a hundred times the cost).
@@ -360,6 +371,7 @@ fn shape(b: &CommandBlock, machine: &Machine, period_s: f64, feed_mm_s: f64) -> 
                 (Vec::new(), Vec::new(), Vec::new())
             }
         }
+        None if b.is_surface() => surface_samples(b),
         None => samples(b),
     };
     let first = pts.first().copied().unwrap_or(([1.0, 0.0, 0.0], [0.0; 3]));
@@ -428,11 +440,11 @@ fn shape(b: &CommandBlock, machine: &Machine, period_s: f64, feed_mm_s: f64) -> 
         }
     }
     Shape {
-        v_cap: v,
+        v_cap: v / ratio,
         // The shares above leave at least a quarter of each; the floor only guards
         // against a degenerate sample.
-        acc: acc.max(0.05 * a_path),
-        jerk: jerk.max(0.05 * j_path),
+        acc: acc.max(0.05 * a_path) / ratio,
+        jerk: jerk.max(0.05 * j_path) / ratio,
         t_start: first.0,
         t_end: last.0,
         k_start: first.1,
@@ -444,7 +456,7 @@ fn shape(b: &CommandBlock, machine: &Machine, period_s: f64, feed_mm_s: f64) -> 
 /// helix; whatever the weights, such a curve runs straight from one to the other).
 fn straight(b: &CommandBlock) -> Option<[f64; 3]> {
     let c = b.ctrl();
-    (b.degree == 1 && c.len() == 2 && b.helix.axis == Helix::NONE.axis)
+    (!b.is_surface() && b.degree == 1 && c.len() == 2 && b.helix.axis == Helix::NONE.axis)
         .then(|| [c[1][0] - c[0][0], c[1][1] - c[0][1], c[1][2] - c[0][2]])
 }
 
@@ -506,6 +518,78 @@ fn samples(b: &CommandBlock) -> Samples {
         }
     }
     (pts, dk, jumps)
+}
+
+/// Samples along a surface block's pass (`t` in `[0, 1]`).
+const SURFACE_SAMPLES: usize = 32;
+/// Parameter step of the finite differences on a surface block's tool point path.
+const SURFACE_DT: f64 = 1e-3;
+
+/// The tool reference point path `M(t)` of a surface block with its first and second
+/// derivatives by central differences ([`shared::path::eval`] gives `M` but the contact
+/// path's derivatives), the stencil kept inside the pass.
+fn tool_point_frame(b: &CommandBlock, t: f64) -> Option<([f64; 3], [f64; 3], [f64; 3])> {
+    let h = SURFACE_DT;
+    let tc = t.clamp(h, 1.0 - h);
+    let (a, m, z) = (
+        path::eval(b, tc - h).p,
+        path::eval(b, tc).p,
+        path::eval(b, tc + h).p,
+    );
+    let d1: [f64; 3] = core::array::from_fn(|i| (z[i] - a[i]) / (2.0 * h));
+    let d2: [f64; 3] = core::array::from_fn(|i| (z[i] - 2.0 * m[i] + a[i]) / (h * h));
+    let sp = path::norm(d1);
+    if sp < 1e-12 {
+        return None;
+    }
+    let t = d1.map(|x| x / sp);
+    let along = dot(d2, t);
+    let k = [0, 1, 2].map(|i| (d2[i] - along * t[i]) / (sp * sp));
+    Some((m, t, k))
+}
+
+/// The largest ratio of the tool point's speed to the contact point's along a surface
+/// block (`(ρ + R)/ρ` on a convex section, below 1 on a concave one).
+fn surface_speed_ratio(b: &CommandBlock) -> f64 {
+    let mut ratio: f64 = 1e-3;
+    for i in 0..=SURFACE_SAMPLES {
+        let t = i as f64 / SURFACE_SAMPLES as f64;
+        let h = SURFACE_DT;
+        let tc = t.clamp(h, 1.0 - h);
+        let m = sub(path::eval(b, tc + h).p, path::eval(b, tc - h).p);
+        let c = path::norm(path::contact(b, &path::surface_at(b, tc)).d1);
+        if c > 1e-12 {
+            ratio = ratio.max(path::norm(m) / (2.0 * h * c));
+        }
+    }
+    ratio
+}
+
+/// [`samples`] for a surface block: the frames of its tool point path `M`. A patch is
+/// smooth inside, so there are no curvature jumps within a block.
+fn surface_samples(b: &CommandBlock) -> Samples {
+    let mut pts: Vec<([f64; 3], [f64; 3])> = Vec::with_capacity(SURFACE_SAMPLES + 1);
+    let mut at: Vec<[f64; 3]> = Vec::with_capacity(SURFACE_SAMPLES + 1);
+    for i in 0..=SURFACE_SAMPLES {
+        let t = i as f64 / SURFACE_SAMPLES as f64;
+        if let Some((p, tan, k)) = tool_point_frame(b, t) {
+            pts.push((tan, k));
+            at.push(p);
+        }
+    }
+    let n = pts.len();
+    let dk = (0..n)
+        .map(|i| {
+            let (lo, hi) = (i.saturating_sub(1), (i + 1).min(n.saturating_sub(1)));
+            let ds = path::norm(sub(at[hi], at[lo]));
+            if hi > lo && ds > 1e-15 {
+                sub(pts[hi].1, pts[lo].1).map(|x| x / ds)
+            } else {
+                [0.0; 3]
+            }
+        })
+        .collect();
+    (pts, dk, Vec::new())
 }
 
 /// Speed (mm/s) at which the junction between two motions with these shapes can be
