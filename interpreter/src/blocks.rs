@@ -551,7 +551,9 @@ fn tool_point_frame(b: &CommandBlock, t: f64) -> Option<([f64; 3], [f64; 3], [f6
 /// The largest ratio of the tool point's speed to the contact point's along a surface
 /// block (`(ρ + R)/ρ` on a convex section, below 1 on a concave one).
 fn surface_speed_ratio(b: &CommandBlock) -> f64 {
-    let mut ratio: f64 = 1e-3;
+    // Never below 1: where `M` is slower (a concave section) the contact path keeps the
+    // machine's own limits rather than more.
+    let mut ratio: f64 = 1.0;
     for i in 0..=SURFACE_SAMPLES {
         let t = i as f64 / SURFACE_SAMPLES as f64;
         let h = SURFACE_DT;

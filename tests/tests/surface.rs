@@ -1,0 +1,75 @@
+//! A STEP-NC free-form part (seed 000) through the real three processes: `cnc run
+//! part.stp` compiles the surface workingstep into surface blocks and runs them to done.
+
+use std::process::Command;
+use tests::{cnc_exe, report, temp_dir};
+
+// Ignored until the interpolator's engine executes surface blocks (FLAG_SURFACE): on this
+// branch the engine does not take them yet. Un-ignore when the engine lands.
+#[test]
+#[ignore = "needs the engine that executes surface blocks"]
+fn seed_surface_part_runs_to_done() {
+    let part =
+        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../examples/seed-surface.stp");
+    let dir = temp_dir("seed-surface");
+    let out = Command::new(cnc_exe())
+        .args(["run", "--clock", "sim", "--no-report", "--out"])
+        .arg(&dir)
+        .arg(&part)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "cnc run failed:\n{}\n{}",
+        String::from_utf8_lossy(&out.stdout),
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let rep = report(&dir);
+    assert_eq!(rep["outcome"], "done", "{rep:#}");
+    assert!(rep["fault"].is_null());
+    // The pass planner's scallop height, within the part's 0.02 mm tolerance.
+    let scallop = rep["max_scallop_mm"].as_f64().unwrap();
+    assert!(scallop > 0.0 && scallop <= 0.02, "{scallop}");
+    // The surface paths are long (about 6 m of contact path plus the rapids).
+    assert!(rep["path_length_mm"].as_f64().unwrap() > 5000.0, "{rep:#}");
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+// The estimate steps the same blocks through the same engine: ignored for the same reason.
+#[test]
+#[ignore = "needs the engine that executes surface blocks"]
+fn seed_surface_part_estimate() {
+    let part =
+        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../examples/seed-surface.stp");
+    let out = Command::new(cnc_exe())
+        .args(["check", "--estimate", "--json"])
+        .arg(&part)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let est: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert!(est["time_s"].as_f64().unwrap() > 100.0, "{est:#}");
+}
+
+/// What works without the engine: the part compiles and `cnc check` describes it.
+#[test]
+fn seed_surface_part_checks() {
+    let part =
+        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../examples/seed-surface.stp");
+    let out = Command::new(cnc_exe())
+        .arg("check")
+        .arg(&part)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(text.contains("surface blocks"), "{text}");
+}
