@@ -31,6 +31,7 @@
 )]
 
 use shared::nurbs::fast::FastCurve;
+use shared::nurbs::surface::FastSurface;
 use shared::nurbs::CurvePoint;
 use shared::path::{self, norm};
 use shared::profile::{self, Limits as Jerk};
@@ -200,6 +201,8 @@ struct Motion {
     u_end: f64,
     s_mm: f64,
     end_mm: [f64; 3],
+    /// The set-point at the block's end.
+    end_out: [f64; 3],
     feed_mm_per_s: f64,
 }
 
@@ -322,10 +325,66 @@ fn min_lim(a: Jerk, b: Jerk) -> Jerk {
     }
 }
 
+/// The evaluators of the motion being run, loaded at each block's start: the moving-data
+/// curve evaluator of seed 001 (§3.3) for curves, and for surface passes the moving-data
+/// surface evaluator of seed 000 (`S`, `S_u`, `S_v` and the normal every cycle).
+struct Geometry {
+    curve: FastCurve,
+    surf: Option<FastSurface>,
+}
+
+impl Geometry {
+    fn load(&mut self, b: &CommandBlock) -> Result<(), Fault> {
+        if b.is_surface() {
+            let s = FastSurface::new(&path::patch(b)).map_err(|_| {
+                Fault::Protocol(ProtocolError::BadField {
+                    seq: b.seq,
+                    field: "surface patch",
+                })
+            })?;
+            self.surf = Some(s);
+            return Ok(());
+        }
+        self.surf = None;
+        self.curve
+            .load(b.degree as usize, b.knots(), b.ctrl())
+            .map_err(|err| Fault::Protocol(ProtocolError::Curve { seq: b.seq, err }))
+    }
+
+    /// The path the profile steps along at `u`: the curve, or a surface pass's
+    /// cutter-contact point (where the feed is programmed).
+    #[inline]
+    fn eval(&mut self, block: &CommandBlock, u: f64) -> CurvePoint {
+        match &mut self.surf {
+            Some(s) if block.is_surface() => {
+                let (uv, _) = path::pass_uv(block, u);
+                path::contact(block, &s.eval(uv[0], uv[1]))
+            }
+            _ => {
+                let mut e = self.curve.eval(u);
+                path::add_axial(block, u, &mut e);
+                e
+            }
+        }
+    }
+
+    /// The set-point at `u`, where the path point `e` was evaluated: the path point itself,
+    /// or over a surface the ball-nose tool's reference point `M = C + R·n + (H − R)·z`.
+    #[inline]
+    fn set_point(&mut self, block: &CommandBlock, u: f64, e: &CurvePoint) -> [f64; 3] {
+        match &mut self.surf {
+            Some(s) if block.is_surface() => {
+                let (uv, _) = path::pass_uv(block, u);
+                path::tool_point(block, &s.eval(uv[0], uv[1]))
+            }
+            _ => e.p,
+        }
+    }
+}
+
 pub struct Engine {
     lim: Limits,
-    /// The moving-data evaluator (seed 001 §3.3), loaded with each motion block's curve.
-    curve: FastCurve,
+    geom: Geometry,
     t_s: f64,
     cur: Current,
     window: Window,
@@ -335,7 +394,10 @@ pub struct Engine {
     acc: f64,
     /// Controlled stop: the distance left to the point where it ends at rest.
     stop_left_mm: f64,
+    /// Where the path point is (the contact point on a surface pass).
     pos: [f64; 3],
+    /// The set-point published: `pos`, or over a surface the tool reference point.
+    out: [f64; 3],
     vel: [f64; 3],
     line: u32,
     seq: u64,
@@ -396,7 +458,7 @@ impl Engine {
         };
         Engine {
             lim,
-            curve,
+            geom: Geometry { curve, surf: None },
             t_s: lim.period_ns as f64 * 1e-9,
             cur: Current::None,
             window: Window::new(lim.lookahead_blocks),
@@ -405,6 +467,7 @@ impl Engine {
             acc: 0.0,
             stop_left_mm: f64::INFINITY,
             pos: start_mm,
+            out: start_mm,
             vel: [0.0; 3],
             line: 0,
             seq: 0,
@@ -502,8 +565,9 @@ impl Engine {
         self.expected_seq
     }
 
+    /// The set-point: where the machine is commanded to be.
     pub fn position(&self) -> [f64; 3] {
-        self.pos
+        self.out
     }
 
     /// True while the engine holds no look-ahead block and the program end has not been
@@ -550,17 +614,23 @@ impl Engine {
         self.seq = b.seq;
         self.cur = match b.kind() {
             Some(BlockKind::Motion) => {
-                self.curve
-                    .load(b.degree as usize, b.knots(), b.ctrl())
-                    .map_err(|err| Fault::Protocol(ProtocolError::Curve { seq: b.seq, err }))?;
+                self.geom.load(&b)?;
                 let (u0, u1) = path::domain(&b);
+                let end = self.geom.eval(&b, u1);
+                let at = self.geom.eval(&b, u0);
+                if b.is_surface() || self.out != self.pos {
+                    // Into or out of a surface pass: the path point jumps between the
+                    // contact point and the tool point (the set-point does not).
+                    self.pos = at.p;
+                }
                 Current::Motion(Motion {
                     block: b,
                     u: u0,
                     u_end: u1,
                     s_mm: 0.0,
-                    end_mm: eval(&mut self.curve, &b, u1).p,
-                    at: eval(&mut self.curve, &b, u0),
+                    end_mm: end.p,
+                    end_out: self.geom.set_point(&b, u1, &end),
+                    at,
                     feed_mm_per_s: b.feed_mm_per_min / 60.0,
                 })
             }
@@ -867,6 +937,7 @@ impl Engine {
         let mut planned = 0.0;
         let mut crossed = false;
         let prev_pos = self.pos;
+        let prev_out = self.out;
         let mut state = TickState::Running;
         for pass in 0..MAX_BLOCKS_PER_CYCLE {
             // The first pass's block was asked for above, before anything moved.
@@ -993,6 +1064,7 @@ impl Engine {
                     if ds >= s_rem - 1e-9 {
                         // The block ends inside this period; carry the rest into the next.
                         self.pos = m.end_mm;
+                        self.out = m.end_out;
                         self.cur = Current::None;
                         crossed = true;
                         if v_exit <= 0.0 {
@@ -1004,11 +1076,12 @@ impl Engine {
                         budget = Some(ds - s_rem);
                         continue;
                     }
-                    let (u, e) = advance(&mut self.curve, &m.block, &m.at, m.u, m.u_end, ds);
+                    let (u, e) = advance(&mut self.geom, &m.block, &m.at, m.u, m.u_end, ds);
                     m.u = u;
                     m.at = e;
                     m.s_mm += ds;
                     self.pos = e.p;
+                    self.out = self.geom.set_point(&m.block, u, &e);
                     self.cur = Current::Motion(m);
                     break;
                 }
@@ -1031,11 +1104,11 @@ impl Engine {
             self.starvations += 1;
         }
         self.starved = starved;
-        let vel = rate(self.pos, prev_pos, t);
+        let vel = rate(self.out, prev_out, t);
         let acc = rate(vel, self.vel, t);
         self.vel = vel;
         Ok(Tick {
-            pos_mm: self.pos,
+            pos_mm: self.out,
             vel_mm_per_s: vel,
             acc_mm_per_s2: acc,
             speed_mm_per_s: self.speed,
@@ -1068,7 +1141,7 @@ impl Engine {
 /// seed 001, `du = ds/|C'| - ds²(C'·C'')/(2|C'|⁴)`, then one Newton correction so the
 /// chord actually covered matches `ds`.
 fn advance(
-    curve: &mut FastCurve,
+    geom: &mut Geometry,
     block: &CommandBlock,
     e: &CurvePoint,
     u: f64,
@@ -1111,7 +1184,7 @@ fn advance(
     // progress. Never steps further than planned: unconverged, it keeps `lo`.
     let (mut lo, mut e_lo) = (u, *e);
     let mut hi = u_end;
-    let mut e1 = eval(curve, block, u1);
+    let mut e1 = geom.eval(block, u1);
     for _ in 0..MAX_CHORD_STEPS {
         let r = [e1.p[0] - e.p[0], e1.p[1] - e.p[1], e1.p[2] - e.p[2]];
         let chord = norm(r);
@@ -1143,17 +1216,9 @@ fn advance(
             break;
         }
         u1 = next;
-        e1 = eval(curve, block, u1);
+        e1 = geom.eval(block, u1);
     }
     (lo, e_lo)
-}
-
-/// The block's path at `u`: its NURBS by the moving-data evaluator, plus any helix.
-#[inline]
-fn eval(curve: &mut FastCurve, block: &CommandBlock, u: f64) -> CurvePoint {
-    let mut e = curve.eval(u);
-    path::add_axial(block, u, &mut e);
-    e
 }
 
 #[cfg(test)]
