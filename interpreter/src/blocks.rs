@@ -327,6 +327,9 @@ struct Shape {
     t_end: [f64; 3],
     k_start: [f64; 3],
     k_end: [f64; 3],
+    /// Surface blocks: the largest ratio of the tool point's speed to the contact
+    /// point's (the speeds above are the contact's); `None` for curves.
+    surface_ratio: Option<f64>,
 }
 
 /// Share of the path (and each axis's) acceleration the curvature may take at the cap
@@ -449,6 +452,7 @@ fn shape(b: &CommandBlock, machine: &Machine, period_s: f64, feed_mm_s: f64) -> 
         t_end: last.0,
         k_start: first.1,
         k_end: last.1,
+        surface_ratio: b.is_surface().then_some(ratio),
     }
 }
 
@@ -604,14 +608,31 @@ fn junction_speed(a: &Shape, b: &Shape, machine: &Machine, period_s: f64) -> f64
     if cos < machine.corner_angle_deg.to_radians().cos() {
         return 0.0;
     }
+    // Between surface blocks the tangents and curvatures are the tool point's, which
+    // moves up to `ratio` times the contact speed the caps are in. Its kinks (where the
+    // surface is only C¹ the normal turns at a rate that jumps) may take only the share
+    // of the acceleration the curvature leaves, so kink and curvature together stay
+    // within the path's.
+    let ratio = match (a.surface_ratio, b.surface_ratio) {
+        (None, None) => None,
+        (x, y) => Some(x.unwrap_or(1.0).max(y.unwrap_or(1.0))),
+    };
+    let (acc, jerk, r) = match ratio {
+        None => (a.acc.min(b.acc), a.jerk.min(b.jerk), 1.0),
+        Some(r) => (
+            (1.0 - NORMAL_SHARE) * machine.path_acc_mm_per_s2,
+            (1.0 - NORMAL_SHARE) * machine.path_jerk_mm_per_s3,
+            r,
+        ),
+    };
     let mut v = a.v_cap.min(b.v_cap);
     let half_sin = (0.5 * (1.0 - cos)).max(0.0).sqrt();
     if half_sin > 1e-7 {
-        v = v.min(a.acc.min(b.acc) * period_s / (2.0 * half_sin));
+        v = v.min(acc * period_s / (2.0 * half_sin) / r);
     }
     let dk = path::norm(sub(a.k_end, b.k_start));
     if dk > 1e-9 {
-        v = v.min((a.jerk.min(b.jerk) * period_s / dk).sqrt());
+        v = v.min((jerk * period_s / dk).sqrt() / r);
     }
     v
 }

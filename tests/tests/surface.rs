@@ -2,7 +2,7 @@
 //! part.stp` compiles the surface workingstep into surface blocks and runs them to done.
 
 use std::process::Command;
-use tests::{cnc_exe, report, temp_dir};
+use tests::{cnc_exe, csv, report, temp_dir};
 
 #[test]
 fn seed_surface_part_runs_to_done() {
@@ -29,6 +29,23 @@ fn seed_surface_part_runs_to_done() {
     assert!(scallop > 0.0 && scallop <= 0.02, "{scallop}");
     // The surface paths are long (about 6 m of contact path plus the rapids).
     assert!(rep["path_length_mm"].as_f64().unwrap() > 5000.0, "{rep:#}");
+    // The set-points' acceleration (second differences) stays within the path's: the
+    // curvature of the tool point path, and its kinks where the p = 2 surface's normal
+    // turns at a rate that jumps, are planned for.
+    let (_, sp) = csv(&dir.join("setpoints.csv"));
+    let period_s = 1e-3;
+    let mut worst: f64 = 0.0;
+    for w in sp.windows(3) {
+        let a: Vec<f64> = (2..5)
+            .map(|k| (w[2][k] - 2.0 * w[1][k] + w[0][k]) / (period_s * period_s))
+            .collect();
+        worst = worst.max((a[0] * a[0] + a[1] * a[1] + a[2] * a[2]).sqrt());
+    }
+    let limit = shared::Machine::default().path_acc_mm_per_s2;
+    assert!(
+        worst <= limit * 1.001,
+        "set-point acceleration {worst} mm/s²"
+    );
     // `cnc check --estimate` steps the same blocks through the same engine: the very
     // cycles of the run.
     let out = Command::new(cnc_exe())
