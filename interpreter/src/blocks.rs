@@ -529,27 +529,38 @@ const SURFACE_SAMPLES: usize = 32;
 /// Parameter step of the finite differences on a surface block's tool point path.
 const SURFACE_DT: f64 = 1e-3;
 
-/// The tool reference point path `M(t)` of a surface block with its first and second
-/// derivatives by central differences ([`shared::path::eval`] gives `M` but the contact
-/// path's derivatives), the stencil kept inside the pass.
-fn tool_point_frame(b: &CommandBlock, t: f64) -> Option<([f64; 3], [f64; 3], [f64; 3])> {
+/// The set-point path of a motion block at `u` with its first and second derivatives:
+/// [`shared::path::eval`] for a curve; for a surface block the tool reference point
+/// `M(t)` with derivatives by central differences (`shared::path::eval` gives `M` with
+/// the contact path's derivatives), the stencil kept inside the pass.
+pub(crate) fn set_point_eval(b: &CommandBlock, u: f64) -> shared::nurbs::CurvePoint {
+    let mut e = path::eval(b, u);
+    if !b.is_surface() {
+        return e;
+    }
     let h = SURFACE_DT;
-    let tc = t.clamp(h, 1.0 - h);
+    let tc = u.clamp(h, 1.0 - h);
     let (a, m, z) = (
         path::eval(b, tc - h).p,
         path::eval(b, tc).p,
         path::eval(b, tc + h).p,
     );
-    let d1: [f64; 3] = core::array::from_fn(|i| (z[i] - a[i]) / (2.0 * h));
-    let d2: [f64; 3] = core::array::from_fn(|i| (z[i] - 2.0 * m[i] + a[i]) / (h * h));
-    let sp = path::norm(d1);
+    e.d1 = core::array::from_fn(|i| (z[i] - a[i]) / (2.0 * h));
+    e.d2 = core::array::from_fn(|i| (z[i] - 2.0 * m[i] + a[i]) / (h * h));
+    e
+}
+
+/// A surface block's tool point with its unit tangent and curvature vector at `t`.
+fn tool_point_frame(b: &CommandBlock, t: f64) -> Option<([f64; 3], [f64; 3], [f64; 3])> {
+    let e = set_point_eval(b, t);
+    let sp = path::norm(e.d1);
     if sp < 1e-12 {
         return None;
     }
-    let t = d1.map(|x| x / sp);
-    let along = dot(d2, t);
-    let k = [0, 1, 2].map(|i| (d2[i] - along * t[i]) / (sp * sp));
-    Some((m, t, k))
+    let tan = e.d1.map(|x| x / sp);
+    let along = dot(e.d2, tan);
+    let k = [0, 1, 2].map(|i| (e.d2[i] - along * tan[i]) / (sp * sp));
+    Some((e.p, tan, k))
 }
 
 /// The largest ratio of the tool point's speed to the contact point's along a surface
