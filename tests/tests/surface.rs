@@ -29,6 +29,9 @@ fn seed_surface_part_runs_to_done() {
     assert!(scallop > 0.0 && scallop <= 0.02, "{scallop}");
     // The surface paths are long (about 6 m of contact path plus the rapids).
     assert!(rep["path_length_mm"].as_f64().unwrap() > 5000.0, "{rep:#}");
+    // The contour analysis measures surface runs on their tool point path.
+    let contour = rep["max_contour_error_um"].as_f64().unwrap();
+    assert!(contour < 5.0, "{contour} µm");
     // The set-points' acceleration (second differences) stays within the path's: the
     // curvature of the tool point path, and its kinks where the p = 2 surface's normal
     // turns at a rate that jumps, are planned for.

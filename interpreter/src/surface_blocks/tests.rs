@@ -255,3 +255,82 @@ fn a_part_is_planned_within_its_caps() {
         .count();
     assert!(flowing > 0);
 }
+
+/// The set-points the interpolator's engine publishes for a part (stepped in-process, as
+/// `cnc check --estimate` does) are tool points of the ORIGINAL surface: each is located
+/// on its block's pass, the pass point mapped back to the surface's own `(u, v)`, and the
+/// tool point there recomputed with the reference evaluator (1e-9 mm).
+#[test]
+fn engine_set_points_are_tool_points_of_the_original_surface() {
+    use interpolator::engine::{BlockSource, Engine, Limits, TickState};
+    struct Slice<'a>(&'a [CommandBlock], usize);
+    impl BlockSource for Slice<'_> {
+        fn next_block(&mut self) -> Option<CommandBlock> {
+            let b = self.0.get(self.1).copied();
+            self.1 += usize::from(b.is_some());
+            b
+        }
+    }
+    for text in [SEED, TORUS] {
+        let machine = Machine::default();
+        let step = read_part(text).unwrap().remove(0);
+        let whole = step.surface.data();
+        let patches = bezier_patches(&whole).unwrap();
+        let (blocks, _) = part_blocks(text, &machine, 1_000_000).unwrap();
+        let mut engine = Engine::new(Limits::new(&machine, 1_000_000), [0.0; 3]);
+        let mut src = Slice(&blocks, 0);
+        let (mut worst, mut checked, mut cycle) = (0.0f64, 0usize, 0usize);
+        let (mut last_seq, mut last_t) = (u64::MAX, 0.0);
+        loop {
+            let tick = engine.tick(&mut src).unwrap();
+            cycle += 1;
+            if tick.state == TickState::Done {
+                break;
+            }
+            assert_ne!(tick.state, TickState::Starved);
+            let b = &blocks[tick.block_seq as usize];
+            if !b.is_surface() || cycle % 5 != 0 {
+                continue;
+            }
+            // Newton on (M(t) - p)·M'(t) from the last pass parameter; its root is exact
+            // whatever the derivative's error, since the set-point is a point of M.
+            let p = tick.pos_mm;
+            let mut t = if tick.block_seq == last_seq {
+                last_t
+            } else {
+                0.0
+            };
+            for _ in 0..30 {
+                let e = crate::blocks::set_point_eval(b, t);
+                let r = [e.p[0] - p[0], e.p[1] - p[1], e.p[2] - p[2]];
+                let g = r[0] * e.d1[0] + r[1] * e.d1[1] + r[2] * e.d1[2];
+                let dg = e.d1.iter().map(|x| x * x).sum::<f64>();
+                let next = (t - g / dg).clamp(0.0, 1.0);
+                if (next - t).abs() < 1e-15 {
+                    break;
+                }
+                t = next;
+            }
+            (last_seq, last_t) = (tick.block_seq, t);
+            let sp = &b.surface;
+            let local =
+                core::array::from_fn(|i| sp.uv_start[i] + t * (sp.uv_end[i] - sp.uv_start[i]));
+            let (u, v) = global_uv(&patches, b, local);
+            let m = tool_point(
+                &whole,
+                sp.tool_radius_mm,
+                sp.tool_length_mm,
+                sp.normal_sign as f64,
+                u,
+                v,
+            );
+            worst = worst.max(dist(m, p));
+            checked += 1;
+        }
+        assert!(checked > 1000, "{checked} set-points checked");
+        assert!(
+            worst < 1e-9,
+            "a set-point is {worst:e} mm off the original surface's tool point"
+        );
+    }
+}
