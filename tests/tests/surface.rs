@@ -63,6 +63,23 @@ fn seed_surface_part_runs_to_done() {
     );
     let est: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
     assert_eq!(est["cycles"], rep["cycles"]);
+    // The command log holds ordinary blocks: replaying it reproduces the run.
+    let replay = dir.join("replay");
+    let out = Command::new(cnc_exe())
+        .args(["replay", "--clock", "sim", "--no-report", "--out"])
+        .arg(&replay)
+        .arg(&dir)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    for f in ["setpoints.csv", "commands.log"] {
+        let same = std::fs::read(dir.join(f)).unwrap() == std::fs::read(replay.join(f)).unwrap();
+        assert!(same, "replay: {f} differs");
+    }
     let _ = std::fs::remove_dir_all(&dir);
 }
 
