@@ -8,6 +8,11 @@
 //! speed (exact stop at corners sharper than the machine's corner angle, limited at kinks
 //! and curvature jumps); and a backward then a forward pass make every block's start and
 //! end speed reachable under the jerk-limited profile the interpolator runs.
+//!
+//! Surface blocks (`FLAG_SURFACE`, from [`crate::surface_blocks`]) go through the same
+//! plan: their caps, limits and junctions come from the tool reference point path `M`,
+//! which the machine follows (`set_point_eval`), scaled to the contact point feed the
+//! block's speeds are in.
 
 use crate::program::{Move, PathControl, Plane};
 use shared::nurbs::{self, SplitCurve, MAX_CTRL};
