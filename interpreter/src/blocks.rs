@@ -8,6 +8,11 @@
 //! speed (exact stop at corners sharper than the machine's corner angle, limited at kinks
 //! and curvature jumps); and a backward then a forward pass make every block's start and
 //! end speed reachable under the jerk-limited profile the interpolator runs.
+//!
+//! Surface blocks (`FLAG_SURFACE`, from [`crate::surface_blocks`]) go through the same
+//! plan: their caps, limits and junctions come from the tool reference point path `M`,
+//! which the machine follows (`set_point_eval`), scaled to the contact point feed the
+//! block's speeds are in.
 
 use crate::program::{Move, PathControl, Plane};
 use shared::nurbs::{self, SplitCurve, MAX_CTRL};
@@ -327,6 +332,9 @@ struct Shape {
     t_end: [f64; 3],
     k_start: [f64; 3],
     k_end: [f64; 3],
+    /// Surface blocks: the largest ratio of the tool point's speed to the contact
+    /// point's (the speeds above are the contact's); `None` for curves.
+    surface_ratio: Option<f64>,
 }
 
 /// Share of the path (and each axis's) acceleration the curvature may take at the cap
@@ -345,6 +353,17 @@ fn shape(b: &CommandBlock, machine: &Machine, period_s: f64, feed_mm_s: f64) -> 
     let axes = machine.axes.as_array();
     let a_path = machine.path_acc_mm_per_s2;
     let j_path = machine.path_jerk_mm_per_s3;
+    // A surface block is planned on its tool reference point `M`, the path the machine
+    // follows, at the fastest `M` moves for the contact feed (`ratio` = max |M'|/|C'|);
+    // the caps and limits found for `M` are scaled back to the contact path, along which
+    // the feed is programmed and the profile runs (conservative where the ratio varies;
+    // the ratio's own change along the block is left out of the tangential terms).
+    let ratio = if b.is_surface() {
+        surface_speed_ratio(b)
+    } else {
+        1.0
+    };
+    let feed_mm_s = feed_mm_s * ratio;
     let (pts, dk, jumps) = match straight(b) {
         // A straight segment has one tangent and no curvature: one sample says it all
         // (the samples below would each find the same, at a hundred times the cost).
@@ -360,6 +379,7 @@ fn shape(b: &CommandBlock, machine: &Machine, period_s: f64, feed_mm_s: f64) -> 
                 (Vec::new(), Vec::new(), Vec::new())
             }
         }
+        None if b.is_surface() => surface_samples(b),
         None => samples(b),
     };
     let first = pts.first().copied().unwrap_or(([1.0, 0.0, 0.0], [0.0; 3]));
@@ -428,15 +448,16 @@ fn shape(b: &CommandBlock, machine: &Machine, period_s: f64, feed_mm_s: f64) -> 
         }
     }
     Shape {
-        v_cap: v,
+        v_cap: v / ratio,
         // The shares above leave at least a quarter of each; the floor only guards
         // against a degenerate sample.
-        acc: acc.max(0.05 * a_path),
-        jerk: jerk.max(0.05 * j_path),
+        acc: acc.max(0.05 * a_path) / ratio,
+        jerk: jerk.max(0.05 * j_path) / ratio,
         t_start: first.0,
         t_end: last.0,
         k_start: first.1,
         k_end: last.1,
+        surface_ratio: b.is_surface().then_some(ratio),
     }
 }
 
@@ -444,7 +465,7 @@ fn shape(b: &CommandBlock, machine: &Machine, period_s: f64, feed_mm_s: f64) -> 
 /// helix; whatever the weights, such a curve runs straight from one to the other).
 fn straight(b: &CommandBlock) -> Option<[f64; 3]> {
     let c = b.ctrl();
-    (b.degree == 1 && c.len() == 2 && b.helix.axis == Helix::NONE.axis)
+    (!b.is_surface() && b.degree == 1 && c.len() == 2 && b.helix.axis == Helix::NONE.axis)
         .then(|| [c[1][0] - c[0][0], c[1][1] - c[0][1], c[1][2] - c[0][2]])
 }
 
@@ -508,6 +529,91 @@ fn samples(b: &CommandBlock) -> Samples {
     (pts, dk, jumps)
 }
 
+/// Samples along a surface block's pass (`t` in `[0, 1]`).
+const SURFACE_SAMPLES: usize = 32;
+/// Parameter step of the finite differences on a surface block's tool point path.
+const SURFACE_DT: f64 = 1e-3;
+
+/// The set-point path of a motion block at `u` with its first and second derivatives:
+/// [`shared::path::eval`] for a curve; for a surface block the tool reference point
+/// `M(t)` with derivatives by central differences (`shared::path::eval` gives `M` with
+/// the contact path's derivatives), the stencil kept inside the pass.
+pub(crate) fn set_point_eval(b: &CommandBlock, u: f64) -> shared::nurbs::CurvePoint {
+    let mut e = path::eval(b, u);
+    if !b.is_surface() {
+        return e;
+    }
+    let h = SURFACE_DT;
+    let tc = u.clamp(h, 1.0 - h);
+    let (a, m, z) = (
+        path::eval(b, tc - h).p,
+        path::eval(b, tc).p,
+        path::eval(b, tc + h).p,
+    );
+    e.d1 = core::array::from_fn(|i| (z[i] - a[i]) / (2.0 * h));
+    e.d2 = core::array::from_fn(|i| (z[i] - 2.0 * m[i] + a[i]) / (h * h));
+    e
+}
+
+/// A surface block's tool point with its unit tangent and curvature vector at `t`.
+fn tool_point_frame(b: &CommandBlock, t: f64) -> Option<([f64; 3], [f64; 3], [f64; 3])> {
+    let e = set_point_eval(b, t);
+    let sp = path::norm(e.d1);
+    if sp < 1e-12 {
+        return None;
+    }
+    let tan = e.d1.map(|x| x / sp);
+    let along = dot(e.d2, tan);
+    let k = [0, 1, 2].map(|i| (e.d2[i] - along * tan[i]) / (sp * sp));
+    Some((e.p, tan, k))
+}
+
+/// The largest ratio of the tool point's speed to the contact point's along a surface
+/// block (`(ρ + R)/ρ` on a convex section, below 1 on a concave one).
+fn surface_speed_ratio(b: &CommandBlock) -> f64 {
+    // Never below 1: where `M` is slower (a concave section) the contact path keeps the
+    // machine's own limits rather than more.
+    let mut ratio: f64 = 1.0;
+    for i in 0..=SURFACE_SAMPLES {
+        let t = i as f64 / SURFACE_SAMPLES as f64;
+        let h = SURFACE_DT;
+        let tc = t.clamp(h, 1.0 - h);
+        let m = sub(path::eval(b, tc + h).p, path::eval(b, tc - h).p);
+        let c = path::norm(path::contact(b, &path::surface_at(b, tc)).d1);
+        if c > 1e-12 {
+            ratio = ratio.max(path::norm(m) / (2.0 * h * c));
+        }
+    }
+    ratio
+}
+
+/// [`samples`] for a surface block: the frames of its tool point path `M`. A patch is
+/// smooth inside, so there are no curvature jumps within a block.
+fn surface_samples(b: &CommandBlock) -> Samples {
+    let mut pts: Vec<([f64; 3], [f64; 3])> = Vec::with_capacity(SURFACE_SAMPLES + 1);
+    let mut at: Vec<[f64; 3]> = Vec::with_capacity(SURFACE_SAMPLES + 1);
+    for i in 0..=SURFACE_SAMPLES {
+        let t = i as f64 / SURFACE_SAMPLES as f64;
+        if let Some((p, tan, k)) = tool_point_frame(b, t) {
+            pts.push((tan, k));
+            at.push(p);
+        }
+    }
+    let n = pts.len();
+    let dk = (0..n)
+        .map(|i| {
+            let (lo, hi) = (i.saturating_sub(1), (i + 1).min(n.saturating_sub(1)));
+            let ds = path::norm(sub(at[hi], at[lo]));
+            if hi > lo && ds > 1e-15 {
+                sub(pts[hi].1, pts[lo].1).map(|x| x / ds)
+            } else {
+                [0.0; 3]
+            }
+        })
+        .collect();
+    (pts, dk, Vec::new())
+}
+
 /// Speed (mm/s) at which the junction between two motions with these shapes can be
 /// passed: the lower cap; at a kink (tangent turning by `θ`), the speed whose direction
 /// change in one period stays within the acceleration (`2·v·sin(θ/2) <= A·T`); where the
@@ -518,14 +624,31 @@ fn junction_speed(a: &Shape, b: &Shape, machine: &Machine, period_s: f64) -> f64
     if cos < machine.corner_angle_deg.to_radians().cos() {
         return 0.0;
     }
+    // Between surface blocks the tangents and curvatures are the tool point's, which
+    // moves up to `ratio` times the contact speed the caps are in. Its kinks (where the
+    // surface is only C¹ the normal turns at a rate that jumps) may take only the share
+    // of the acceleration the curvature leaves, so kink and curvature together stay
+    // within the path's.
+    let ratio = match (a.surface_ratio, b.surface_ratio) {
+        (None, None) => None,
+        (x, y) => Some(x.unwrap_or(1.0).max(y.unwrap_or(1.0))),
+    };
+    let (acc, jerk, r) = match ratio {
+        None => (a.acc.min(b.acc), a.jerk.min(b.jerk), 1.0),
+        Some(r) => (
+            (1.0 - NORMAL_SHARE) * machine.path_acc_mm_per_s2,
+            (1.0 - NORMAL_SHARE) * machine.path_jerk_mm_per_s3,
+            r,
+        ),
+    };
     let mut v = a.v_cap.min(b.v_cap);
     let half_sin = (0.5 * (1.0 - cos)).max(0.0).sqrt();
     if half_sin > 1e-7 {
-        v = v.min(a.acc.min(b.acc) * period_s / (2.0 * half_sin));
+        v = v.min(acc * period_s / (2.0 * half_sin) / r);
     }
     let dk = path::norm(sub(a.k_end, b.k_start));
     if dk > 1e-9 {
-        v = v.min((a.jerk.min(b.jerk) * period_s / dk).sqrt());
+        v = v.min((jerk * period_s / dk).sqrt() / r);
     }
     v
 }

@@ -201,6 +201,59 @@ fn open_in_browser(page: &std::path::Path) {
     }
 }
 
+/// `cnc check part.stp`: the part's report; with `--estimate` its blocks stepped through
+/// the interpolator's engine too.
+fn check_step(
+    src: &Source,
+    machine: &shared::Machine,
+    period_us: u64,
+    estimate: bool,
+    json: bool,
+) -> ExitCode {
+    let report = match crate::step::check::check_part(&src.name, &src.text, machine) {
+        Ok(r) => r,
+        Err(errors) => {
+            eprint!("{errors}");
+            return ExitCode::FAILURE;
+        }
+    };
+    if !estimate {
+        print!("{report}");
+        return ExitCode::SUCCESS;
+    }
+    let period_ns = period_us * 1000;
+    let (blocks, scallop) = match crate::surface_blocks::part_blocks(&src.text, machine, period_ns)
+    {
+        Ok(b) => b,
+        Err(e) => {
+            eprint!("{}", crate::step::format_errors(&src.name, &e));
+            return ExitCode::FAILURE;
+        }
+    };
+    match crate::estimate::estimate(&blocks, machine, period_ns) {
+        Ok(est) if json => {
+            println!("{}", serde_json::to_string_pretty(&est).unwrap_or_default());
+            ExitCode::SUCCESS
+        }
+        Ok(est) => {
+            print!("{report}");
+            println!(
+                "{}: {} blocks; machining time {:.3} s ({} cycles of {} µs), path {:.3} mm, \
+                 max scallop {:.2} µm",
+                src.name,
+                blocks.len(),
+                est.time_s,
+                est.cycles,
+                period_us,
+                est.path_length_mm,
+                scallop * 1e3
+            );
+            ExitCode::SUCCESS
+        }
+        Err(e) => fail(format!("{}: estimate: {e}", src.name)),
+    }
+}
+
 pub fn main() -> ExitCode {
     let cli = Cli::parse();
     init_tracing();
@@ -225,25 +278,10 @@ pub fn main() -> ExitCode {
                 Ok(s) => s,
                 Err(e) => return fail(e),
             };
-            if crate::step::check::is_step_file(&src.name, &src.text) {
-                if estimate {
-                    return fail(format!(
-                        "{}: --estimate is not available for STEP-NC surface workingsteps yet",
-                        src.name
-                    ));
-                }
-                return match crate::step::check::check_part(&src.name, &src.text, &machine) {
-                    Ok(report) => {
-                        print!("{report}");
-                        ExitCode::SUCCESS
-                    }
-                    Err(errors) => {
-                        eprint!("{errors}");
-                        ExitCode::FAILURE
-                    }
-                };
-            }
             let period_ns = period_us * 1000;
+            if crate::step::check::is_step_file(&src.name, &src.text) {
+                return check_step(&src, &machine, period_us, estimate, json);
+            }
             let opts = crate::program::Options { dialect };
             match process::compile_with(&src.text, &opts, &machine, period_ns) {
                 Ok((prog, blocks)) if estimate => {

@@ -23,8 +23,9 @@
 //!   reports it. The fitted radius minus the commanded one is the size error, which
 //!   without feed-forward is the textbook `v² / (2·R·Kv²)`.
 
+use crate::blocks::set_point_eval as eval;
 use shared::nurbs::CurvePoint;
-use shared::path::{domain, eval, norm};
+use shared::path::{domain, norm};
 use shared::protocol::{BlockKind, CommandBlock, FLAG_RAPID};
 use std::f64::consts::PI;
 
@@ -120,6 +121,20 @@ impl<'a> Seg<'a> {
                 lo[k] = lo[k].min(c[k]);
                 hi[k] = hi[k].max(c[k]);
             }
+        }
+        if b.is_surface() {
+            // The patch lies in its control points' box; the tool point is `R` off it
+            // along the normal and `H − R` above.
+            let (r, up) = (
+                b.surface.tool_radius_mm,
+                b.surface.tool_length_mm - b.surface.tool_radius_mm,
+            );
+            for k in 0..3 {
+                lo[k] -= r;
+                hi[k] += r;
+            }
+            lo[2] += up;
+            hi[2] += up;
         }
         if b.helix.axis != shared::protocol::NO_AXIS {
             // The axial motion of a helix is not in the control points.

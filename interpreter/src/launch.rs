@@ -256,16 +256,17 @@ fn run_inner(args: &RunArgs) -> Result<bool, String> {
     let opts = crate::program::Options {
         dialect: args.dialect,
     };
-    let blocks = match process::compile_with(&src.text, &opts, &machine, period_ns) {
-        Ok((_, blocks)) => blocks,
-        Err(diags) => {
-            eprint!("{}", process::format_diagnostics(&src.name, &diags));
+    let blocks = match process::compile_source(&src.name, &src.text, &opts, &machine, period_ns) {
+        Ok(c) => c.blocks,
+        Err(errors) => {
+            eprint!("{errors}");
             return Ok(false);
         }
     };
     let dir = args.out.clone().unwrap_or_else(default_out_dir);
     std::fs::create_dir_all(&dir).map_err(|e| format!("{}: {e}", dir.display()))?;
-    // The run directory keeps the exact program and machine it ran.
+    // The run directory keeps the exact program and machine it ran (a STEP-NC part too:
+    // the interpreter process knows it by its content, the report page reads its lines).
     let program_copy = dir.join("program.ngc");
     std::fs::write(&program_copy, &src.text)
         .map_err(|e| format!("{}: {e}", program_copy.display()))?;

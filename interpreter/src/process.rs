@@ -84,6 +84,46 @@ pub fn compile_with(
     }
 }
 
+/// A program ready to send: its blocks and what the reports say about it.
+#[derive(Debug, Clone)]
+pub struct Compiled {
+    pub blocks: Vec<CommandBlock>,
+    /// The NC dialect a G-code program was read in; none for a STEP-NC part.
+    pub dialect: Option<program::Dialect>,
+    pub messages: Vec<(u32, String)>,
+    /// The largest scallop height of a STEP-NC part's surface paths (as planned).
+    pub max_scallop_mm: Option<f64>,
+}
+
+/// Reads, checks, builds and plans a G-code program or a STEP-NC part (told apart by
+/// [`crate::step::check::is_step_file`]); every problem as `NAME:LINE:...` lines.
+pub fn compile_source(
+    name: &str,
+    text: &str,
+    opts: &program::Options,
+    machine: &Machine,
+    period_ns: u64,
+) -> Result<Compiled, String> {
+    if crate::step::check::is_step_file(name, text) {
+        let (blocks, scallop) = crate::surface_blocks::part_blocks(text, machine, period_ns)
+            .map_err(|e| crate::step::format_errors(name, &e))?;
+        return Ok(Compiled {
+            blocks,
+            dialect: None,
+            messages: Vec::new(),
+            max_scallop_mm: Some(scallop),
+        });
+    }
+    let (prog, blocks) =
+        compile_with(text, opts, machine, period_ns).map_err(|d| format_diagnostics(name, &d))?;
+    Ok(Compiled {
+        blocks,
+        dialect: Some(prog.dialect),
+        messages: prog.messages,
+        max_scallop_mm: None,
+    })
+}
+
 #[derive(Debug, Clone)]
 pub struct Config {
     pub prefix: String,
@@ -235,6 +275,7 @@ pub fn run_streaming<S: Service>(
 ) -> Result<InterpreterSummary, String> {
     let mut salvaged = None;
     let mut dialect = None;
+    let mut max_scallop_mm = None;
     let (name, blocks, messages) = match &cfg.replay {
         Some(log) => {
             let r = load_replay(log, cfg.salvage)?;
@@ -247,10 +288,10 @@ pub fn run_streaming<S: Service>(
             let opts = program::Options {
                 dialect: streaming.dialect,
             };
-            let (prog, blocks) = compile_with(&src.text, &opts, &cfg.machine, cfg.period_ns)
-                .map_err(|d| format_diagnostics(&name, &d))?;
-            dialect = Some(prog.dialect.name().to_string());
-            (name, blocks, prog.messages)
+            let c = compile_source(&name, &src.text, &opts, &cfg.machine, cfg.period_ns)?;
+            dialect = c.dialect.map(|d| d.name().to_string());
+            max_scallop_mm = c.max_scallop_mm;
+            (name, c.blocks, c.messages)
         }
     };
     for (line, m) in &messages {
@@ -293,6 +334,7 @@ pub fn run_streaming<S: Service>(
         messages,
         salvaged,
         dialect,
+        max_scallop_mm,
     };
     let text = serde_json::to_string_pretty(&summary).map_err(|e| e.to_string())?;
     std::fs::write(cfg.out_dir.join("interpreter.json"), text)

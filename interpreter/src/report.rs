@@ -23,6 +23,9 @@ pub struct InterpreterSummary {
     /// The NC dialect the program was read in (`linuxcnc` or `fanuc`); none for replays.
     #[serde(default)]
     pub dialect: Option<String>,
+    /// A STEP-NC part's largest scallop height between passes (mm), as planned.
+    #[serde(default)]
+    pub max_scallop_mm: Option<f64>,
 }
 
 #[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
@@ -83,6 +86,10 @@ pub struct Report {
     /// The NC dialect the program was read in (`linuxcnc`, `fanuc`); null for replays.
     #[serde(default)]
     pub dialect: Option<String>,
+    /// A STEP-NC part's largest scallop height between passes (mm), as the pass planner
+    /// predicts it; absent for G-code.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub max_scallop_mm: Option<f64>,
     pub sched: Option<interpolator::rt::sched::SchedReport>,
     pub miss_list: Vec<interpolator::summary::MissEntry>,
     pub processes: Vec<Process>,
@@ -216,6 +223,7 @@ pub fn assemble(
         blocks: interp.as_ref().map_or(0, |s| s.blocks),
         salvaged: interp.as_ref().and_then(|s| s.salvaged.clone()),
         dialect: interp.as_ref().and_then(|s| s.dialect.clone()),
+        max_scallop_mm: interp.as_ref().and_then(|s| s.max_scallop_mm),
         sched: i.map(|s| s.sched.clone()),
         miss_list: i.map(|s| s.miss_list.clone()).unwrap_or_default(),
         processes,
@@ -271,6 +279,12 @@ impl Report {
             self.max_following_error_um,
             dir.display()
         );
+        if let Some(h) = self.max_scallop_mm {
+            s.push_str(&format!(
+                "  surface      max scallop {:.2} µm (as the passes were planned)\n",
+                h * 1e3
+            ));
+        }
         if let Some(note) = &self.salvaged {
             s.push_str(&format!("  warning      {note}\n"));
         }

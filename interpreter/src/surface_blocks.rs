@@ -1,30 +1,30 @@
-//! A planned surface workingstep as command blocks: [`SurfaceBlock`]s along the passes
-//! (and, in zig-zag, the links between them), rapid line blocks for the lifts.
+//! A planned surface workingstep as wire blocks (protocol 3, seed 000): surface blocks
+//! (`FLAG_SURFACE`, one rational Bézier patch and a straight pass in its `(u, v)`)
+//! along the passes and, in zig-zag, along the links between them; rapid line blocks in
+//! tool-point space for the lifts; a program end.
 //!
-//! A surface larger than a block's section ([`MAX_SURF_CTRL`] per direction) is split
-//! exactly by knot insertion ([`split_surface`]): every column is split as a curve in `u`
-//! at the same knots (then every row in `v`), so the pieces trace the very same surface
-//! with the very same parameters. A pass is cut where it crosses from one piece to the
-//! next; each block carries the piece its path runs on.
-//!
-//! Every surface block's path is one straight segment in `(u, v)` (degree 1, knots
-//! `0 0 1 1`): a pass, the part of a pass on one piece, or a zig-zag link along the
-//! domain boundary. The feeds are the programmed feed with start and end feed 0 (a stop
-//! at every block end) until the look-ahead learns surface blocks; `length_mm` is the
-//! contact point's path length on the surface.
+//! The surface is decomposed exactly into its Bézier patches by knot insertion to full
+//! multiplicity ([`bezier_patches`]): every column is split as a curve in `u` at every
+//! interior knot (then every row in `v`), so the patches trace the very same surface. A
+//! pass is cut where it crosses from one patch to the next and each piece is mapped
+//! affinely onto its patch's local `[0, 1]²`; the orientation is kept, so one
+//! `normal_sign` serves every patch.
 //!
 //! Forward mode (and the approach and the final retract) lifts the tool: rapid lines
 //! straight up along the tool axis to a safe height (5 mm above the highest tool
-//! reference point `M` over the surface), across, and down.
+//! reference point `M` over the surface), across, and down. Every rapid starts and ends
+//! exactly at the `M` the adjacent surface block gives ([`shared::path::eval`]).
+//!
+//! [`part_blocks`] joins every workingstep of a part from the machine's start (the
+//! origin) and plans the feeds with the look-ahead of [`crate::blocks::plan`].
 
 use crate::step::{FreeformStep, PathMode, StepError};
-use crate::surface_path::{eval2, SurfacePath};
-use shared::nurbs::surface::{unit_normal, SurfaceData, MAX_SURF_CTRL};
-use shared::nurbs::{split_to_capacity, SplitCurve};
-use shared::protocol::{
-    BlockKind, CommandBlock, SurfaceBlock, SurfaceSection, SurfaceTool, FLAG_RAPID,
-    FLAG_STOP_AT_END,
-};
+use crate::surface_path::SurfacePath;
+use shared::nurbs::reference::piegl_tiller_surface;
+use shared::nurbs::surface::SurfaceData;
+use shared::nurbs::{split_to_capacity, SplitCurve, MAX_CTRL};
+use shared::path;
+use shared::protocol::{BlockKind, CommandBlock, FLAG_RAPID, FLAG_STOP_AT_END, FLAG_SURFACE};
 use shared::Machine;
 
 /// Clearance of the lifts above the highest tool reference point.
@@ -151,16 +151,19 @@ pub fn split_surface(s: &SurfaceData<'_>, max_ctrl: usize) -> Option<Vec<OwnedSu
     Some(out)
 }
 
-/// What a surface workingstep turns into.
-#[derive(Debug, Clone)]
-pub enum SurfaceCommand {
-    Surface(Box<SurfaceBlock>),
-    /// A rapid line (lift, traverse, approach).
-    Motion(Box<CommandBlock>),
+/// Decomposes a valid surface exactly into its Bézier patches (knot insertion to full
+/// multiplicity at every interior knot), ordered along `u` first, then `v`; each keeps
+/// its `(u0, u1, v0, v1)` domain in the knots. `None` only if the pieces of the columns
+/// disagree (an internal error).
+pub fn bezier_patches(s: &SurfaceData<'_>) -> Option<Vec<OwnedSurface>> {
+    let mut out = Vec::new();
+    for piece in split_u(&OwnedSurface::from_data(s), s.degree_u + 1)? {
+        for t in split_u(&piece.transposed(), s.degree_v + 1)? {
+            out.push(t.transposed());
+        }
+    }
+    Some(out)
 }
-
-/// A block section with its `(u0, u1, v0, v1)` domain.
-type Section = (SurfaceSection, (f64, f64, f64, f64));
 
 /// One straight `(u, v)` segment on the surface.
 #[derive(Debug, Clone, Copy)]
@@ -169,34 +172,23 @@ struct Segment {
     to: (f64, f64),
 }
 
-fn length_on_surface(s: &SurfaceData<'_>, seg: Segment) -> f64 {
-    let (du, dv) = (seg.to.0 - seg.from.0, seg.to.1 - seg.from.1);
-    // Quadrature pieces end where the segment crosses a knot.
-    let (knots, a, d) = if du != 0.0 {
-        (s.knots_u, seg.from.0, du)
-    } else {
-        (s.knots_v, seg.from.1, dv)
-    };
-    let mut breaks: Vec<f64> = knots.iter().map(|k| (k - a) / d).collect();
-    breaks.sort_by(f64::total_cmp);
-    let breaks = crate::surface_path::breaks_between(&breaks, 0.0, 1.0);
-    shared::nurbs::arc_length(&breaks, 4, |t| {
-        let d = eval2(s, seg.from.0 + t * du, seg.from.1 + t * dv);
-        let v = [
-            d.su[0] * du + d.sv[0] * dv,
-            d.su[1] * du + d.sv[1] * dv,
-            d.su[2] * du + d.sv[2] * dv,
-        ];
-        (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt()
-    })
-}
-
-/// The tool reference point `M = P + R·n + (H − R)·z` at `(u, v)`.
-pub fn tool_point(s: &SurfaceData<'_>, tool: &SurfaceTool, u: f64, v: f64) -> [f64; 3] {
-    let d = eval2(s, u, v);
-    let n = unit_normal(d.su, d.sv);
-    let (r, h, k) = (tool.radius_mm, tool.length_mm, tool.normal_sign);
-    core::array::from_fn(|x| d.p[x] + r * k * n[x] + (h - r) * tool.axis[x])
+/// The tool reference point `M = S + R·n + (H − R)·z` at `(u, v)` of a surface, with the
+/// reference evaluator; `sign` turns `S_u × S_v` to the tool's side.
+pub fn tool_point(
+    s: &SurfaceData<'_>,
+    radius_mm: f64,
+    length_mm: f64,
+    sign: f64,
+    u: f64,
+    v: f64,
+) -> [f64; 3] {
+    let e = piegl_tiller_surface(s, u, v);
+    let k = radius_mm * sign;
+    [
+        e.p[0] + k * e.normal[0],
+        e.p[1] + k * e.normal[1],
+        e.p[2] + k * e.normal[2] + (length_mm - radius_mm),
+    ]
 }
 
 fn rapid(line: u32, a: [f64; 3], b: [f64; 3], machine: &Machine) -> CommandBlock {
@@ -208,19 +200,75 @@ fn rapid(line: u32, a: [f64; 3], b: [f64; 3], machine: &Machine) -> CommandBlock
     blk.ctrl[1] = [b[0], b[1], b[2], 1.0];
     blk.flags = FLAG_RAPID | FLAG_STOP_AT_END;
     blk.feed_mm_per_min = machine.rapid_mm_per_min;
-    blk.length_mm = ((b[0] - a[0]).powi(2) + (b[1] - a[1]).powi(2) + (b[2] - a[2]).powi(2)).sqrt();
+    blk.length_mm = path::norm([b[0] - a[0], b[1] - a[1], b[2] - a[2]]);
     blk.acc_mm_per_s2 = machine.path_acc_mm_per_s2;
     blk.jerk_mm_per_s3 = machine.path_jerk_mm_per_s3;
     blk
 }
 
-/// The blocks of a planned workingstep, numbered from 0 in order (renumber when merging
-/// with other blocks). Every block validates.
+/// Rapids from `from` to `to` at the safe height: up, across, down (the legs of no
+/// length left out).
+fn travel(
+    out: &mut Vec<CommandBlock>,
+    line: u32,
+    from: [f64; 3],
+    to: [f64; 3],
+    safe_z: f64,
+    machine: &Machine,
+) {
+    let z = safe_z.max(from[2]).max(to[2]);
+    let legs = [from, [from[0], from[1], z], [to[0], to[1], z], to];
+    for w in legs.windows(2) {
+        if path::norm([w[1][0] - w[0][0], w[1][1] - w[0][1], w[1][2] - w[0][2]]) > 1e-9 {
+            out.push(rapid(line, w[0], w[1], machine));
+        }
+    }
+}
+
+/// What the blocks of a workingstep need besides the step and its path.
+struct Emit<'a> {
+    patches: &'a [OwnedSurface],
+    radius_mm: f64,
+    length_mm: f64,
+    normal_sign: i32,
+    feed_mm_per_min: f64,
+    line: u32,
+    machine: &'a Machine,
+}
+
+impl Emit<'_> {
+    /// The surface block of the piece `local` (patch-local `(u, v)`) of a pass on `patch`.
+    fn block(&self, patch: &OwnedSurface, local: Segment) -> CommandBlock {
+        let mut b = CommandBlock::empty(BlockKind::Motion, 0, self.line);
+        b.flags = FLAG_SURFACE;
+        b.degree = patch.degree_u as u32;
+        b.n_ctrl = patch.ctrl.len().min(MAX_CTRL) as u32;
+        b.ctrl[..patch.ctrl.len().min(MAX_CTRL)]
+            .copy_from_slice(&patch.ctrl[..patch.ctrl.len().min(MAX_CTRL)]);
+        let sp = &mut b.surface;
+        sp.degree_v = patch.degree_v as u32;
+        sp.uv_start = [local.from.0, local.from.1];
+        sp.uv_end = [local.to.0, local.to.1];
+        sp.tool_radius_mm = self.radius_mm;
+        sp.tool_length_mm = self.length_mm;
+        sp.normal_sign = self.normal_sign;
+        b.feed_mm_per_min = self.feed_mm_per_min.min(self.machine.max_feed_mm_per_min);
+        b.acc_mm_per_s2 = self.machine.path_acc_mm_per_s2;
+        b.jerk_mm_per_s3 = self.machine.path_jerk_mm_per_s3;
+        b.length_mm = path::length(&b);
+        b
+    }
+}
+
+/// The blocks of a planned workingstep, unplanned (feed caps are the programmed feed):
+/// from `start` (the tool point before it) to the safe height above its last pass.
+/// Returns the blocks and where they leave the tool.
 pub fn surface_commands(
     step: &FreeformStep,
     path: &SurfacePath,
     machine: &Machine,
-) -> Result<Vec<SurfaceCommand>, StepError> {
+    start: [f64; 3],
+) -> Result<(Vec<CommandBlock>, [f64; 3]), StepError> {
     let fail = |message: String| StepError {
         line: step.line,
         id: Some(step.id),
@@ -228,32 +276,37 @@ pub fn surface_commands(
         message,
     };
     let whole = step.surface.data();
-    let pieces = split_surface(&whole, MAX_SURF_CTRL)
-        .ok_or_else(|| fail("the surface could not be split into block sections".into()))?;
-    let sections: Vec<Section> = pieces
-        .iter()
-        .map(|p| SurfaceSection::from_data(&p.data()).map(|s| (s, p.domain())))
-        .collect::<Option<_>>()
-        .ok_or_else(|| fail("a surface piece exceeds the block section".into()))?;
-    let tool = SurfaceTool {
+    let (p, q) = (whole.degree_u, whole.degree_v);
+    if (p + 1) * (q + 1) > MAX_CTRL {
+        return Err(fail(format!(
+            "degrees p={p} q={q}: a Bézier patch of {} control points exceeds a block's {MAX_CTRL}",
+            (p + 1) * (q + 1)
+        )));
+    }
+    let patches = bezier_patches(&whole)
+        .ok_or_else(|| fail("the surface could not be split into Bézier patches".into()))?;
+    let emit = Emit {
+        patches: &patches,
         radius_mm: step.tool.radius_mm(),
         length_mm: step.tool.length_mm,
-        axis: [0.0, 0.0, 1.0],
-        normal_sign: path.normal_sign,
+        normal_sign: if path.normal_sign < 0.0 { -1 } else { 1 },
+        feed_mm_per_min: step.technology.feed_mm_per_min,
+        line: step.line,
+        machine,
     };
     // The surface segments in order, and where the tool lifts between them.
     let mut runs: Vec<Vec<Segment>> = Vec::new();
-    for (k, p) in path.passes.iter().enumerate() {
+    for (k, ps) in path.passes.iter().enumerate() {
         let seg = Segment {
-            from: path.uv(p.from, p.fixed),
-            to: path.uv(p.to, p.fixed),
+            from: path.uv(ps.from, ps.fixed),
+            to: path.uv(ps.to, ps.fixed),
         };
         match (path.mode, runs.last_mut()) {
             (PathMode::Zigzag, Some(run)) => {
                 let prev = path.passes[k - 1];
                 run.push(Segment {
                     from: path.uv(prev.to, prev.fixed),
-                    to: path.uv(p.from, p.fixed),
+                    to: path.uv(ps.from, ps.fixed),
                 });
                 run.push(seg);
             }
@@ -262,74 +315,85 @@ pub fn surface_commands(
     }
     // Safe height: above every tool reference point of the surface.
     let (u0, u1, v0, v1) = OwnedSurface::from_data(&whole).domain();
+    let sign = f64::from(emit.normal_sign);
     let mut top = f64::NEG_INFINITY;
     for i in 0..=64 {
         for j in 0..=64 {
             let u = u0 + (u1 - u0) * i as f64 / 64.0;
             let v = v0 + (v1 - v0) * j as f64 / 64.0;
-            top = top.max(tool_point(&whole, &tool, u, v)[2]);
+            top = top.max(tool_point(&whole, emit.radius_mm, emit.length_mm, sign, u, v)[2]);
         }
     }
     let safe_z = top + LIFT_CLEARANCE_MM;
-    let line = step.line;
     let mut out = Vec::new();
-    let mut last_top: Option<[f64; 3]> = None;
+    let mut pos = start;
     for run in &runs {
-        let Some(first) = run.first() else { continue };
-        let m0 = tool_point(&whole, &tool, first.from.0, first.from.1);
-        let above = [m0[0], m0[1], safe_z];
-        if let Some(t) = last_top {
-            out.push(SurfaceCommand::Motion(Box::new(rapid(
-                line, t, above, machine,
-            ))));
-        }
-        out.push(SurfaceCommand::Motion(Box::new(rapid(
-            line, above, m0, machine,
-        ))));
+        let mut blocks = Vec::new();
         for seg in run {
-            for (sub, section) in cut_at_pieces(*seg, &sections) {
-                let mut b = SurfaceBlock::empty(0, line);
-                b.surface = *section;
-                b.tool = tool;
-                let p = &mut b.path;
-                p.degree = 1;
-                p.n_ctrl = 2;
-                p.knots[..4].copy_from_slice(&[0.0, 0.0, 1.0, 1.0]);
-                p.ctrl[0] = [sub.from.0, sub.from.1, 0.0, 1.0];
-                p.ctrl[1] = [sub.to.0, sub.to.1, 0.0, 1.0];
-                p.feed_mm_per_min = step.technology.feed_mm_per_min;
-                p.length_mm = length_on_surface(&whole, sub);
-                p.acc_mm_per_s2 = machine.path_acc_mm_per_s2;
-                p.jerk_mm_per_s3 = machine.path_jerk_mm_per_s3;
-                out.push(SurfaceCommand::Surface(Box::new(b)));
+            for (patch, local) in cut_at_patches(*seg, emit.patches) {
+                let b = emit.block(patch, local);
+                if b.length_mm > 1e-9 {
+                    blocks.push(b);
+                }
             }
         }
-        let end = run[run.len() - 1].to;
-        let m1 = tool_point(&whole, &tool, end.0, end.1);
-        let t = [m1[0], m1[1], safe_z];
-        out.push(SurfaceCommand::Motion(Box::new(rapid(
-            line, m1, t, machine,
-        ))));
-        last_top = Some(t);
-    }
-    for (seq, c) in out.iter_mut().enumerate() {
-        let res = match c {
-            SurfaceCommand::Surface(b) => {
-                b.path.seq = seq as u64;
-                b.validate()
-            }
-            SurfaceCommand::Motion(b) => {
-                b.seq = seq as u64;
-                b.validate().map(|_| ())
-            }
+        let (Some(first), Some(last)) = (blocks.first(), blocks.last()) else {
+            continue;
         };
-        res.map_err(|e| fail(format!("internal: {e}")))?;
+        let (m0, m1) = (path::eval(first, 0.0).p, path::eval(last, 1.0).p);
+        travel(&mut out, step.line, pos, m0, safe_z, machine);
+        out.extend(blocks);
+        pos = m1;
     }
-    Ok(out)
+    let top = [pos[0], pos[1], safe_z.max(pos[2])];
+    travel(&mut out, step.line, pos, top, safe_z, machine);
+    Ok((out, top))
 }
 
-/// The parts of an axis-parallel segment on each piece, in the segment's direction.
-fn cut_at_pieces(seg: Segment, sections: &[Section]) -> Vec<(Segment, &SurfaceSection)> {
+/// The blocks of a whole part, planned and numbered, ending with a program end, and the
+/// largest scallop height its paths leave (predicted by the pass planner): every
+/// free-form workingstep in order, from the machine's start (the origin).
+pub fn part_blocks(
+    text: &str,
+    machine: &Machine,
+    period_ns: u64,
+) -> Result<(Vec<CommandBlock>, f64), Vec<StepError>> {
+    let planned = crate::step::check::plan_part(text)?;
+    let mut blocks = Vec::new();
+    let mut pos = [0.0; 3];
+    let mut scallop: f64 = 0.0;
+    let mut last_line = 0;
+    for (step, sp) in &planned {
+        let (b, end) = surface_commands(step, sp, machine, pos).map_err(|e| vec![e])?;
+        blocks.extend(b);
+        pos = end;
+        scallop = scallop.max(sp.predicted_scallop_mm);
+        last_line = step.line;
+    }
+    blocks.push(CommandBlock::empty(BlockKind::ProgramEnd, 0, last_line));
+    crate::blocks::plan(&mut blocks, machine, period_ns);
+    let mut errs = Vec::new();
+    for (seq, b) in blocks.iter_mut().enumerate() {
+        b.seq = seq as u64;
+        if let Err(e) = b.validate() {
+            errs.push(StepError {
+                line: b.source_line,
+                id: None,
+                rule: "internal",
+                message: e.to_string(),
+            });
+        }
+    }
+    if errs.is_empty() {
+        Ok((blocks, scallop))
+    } else {
+        Err(errs)
+    }
+}
+
+/// The parts of an axis-parallel segment on each patch, in the segment's direction, in
+/// the patch's local `[0, 1]²`.
+fn cut_at_patches(seg: Segment, patches: &[OwnedSurface]) -> Vec<(&OwnedSurface, Segment)> {
     let along_u = seg.from.1 == seg.to.1;
     let (fixed, a, b) = if along_u {
         (seg.from.1, seg.from.0, seg.to.0)
@@ -337,18 +401,19 @@ fn cut_at_pieces(seg: Segment, sections: &[Section]) -> Vec<(Segment, &SurfaceSe
         (seg.from.0, seg.from.1, seg.to.1)
     };
     let (lo, hi) = (a.min(b), a.max(b));
-    // The pieces the fixed parameter lies on: the first one for each range of the other.
-    let mut hits: Vec<(f64, f64, &SurfaceSection)> = Vec::new();
-    for (s, (u0, u1, v0, v1)) in sections {
+    // The patches the fixed parameter lies on: the first one for each range of the other.
+    let mut hits: Vec<(f64, f64, &OwnedSurface)> = Vec::new();
+    for s in patches {
+        let (u0, u1, v0, v1) = s.domain();
         let (f0, f1, r0, r1) = if along_u {
-            (*v0, *v1, *u0, *u1)
+            (v0, v1, u0, u1)
         } else {
-            (*u0, *u1, *v0, *v1)
+            (u0, u1, v0, v1)
         };
         if fixed < f0 || fixed > f1 || r1 <= lo || r0 >= hi {
             continue;
         }
-        if hits.iter().any(|h| h.0 == r0) {
+        if hits.iter().any(|h| h.0 == r0.max(lo)) {
             continue;
         }
         hits.push((r0.max(lo), r1.min(hi), s));
@@ -357,21 +422,19 @@ fn cut_at_pieces(seg: Segment, sections: &[Section]) -> Vec<(Segment, &SurfaceSe
     if b < a {
         hits.reverse();
     }
+    let local = |x: f64, lo: f64, hi: f64| ((x - lo) / (hi - lo)).clamp(0.0, 1.0);
     hits.into_iter()
         .map(|(r0, r1, s)| {
             let (p, q) = if b < a { (r1, r0) } else { (r0, r1) };
-            let sub = if along_u {
-                Segment {
-                    from: (p, fixed),
-                    to: (q, fixed),
-                }
+            let (u0, u1, v0, v1) = s.domain();
+            let (from, to) = if along_u {
+                let f = local(fixed, v0, v1);
+                ((local(p, u0, u1), f), (local(q, u0, u1), f))
             } else {
-                Segment {
-                    from: (fixed, p),
-                    to: (fixed, q),
-                }
+                let f = local(fixed, u0, u1);
+                ((f, local(p, v0, v1)), (f, local(q, v0, v1)))
             };
-            (sub, s)
+            (s, Segment { from, to })
         })
         .collect()
 }

@@ -8,9 +8,6 @@
 use crate::nurbs::{self, CurveError, MAX_CTRL, MAX_KNOTS};
 use iceoryx2::prelude::ZeroCopySend;
 
-mod surface;
-pub use surface::{SurfaceBlock, SurfaceSection, SurfaceTool, SURFACE_KIND};
-
 /// Bumped whenever a payload's layout or meaning changes.
 pub const PROTOCOL_VERSION: u32 = 3;
 

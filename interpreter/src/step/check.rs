@@ -41,12 +41,9 @@ pub fn check_part(name: &str, text: &str, machine: &shared::Machine) -> Result<S
         if n == 1 { "" } else { "s" }
     );
     for (s, p) in &planned {
-        let cmds = crate::surface_blocks::surface_commands(s, p, machine)
+        let (cmds, _) = crate::surface_blocks::surface_commands(s, p, machine, [0.0; 3])
             .map_err(|e| format_errors(name, &[e]))?;
-        let n_surf = cmds
-            .iter()
-            .filter(|c| matches!(c, crate::surface_blocks::SurfaceCommand::Surface(_)))
-            .count();
+        let n_surf = cmds.iter().filter(|c| c.is_surface()).count();
         let sf = &s.surface;
         let _ = writeln!(o, "  #{} '{}' (line {}):", s.id, s.name, s.line);
         let _ = writeln!(

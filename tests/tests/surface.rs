@@ -1,0 +1,103 @@
+//! A STEP-NC free-form part (seed 000) through the real three processes: `cnc run
+//! part.stp` compiles the surface workingstep into surface blocks and runs them to done.
+
+use std::process::Command;
+use tests::{cnc_exe, csv, report, temp_dir};
+
+#[test]
+fn seed_surface_part_runs_to_done() {
+    let part =
+        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../examples/seed-surface.stp");
+    let dir = temp_dir("seed-surface");
+    let out = Command::new(cnc_exe())
+        .args(["run", "--clock", "sim", "--no-report", "--out"])
+        .arg(&dir)
+        .arg(&part)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "cnc run failed:\n{}\n{}",
+        String::from_utf8_lossy(&out.stdout),
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let rep = report(&dir);
+    assert_eq!(rep["outcome"], "done", "{rep:#}");
+    assert!(rep["fault"].is_null());
+    // The pass planner's scallop height, within the part's 0.02 mm tolerance.
+    let scallop = rep["max_scallop_mm"].as_f64().unwrap();
+    assert!(scallop > 0.0 && scallop <= 0.02, "{scallop}");
+    // The surface paths are long (about 6 m of contact path plus the rapids).
+    assert!(rep["path_length_mm"].as_f64().unwrap() > 5000.0, "{rep:#}");
+    // The contour analysis measures surface runs on their tool point path.
+    let contour = rep["max_contour_error_um"].as_f64().unwrap();
+    assert!(contour < 5.0, "{contour} µm");
+    // The set-points' acceleration (second differences) stays within the path's: the
+    // curvature of the tool point path, and its kinks where the p = 2 surface's normal
+    // turns at a rate that jumps, are planned for.
+    let (_, sp) = csv(&dir.join("setpoints.csv"));
+    let period_s = 1e-3;
+    let mut worst: f64 = 0.0;
+    for w in sp.windows(3) {
+        let a: Vec<f64> = (2..5)
+            .map(|k| (w[2][k] - 2.0 * w[1][k] + w[0][k]) / (period_s * period_s))
+            .collect();
+        worst = worst.max((a[0] * a[0] + a[1] * a[1] + a[2] * a[2]).sqrt());
+    }
+    let limit = shared::Machine::default().path_acc_mm_per_s2;
+    assert!(
+        worst <= limit * 1.001,
+        "set-point acceleration {worst} mm/s²"
+    );
+    // `cnc check --estimate` steps the same blocks through the same engine: the very
+    // cycles of the run.
+    let out = Command::new(cnc_exe())
+        .args(["check", "--estimate", "--json"])
+        .arg(&part)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let est: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(est["cycles"], rep["cycles"]);
+    // The command log holds ordinary blocks: replaying it reproduces the run.
+    let replay = dir.join("replay");
+    let out = Command::new(cnc_exe())
+        .args(["replay", "--clock", "sim", "--no-report", "--out"])
+        .arg(&replay)
+        .arg(&dir)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    for f in ["setpoints.csv", "commands.log"] {
+        let same = std::fs::read(dir.join(f)).unwrap() == std::fs::read(replay.join(f)).unwrap();
+        assert!(same, "replay: {f} differs");
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// `cnc check` describes the part and its blocks.
+#[test]
+fn seed_surface_part_checks() {
+    let part =
+        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../examples/seed-surface.stp");
+    let out = Command::new(cnc_exe())
+        .arg("check")
+        .arg(&part)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(text.contains("surface blocks"), "{text}");
+}
