@@ -947,6 +947,9 @@ impl Engine {
             if let Current::None = self.cur {
                 match self.window.pop() {
                     Some(b) => {
+                        // A step from a block's start measures no fluctuation: the path
+                        // point may jump there (onto or off a surface's contact path).
+                        crossed = true;
                         if let Err(f) = self.start(b) {
                             // Not loadable after all: stand still here, fault next tick.
                             self.deferred.get_or_insert(f);
