@@ -17,9 +17,15 @@
 //! Criterion reports mean times. The hard-timing target is a percentile (p99 of one
 //! cycle), so the same binary then times 200 000 single cycles per case with
 //! `std::time::Instant` and prints p50 / p90 / p99 / p99.9 / max, together with the cost
-//! of the timer itself (`CYCLE_PCT_N` sets the count; 0 skips it). The subscriber is
-//! drained between timed stretches, never inside one: in the machine it is another
-//! process's work.
+//! of the timer itself, in 5 runs: pooled, and as the minimum per cycle over the runs
+//! (the cycles are deterministic, so that takes out most of the machine's noise).
+//! `CYCLE_PCT_N` sets the count (0 skips it), `CYCLE_PCT_REPEATS` the runs and
+//! `CYCLE_CRITERION=0` leaves criterion out.
+//!
+//! The subscriber takes every set-point after its cycle, as the servo-sim does each
+//! period (so the publisher gets one sample back per cycle, as in the machine), outside
+//! the timed part: in the machine it is another process's work. Criterion therefore
+//! also times each cycle on its own and sums, which adds one timer pair per cycle.
 
 use criterion::Criterion;
 use iceoryx2::node::Node;
@@ -31,17 +37,13 @@ use shared::ipc::PubSub;
 use shared::path;
 use shared::profile::Limits as Jerk;
 use shared::protocol::{
-    BlockKind, CommandBlock, Services, Setpoint, CYCLE_QUEUE, FLAG_SURFACE, PROTOCOL_VERSION,
+    BlockKind, CommandBlock, Services, Setpoint, FLAG_SURFACE, PROTOCOL_VERSION,
 };
 use std::hint::black_box;
 use std::time::{Duration, Instant};
 
 /// The period of issue #6's target: a 100 µs cycle.
 const PERIOD_NS: u64 = 100_000;
-
-/// Cycles published between two drains of the subscriber: well inside its buffer, so the
-/// queue never fills and no send overwrites.
-const DRAIN_EVERY: u64 = (CYCLE_QUEUE / 2) as u64;
 
 /// Cycles run before any measurement: connections made, caches warm, past the first
 /// block's start.
@@ -295,11 +297,8 @@ impl<Src: BlockSource> Case<Src> {
         };
         for _ in 0..WARMUP_CYCLES {
             case.step();
-            if case.cycle.is_multiple_of(DRAIN_EVERY) {
-                assert!(case.drain() > 0, "the subscriber receives the set-points");
-            }
+            assert_eq!(case.drain(), 1, "the subscriber receives every set-point");
         }
-        case.drain();
         case
     }
 
@@ -332,17 +331,14 @@ impl<Src: BlockSource> Case<Src> {
             ..Setpoint::default()
         };
         let mut ns = Vec::with_capacity(n);
-        for k in 0..n {
+        for _ in 0..n {
             let t0 = Instant::now();
             if let Ok(s) = self.publisher.loan_uninit() {
                 let _ = black_box(s.write_payload(sp).send());
             }
             ns.push(t0.elapsed().as_nanos() as u64);
-            if (k as u64 + 1).is_multiple_of(DRAIN_EVERY) {
-                self.drain();
-            }
+            self.drain();
         }
-        self.drain();
         ns
     }
 
@@ -382,20 +378,15 @@ impl<Src: BlockSource> Case<Src> {
         n
     }
 
-    /// `iters` cycles, timed in stretches of `DRAIN_EVERY` with the drain between them
-    /// left out.
+    /// `iters` cycles, each timed on its own so that the subscriber's drain after it is
+    /// left out (one timer pair per cycle is included: see the timer overhead row).
     fn timed(&mut self, iters: u64) -> Duration {
         let mut total = Duration::ZERO;
-        let mut left = iters;
-        while left > 0 {
-            let k = left.min(DRAIN_EVERY);
+        for _ in 0..iters {
             let t0 = Instant::now();
-            for _ in 0..k {
-                self.step();
-            }
+            self.step();
             total += t0.elapsed();
             self.drain();
-            left -= k;
         }
         total
     }
@@ -403,15 +394,12 @@ impl<Src: BlockSource> Case<Src> {
     /// `n` cycles timed one by one (ns each).
     fn each(&mut self, n: usize) -> Vec<u64> {
         let mut ns = Vec::with_capacity(n);
-        for k in 0..n {
+        for _ in 0..n {
             let t0 = Instant::now();
             self.step();
             ns.push(t0.elapsed().as_nanos() as u64);
-            if (k as u64 + 1).is_multiple_of(DRAIN_EVERY) {
-                self.drain();
-            }
+            self.drain();
         }
-        self.drain();
         ns
     }
 }
@@ -540,6 +528,40 @@ fn filter() -> Option<String> {
     None
 }
 
+/// A count from the environment, or `default`.
+fn env_count(var: &str, default: usize) -> usize {
+    std::env::var(var)
+        .ok()
+        .and_then(|s| s.parse().ok())
+        .unwrap_or(default)
+}
+
+/// Times `n` cycles of a case made afresh `repeats` times. The cycles are deterministic
+/// (the same work at the same index in every run), so the minimum per index over the
+/// runs is the cycle's own cost with most of the machine's noise (preemption,
+/// interrupts, the other builders) taken out; the pooled runs are what the machine gave.
+fn measure<Src: BlockSource>(
+    name: &str,
+    make: impl Fn() -> (Survey, Case<Src>),
+    n: usize,
+    repeats: usize,
+) -> Survey {
+    let mut runs = Vec::with_capacity(repeats);
+    let mut survey = None;
+    for _ in 0..repeats {
+        let (s, mut case) = make();
+        runs.push(case.each(n));
+        survey = Some(s);
+    }
+    let min: Vec<u64> = (0..n)
+        .map(|k| runs.iter().filter_map(|r| r.get(k)).copied().min())
+        .map(|m| m.unwrap_or(0))
+        .collect();
+    print_row(name, runs.concat());
+    print_row(&format!("  min of {repeats} per cycle"), min);
+    survey.expect("at least one run")
+}
+
 fn percentiles() {
     let args: Vec<String> = std::env::args().collect();
     if args.iter().any(|a| a == "--list") {
@@ -547,23 +569,24 @@ fn percentiles() {
     }
     // Under `cargo test` (no `--bench`) a short run only proves the code works.
     let bench = args.iter().any(|a| a == "--bench");
-    let n = std::env::var("CYCLE_PCT_N")
-        .ok()
-        .and_then(|s| s.parse().ok())
-        .unwrap_or(if bench { PCT_N } else { 2_000 });
+    let n = env_count("CYCLE_PCT_N", if bench { PCT_N } else { 2_000 });
+    let repeats = env_count("CYCLE_PCT_REPEATS", if bench { 5 } else { 2 }).max(1);
     if n == 0 {
         return;
     }
     let wanted = |name: &str| filter().is_none_or(|f| name.contains(&f));
     println!();
-    println!("Per-cycle percentiles: {n} single cycles per case, period {PERIOD_NS} ns, each timed with std::time::Instant (ns)");
+    println!(
+        "Per-cycle percentiles (ns): {n} single cycles per case and run, {repeats} runs, \
+         period {PERIOD_NS} ns, each cycle timed with std::time::Instant"
+    );
     println!(
         "{:<26} {:>8} {:>7} {:>7} {:>7} {:>7} {:>8} {:>9}",
         "case", "cycles", "mean", "p50", "p90", "p99", "p99.9", "max"
     );
     // What one `Instant::now()` .. `elapsed()` pair costs with nothing between: it is
     // included in every figure below.
-    let timer: Vec<u64> = (0..n)
+    let timer: Vec<u64> = (0..n * repeats)
         .map(|_| {
             let t0 = black_box(Instant::now());
             t0.elapsed().as_nanos() as u64
@@ -572,19 +595,18 @@ fn percentiles() {
     print_row("timer overhead (empty)", timer);
     let mut surveys = Vec::new();
     if wanted("cycle/nurbs_deg5_publish") {
-        let (s, mut case) = deg5_case();
-        print_row("publish alone (loan+send)", case.publish_only(n));
-        print_row("cycle/nurbs_deg5_publish", case.each(n));
+        let (_, mut case) = deg5_case();
+        print_row("publish alone (loan+send)", case.publish_only(n * repeats));
+        drop(case);
+        let s = measure("cycle/nurbs_deg5_publish", deg5_case, n, repeats);
         surveys.push(("cycle/nurbs_deg5_publish", s));
     }
     if wanted("cycle/surface_p3q3") {
-        let (s, mut case) = surface_case();
-        print_row("cycle/surface_p3q3", case.each(n));
+        let s = measure("cycle/surface_p3q3", surface_case, n, repeats);
         surveys.push(("cycle/surface_p3q3", s));
     }
     if wanted("cycle/profile_worst") {
-        let (s, mut case) = worst_case();
-        print_row("cycle/profile_worst", case.each(n));
+        let s = measure("cycle/profile_worst", worst_case, n, repeats);
         surveys.push(("cycle/profile_worst", s));
     }
     println!("target (issue #6): p99 <= 2000 ns; period 100 000 ns");
@@ -599,8 +621,11 @@ fn percentiles() {
 }
 
 fn main() {
-    let mut c = Criterion::default().configure_from_args();
-    criterion_benches(&mut c);
-    c.final_summary();
+    // CYCLE_CRITERION=0: the percentiles alone.
+    if env_count("CYCLE_CRITERION", 1) != 0 {
+        let mut c = Criterion::default().configure_from_args();
+        criterion_benches(&mut c);
+        c.final_summary();
+    }
     percentiles();
 }
