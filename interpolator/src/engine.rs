@@ -318,6 +318,30 @@ fn block_jerk(b: &CommandBlock) -> Jerk {
     }
 }
 
+/// A speed (zero acceleration) from which `v` is reached within `d` mm under `lim`: the
+/// highest such to within an eighth of a per cent, never above it (a few steps of
+/// bisection on the closed-form distance; cheap enough for the cycle).
+fn reach_within(lim: Jerk, v: f64, d: f64) -> f64 {
+    if d <= 0.0 {
+        return v;
+    }
+    // Upper bracket: the speed change whose distance alone at the higher speed is `d`
+    // cannot exceed reaching it at jerk and acceleration limits from rest.
+    let (mut lo, mut hi) = (
+        v,
+        v + (2.0 * lim.acc * d).sqrt().max((lim.jerk * d * d).cbrt()),
+    );
+    for _ in 0..10 {
+        let mid = 0.5 * (lo + hi);
+        if lim.change_distance(mid, v) <= d {
+            lo = mid;
+        } else {
+            hi = mid;
+        }
+    }
+    lo
+}
+
 fn min_lim(a: Jerk, b: Jerk) -> Jerk {
     Jerk {
         acc: a.acc.min(b.acc),
@@ -673,7 +697,7 @@ impl Engine {
         // The last low seen (distance, speed) and the limits of the blocks since it: a
         // lower limit further on that those blocks alone can brake for from the last low
         // needs no braking before it (keeping the last low keeps it too), so it is left
-        // out (when there is room to spare). Without this, its braking would be judged under the lowest limits of the
+        // out (when there is room to spare: see `spare`). Without this, its braking would be judged under the lowest limits of the
         // whole way, including blocks before the last low where the machine may brake
         // harder, and could look lost long before it is.
         let mut last_low: Option<(f64, f64)> = None;
@@ -687,7 +711,7 @@ impl Engine {
                     // a full cycle after the last low is passed, not inside the cycle
                     // that crosses it.
                     (Some((dl, vl)), Some(seg)) => {
-                        seg.change_distance(v, vl) + 2.0 * v_top * self.t_s <= d - dl
+                        seg.change_distance(v, vl) + self.spare(vl, lim, seg) <= d - dl
                     }
                     _ => false,
                 };
@@ -706,13 +730,22 @@ impl Engine {
                     }
                     n += 1;
                 } else if let Some(last) = out.get_mut(MAX_AHEAD - 1) {
-                    last.v = v;
+                    // No room for it: the last kept limit takes it over, lowered to the
+                    // highest speed from which this one can still be kept between the two
+                    // (found conservatively, with time to spare: see `spare`). Lowering
+                    // it to this one's speed would be safe too, but on a long chain of
+                    // tiny blocks slowing down to a stop it makes the machine crawl.
+                    let room = d - last.d - self.spare(last.v, lim, lim);
+                    last.v = last.v.min(reach_within(lim, v, room));
                     last.lim = min_lim(last.lim, lim);
                     last.next = min_lim(last.next, next);
                 }
             }
             // Beyond the stopping distance nothing can bind, and nothing is below zero.
-            if v <= 0.0 || d > lim.change_distance(v_top, 0.0) + v_top * self.t_s {
+            // (From `v_top` to rest, after this cycle and after the time it takes to
+            // bring a positive acceleration back to zero.)
+            let easing = self.acc.max(0.0) / lim.jerk;
+            if v <= 0.0 || d > lim.change_distance(v_top, 0.0) + v_top * (self.t_s + easing) {
                 break;
             }
             let Some(b) = self.window.get(i) else {
@@ -731,6 +764,18 @@ impl Engine {
             i += 1;
         }
         n
+    }
+
+    /// Distance to allow for past a kept limit of speed `v` before braking for a limit
+    /// beyond it can begin. A limit is kept by being passed no faster than `v`, perhaps
+    /// still accelerating: easing off a positive acceleration `a` (at most the lower of
+    /// `acc` and `√(2·jerk·v)`, since `v`'s own limit was kept) takes `a/jerk` seconds at
+    /// speeds up to `v`; and the braking may only begin in the cycle after the one that
+    /// crosses it (two periods).
+    fn spare(&self, v: f64, a: Jerk, b: Jerk) -> f64 {
+        let jerk = a.jerk.min(b.jerk);
+        let acc = a.acc.max(b.acc).min((2.0 * jerk * v).sqrt());
+        v * (2.0 * self.t_s + acc / jerk)
     }
 
     /// The cycle's profile step in motion `m`: the new speed and acceleration and the
@@ -820,6 +865,10 @@ impl Engine {
                 // A limit passed in this cycle was kept on passing (the room was not
                 // negative before): it binds no more.
                 Some(l) if x.s > l.d => f64::INFINITY,
+                // Easing off now keeps the speed below it for good: no hurry. (The
+                // acceleration need not be back to zero where a limit is passed: what
+                // follows it has limits of its own.)
+                Some(l) if x.v + x.a.max(0.0).powi(2) / (2.0 * l.lim.jerk) <= l.v => f64::INFINITY,
                 Some(l) => l.d - x.s - l.lim.brake_distance(x, l.v),
                 None => f64::INFINITY,
             }

@@ -712,17 +712,11 @@ pub fn plan(blocks: &mut [CommandBlock], machine: &Machine, period_ns: u64) {
             end[i - 1] = start[i];
         }
     }
-    // Forward pass: and able to reach it from its start speed.
-    for i in 0..n {
-        if !motion(&blocks[i]) {
-            continue;
-        }
-        let len = blocks[i].length_mm;
-        end[i] = end[i].min(lim(&blocks[i]).reachable_speed(start[i], len));
-        if i + 1 < n && motion(&blocks[i + 1]) {
-            start[i + 1] = start[i + 1].min(end[i]);
-        }
-    }
+    // No forward pass: the interpolator accelerates as fast as its limits allow by
+    // itself, along the whole path at once. A forward pass (each block's end speed
+    // reachable from its start with zero acceleration at both) would hold it to a
+    // staircase of stops in acceleration at every block end: on a chain of tiny segments
+    // from rest, a crawl.
     for (i, b) in blocks.iter_mut().enumerate() {
         if motion(b) {
             b.start_feed_mm_per_min = start[i] * 60.0;
