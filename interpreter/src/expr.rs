@@ -55,6 +55,7 @@ impl Cursor {
 
     pub fn err(&self, rule: &'static str, col: u32, message: impl Into<String>) -> Diagnostic {
         Diagnostic {
+            file: None,
             line: self.line,
             col,
             rule,

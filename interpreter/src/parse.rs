@@ -12,6 +12,9 @@ use crate::expr::{at_function, param_ref, real_value, Cursor, MAX_NUMBERED};
 /// `line:col: rule: message` (after the file name in `cnc check`).
 #[derive(Debug, Clone, PartialEq)]
 pub struct Diagnostic {
+    /// The file the problem is in when it is not the program itself: a subroutine file
+    /// it calls (`o<name> call` reading `name.ngc`), as its path was found.
+    pub file: Option<String>,
     pub line: u32,
     pub col: u32,
     /// What the program broke, in the words of the manual a machinist would open: the
@@ -223,6 +226,7 @@ fn significant(text: &str, line: u32, messages: &mut Vec<String>) -> Result<Curs
                     }
                     if c == '(' {
                         return Err(Diagnostic {
+                            file: None,
                             line,
                             col,
                             rule: "syntax",
@@ -233,6 +237,7 @@ fn significant(text: &str, line: u32, messages: &mut Vec<String>) -> Result<Curs
                 }
                 if !closed {
                     return Err(Diagnostic {
+                        file: None,
                         line,
                         col: start,
                         rule: "syntax",
@@ -461,6 +466,7 @@ pub fn flow(o_words: &[Option<OWord>]) -> (Flow, Vec<Diagnostic>) {
     for (i, o) in o_words.iter().enumerate() {
         let Some(o) = o else { continue };
         let err = |m: String| Diagnostic {
+            file: None,
             line: i as u32 + 1,
             col: o.col,
             rule: "O-word",
@@ -553,6 +559,7 @@ pub fn flow(o_words: &[Option<OWord>]) -> (Flow, Vec<Diagnostic>) {
     }
     for t in open {
         errors.push(Diagnostic {
+            file: None,
             line: t.at as u32 + 1,
             col: o_words[t.at].as_ref().map_or(1, |o| o.col),
             rule: "O-word",
