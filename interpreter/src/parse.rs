@@ -203,7 +203,7 @@ impl OKind {
 /// comments taken out, whitespace dropped (LinuxCNC ignores it everywhere outside
 /// comments, even inside numbers and parameter names), letters upper-cased.
 fn significant(text: &str, line: u32, messages: &mut Vec<String>) -> Result<Cursor, Diagnostic> {
-    let mut chars = Vec::new();
+    let mut chars = Vec::with_capacity(text.len());
     let mut it = text.chars();
     let mut col = 0u32;
     while let Some(c) = it.next() {
@@ -412,6 +412,10 @@ fn o_head(cur: &mut Cursor, col: u32) -> Result<OWord, Diagnostic> {
 /// The O-word of a line, read without evaluating its values (to learn a program's
 /// structure before running it), or `None` for a line without one.
 pub fn o_word_of(text: &str, line: u32) -> Result<Option<OWord>, Diagnostic> {
+    // Most lines have no `O` at all: no need to read them into a cursor.
+    if !text.bytes().any(|b| b.eq_ignore_ascii_case(&b'o')) {
+        return Ok(None);
+    }
     let mut cur = significant(text, line, &mut Vec::new())?;
     if let Some('/') = cur.peek() {
         cur.pos += 1;
