@@ -722,6 +722,9 @@ fn errors_in_subroutine_files_name_the_file_and_its_line() {
         ),
         "{shown}"
     );
+    // A name that would leave the directories is refused, not looked up.
+    let e = with_dirs("o<../deep> call\n", &[&dir]).expect_err("refused");
+    assert!(e[0].message.contains("only letters, digits"), "{e:?}");
     // Without directories (the built-in demo, a program from memory) nothing is read.
     let e = errors("o<bad> call\n");
     assert_eq!(e[0].0, 1, "{e:?}");

@@ -2,7 +2,8 @@
 //! program defines no `o<name> sub` reads `name.ngc` (the name lower case, as LinuxCNC
 //! makes it) from the first directory of [`super::Options::subroutine_dirs`] that has
 //! one. The file holds `o<name> sub … o<name> endsub`, which may be followed by `M2` or
-//! `%` (never run: the return leaves the file first).
+//! `%` (never run: the return leaves the file first). As in LinuxCNC, such a name has
+//! only letters, digits, `-` and `_`.
 //!
 //! The files are read before the program runs and their lines joined after the
 //! program's own, so the O-word flow ([`super::flow`]) runs them as it runs a subroutine
@@ -62,6 +63,18 @@ pub(super) fn load(main: &[Option<OWord>], dirs: &[PathBuf]) -> (Vec<SubFile>, M
             continue;
         };
         let name = name.to_string();
+        // LinuxCNC's rule for these names; it also keeps the lookup inside the
+        // directories (no `/`, no `..`).
+        if !name
+            .bytes()
+            .all(|b| b.is_ascii_alphanumeric() || b == b'-' || b == b'_')
+        {
+            missing.insert(
+                label,
+                format!("no subroutine o<{name}> in this file, and a subroutine file's name has only letters, digits, `-` and `_`"),
+            );
+            continue;
+        }
         let file_name = format!("{name}.ngc");
         let Some(path) = dirs
             .iter()
