@@ -202,7 +202,8 @@ fn split_at_cusps(c: SplitCurve, machine: &Machine) -> Vec<SplitCurve> {
 
 /// Turns moves into unplanned command blocks (feeds are the caps, speeds not yet set).
 pub fn build(moves: &[Move], machine: &Machine) -> Vec<CommandBlock> {
-    let mut out: Vec<CommandBlock> = Vec::new();
+    // Most moves make one block; blocks are large, so growing the list by copying costs.
+    let mut out: Vec<CommandBlock> = Vec::with_capacity(moves.len());
     // `G61.1` exact stop mode: every move ends at rest.
     let mut exact_stop = false;
     let stop_after_last = |out: &mut Vec<CommandBlock>| {

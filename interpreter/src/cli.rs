@@ -50,6 +50,10 @@ pub enum Command {
         /// Read the program as `linuxcnc` or `fanuc` instead of detecting the dialect.
         #[arg(long)]
         dialect: Option<crate::program::Dialect>,
+        /// A directory where `o<name> call` looks for `name.ngc` after the program's own
+        /// directory (LinuxCNC's SUBROUTINE_PATH); may be given several times.
+        #[arg(long, value_name = "DIR")]
+        subroutine_path: Vec<PathBuf>,
     },
     /// Replay a command log through a fresh stack, without the NC program. Under the
     /// lock-step servo the new setpoints.csv and feedback.csv equal the original run's,
@@ -266,6 +270,7 @@ pub fn main() -> ExitCode {
             json,
             period_us,
             dialect,
+            subroutine_path,
         } => {
             let machine = match shared::machine::load(machine.as_deref()) {
                 Ok(m) => m,
@@ -282,7 +287,13 @@ pub fn main() -> ExitCode {
             if crate::step::check::is_step_file(&src.name, &src.text) {
                 return check_step(&src, &machine, period_us, estimate, json);
             }
-            let opts = crate::program::Options { dialect };
+            // Subroutine files are looked for beside the program first, as LinuxCNC
+            // looks in the directory of the program it opened.
+            let beside = program.parent().map(std::path::Path::to_path_buf);
+            let opts = crate::program::Options {
+                dialect,
+                subroutine_dirs: beside.into_iter().chain(subroutine_path).collect(),
+            };
             match process::compile_with(&src.text, &opts, &machine, period_ns) {
                 Ok((prog, blocks)) if estimate => {
                     match crate::estimate::estimate(&blocks, &machine, period_ns) {

@@ -55,6 +55,7 @@ impl Cursor {
 
     pub fn err(&self, rule: &'static str, col: u32, message: impl Into<String>) -> Diagnostic {
         Diagnostic {
+            file: None,
             line: self.line,
             col,
             rule,
@@ -490,15 +491,34 @@ pub(crate) fn whole(v: f64) -> Option<f64> {
     }
 }
 
+/// Powers of ten that are exact in an `f64`.
+const EXACT_POW10: [f64; 23] = [
+    1e0, 1e1, 1e2, 1e3, 1e4, 1e5, 1e6, 1e7, 1e8, 1e9, 1e10, 1e11, 1e12, 1e13, 1e14, 1e15, 1e16,
+    1e17, 1e18, 1e19, 1e20, 1e21, 1e22,
+];
+
 fn number(cur: &mut Cursor) -> Result<f64, Diagnostic> {
     let col = cur.col();
-    let mut text = String::new();
-    let mut digits = 0;
+    let start = cur.pos;
+    // Digits as an integer and the count of those after the point, while exact.
+    let (mut mantissa, mut decimals, mut digits, mut points) = (0u64, 0usize, 0usize, 0usize);
     while let Some(c @ ('0'..='9' | '.')) = cur.peek() {
-        digits += usize::from(c != '.');
-        text.push(c);
+        match c.to_digit(10) {
+            Some(d) => {
+                digits += 1;
+                decimals += usize::from(points > 0);
+                mantissa = mantissa.saturating_mul(10).saturating_add(u64::from(d));
+            }
+            None => points += 1,
+        }
         cur.pos += 1;
     }
+    // The usual number (`12.345`): an integer below 2^53 over an exact power of ten is
+    // one correctly rounded division, the same value `str::parse` gives.
+    if digits > 0 && points <= 1 && mantissa < 1 << 53 && decimals < EXACT_POW10.len() {
+        return Ok(mantissa as f64 / EXACT_POW10[decimals]);
+    }
+    let text: String = cur.chars[start..cur.pos].iter().map(|c| c.0).collect();
     if digits == 0 {
         return Err(cur.err("syntax", col, format!("`{text}` is not a number")));
     }
@@ -570,5 +590,37 @@ mod tests {
         assert_eq!(fail("[1 + 2 F").0, 8);
         assert_eq!(fail("[FOO[1]]").0, 2);
         assert_eq!(fail(&"[".repeat(1000)).0, 66);
+    }
+
+    #[test]
+    fn numbers_read_as_str_parse_reads_them() {
+        for text in [
+            "0",
+            "1.",
+            ".5",
+            "12.345",
+            "0.1",
+            "0.3",
+            "-0",
+            "007.250",
+            "123456789.123456789",
+            "9007199254740993",
+            "0.00000000000000000000001",
+            "1.7976931348623157",
+            "99999999999999999999999",
+        ] {
+            let digits = text.trim_start_matches('-');
+            let mut cur = cursor(digits);
+            assert_eq!(number(&mut cur).ok(), digits.parse::<f64>().ok(), "{text}");
+            assert_eq!(cur.pos, digits.len());
+        }
+        for bad in [".", "1.2.3", ".."] {
+            let e = number(&mut cursor(bad)).unwrap_err();
+            assert!(
+                e.message.contains("is not a number"),
+                "{bad}: {}",
+                e.message
+            );
+        }
     }
 }

@@ -255,6 +255,7 @@ fn run_inner(args: &RunArgs) -> Result<bool, String> {
     // Bad input is rejected before any process starts, let alone any motion.
     let opts = crate::program::Options {
         dialect: args.dialect,
+        ..Default::default()
     };
     let blocks = match process::compile_source(&src.name, &src.text, &opts, &machine, period_ns) {
         Ok(c) => c.blocks,

@@ -12,6 +12,9 @@ use crate::expr::{at_function, param_ref, real_value, Cursor, MAX_NUMBERED};
 /// `line:col: rule: message` (after the file name in `cnc check`).
 #[derive(Debug, Clone, PartialEq)]
 pub struct Diagnostic {
+    /// The file the problem is in when it is not the program itself: a subroutine file
+    /// it calls (`o<name> call` reading `name.ngc`), as its path was found.
+    pub file: Option<String>,
     pub line: u32,
     pub col: u32,
     /// What the program broke, in the words of the manual a machinist would open: the
@@ -200,7 +203,7 @@ impl OKind {
 /// comments taken out, whitespace dropped (LinuxCNC ignores it everywhere outside
 /// comments, even inside numbers and parameter names), letters upper-cased.
 fn significant(text: &str, line: u32, messages: &mut Vec<String>) -> Result<Cursor, Diagnostic> {
-    let mut chars = Vec::new();
+    let mut chars = Vec::with_capacity(text.len());
     let mut it = text.chars();
     let mut col = 0u32;
     while let Some(c) = it.next() {
@@ -223,6 +226,7 @@ fn significant(text: &str, line: u32, messages: &mut Vec<String>) -> Result<Curs
                     }
                     if c == '(' {
                         return Err(Diagnostic {
+                            file: None,
                             line,
                             col,
                             rule: "syntax",
@@ -233,6 +237,7 @@ fn significant(text: &str, line: u32, messages: &mut Vec<String>) -> Result<Curs
                 }
                 if !closed {
                     return Err(Diagnostic {
+                        file: None,
                         line,
                         col: start,
                         rule: "syntax",
@@ -407,6 +412,10 @@ fn o_head(cur: &mut Cursor, col: u32) -> Result<OWord, Diagnostic> {
 /// The O-word of a line, read without evaluating its values (to learn a program's
 /// structure before running it), or `None` for a line without one.
 pub fn o_word_of(text: &str, line: u32) -> Result<Option<OWord>, Diagnostic> {
+    // Most lines have no `O` at all: no need to read them into a cursor.
+    if !text.bytes().any(|b| b.eq_ignore_ascii_case(&b'o')) {
+        return Ok(None);
+    }
     let mut cur = significant(text, line, &mut Vec::new())?;
     if let Some('/') = cur.peek() {
         cur.pos += 1;
@@ -461,6 +470,7 @@ pub fn flow(o_words: &[Option<OWord>]) -> (Flow, Vec<Diagnostic>) {
     for (i, o) in o_words.iter().enumerate() {
         let Some(o) = o else { continue };
         let err = |m: String| Diagnostic {
+            file: None,
             line: i as u32 + 1,
             col: o.col,
             rule: "O-word",
@@ -553,6 +563,7 @@ pub fn flow(o_words: &[Option<OWord>]) -> (Flow, Vec<Diagnostic>) {
     }
     for t in open {
         errors.push(Diagnostic {
+            file: None,
             line: t.at as u32 + 1,
             col: o_words[t.at].as_ref().map_or(1, |o| o.col),
             rule: "O-word",

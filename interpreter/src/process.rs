@@ -41,9 +41,13 @@ impl Source {
     }
 }
 
-/// Every problem of a program as `NAME:LINE:COL: RULE: message` lines.
+/// Every problem of a program as `NAME:LINE:COL: RULE: message` lines; `NAME` is the
+/// program's, or the subroutine file's for a problem in one.
 pub fn format_diagnostics(name: &str, diags: &[Diagnostic]) -> String {
-    diags.iter().map(|d| format!("{name}:{d}\n")).collect()
+    diags
+        .iter()
+        .map(|d| format!("{}:{d}\n", d.file.as_deref().unwrap_or(name)))
+        .collect()
 }
 
 /// Reads, checks, builds and plans: the blocks as they will be sent.
@@ -70,6 +74,7 @@ pub fn compile_with(
         .iter()
         .filter_map(|b| {
             b.validate().err().map(|e| Diagnostic {
+                file: None,
                 line: b.source_line,
                 col: 1,
                 rule: "internal",
@@ -287,6 +292,7 @@ pub fn run_streaming<S: Service>(
             let name = cfg.program_name.clone().unwrap_or(src.name.clone());
             let opts = program::Options {
                 dialect: streaming.dialect,
+                ..Default::default()
             };
             let c = compile_source(&name, &src.text, &opts, &cfg.machine, cfg.period_ns)?;
             dialect = c.dialect.map(|d| d.name().to_string());

@@ -8,8 +8,11 @@
 //!
 //! Parameters are set after their whole line is read, as LinuxCNC does. O-word
 //! subroutines (`sub`/`endsub`/`call`/`return`) and control flow (`if`/`elseif`/`else`,
-//! `while`, `do … while`, `repeat`, `break`, `continue`) run within the one file: lines
-//! are read again, with the parameters of the moment, each time the flow reaches them.
+//! `while`, `do … while`, `repeat`, `break`, `continue`) run as in LinuxCNC: lines are
+//! read again, with the parameters of the moment, each time the flow reaches them. A
+//! subroutine the program does not define is read from its own file ([`subfile`]);
+//! the moves made in it carry the line of the call in the program (a move's `line` is
+//! always a line of the program's own file), its errors name the file and its line.
 //!
 //! The program's [`Dialect`] (LinuxCNC or Fanuc) is detected from the codes only one of
 //! them has, or forced by the caller; see [`dialect`].
@@ -24,8 +27,9 @@ mod fanuc;
 mod feed;
 mod flow;
 mod linuxcnc;
+mod subfile;
 
-use crate::parse::{flow, o_word_of, read_line, Diagnostic, OKind, OWord, Params, Word};
+use crate::parse::{flow, read_line, Diagnostic, OKind, Params, Word};
 pub use dialect::Dialect;
 use dialect::DialectState;
 use flow::Runner;
@@ -142,6 +146,22 @@ pub enum Move {
     },
 }
 
+impl Move {
+    /// The source line the move carries.
+    fn line_mut(&mut self) -> &mut u32 {
+        match self {
+            Move::Line { line, .. }
+            | Move::Arc { line, .. }
+            | Move::Nurbs { line, .. }
+            | Move::Dwell { line, .. }
+            | Move::End { line }
+            | Move::PathMode { line, .. }
+            | Move::Spindle { line, .. }
+            | Move::Stop { line, .. } => line,
+        }
+    }
+}
+
 /// A whole program, read and checked.
 #[derive(Debug, Clone, Default)]
 pub struct Program {
@@ -154,10 +174,14 @@ pub struct Program {
 }
 
 /// How to read a program beyond its text.
-#[derive(Debug, Clone, Copy, Default)]
+#[derive(Debug, Clone, Default)]
 pub struct Options {
     /// Read the program in this dialect instead of detecting it (`--dialect`).
     pub dialect: Option<Dialect>,
+    /// Where `o<name> call` looks for `name.ngc` when the program does not define
+    /// `o<name>` itself, in this order: the program's own directory first, then those
+    /// of `--subroutine-path` (see [`subfile`]). Empty: no files are looked for.
+    pub subroutine_dirs: Vec<std::path::PathBuf>,
 }
 
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -237,6 +261,7 @@ impl LineWords<'_> {
     }
     fn err(&self, rule: &'static str, col: u32, message: impl Into<String>) -> Diagnostic {
         Diagnostic {
+            file: None,
             line: self.line,
             col,
             rule,
@@ -281,18 +306,27 @@ pub fn interpret_with(text: &str, opts: &Options) -> Result<Program, Vec<Diagnos
     let mut params = Params::default();
     let mut prog = Program::default();
     let mut errors = Vec::new();
-    let lines: Vec<&str> = text.lines().collect();
-    let o_words: Vec<Option<OWord>> = lines
-        .iter()
-        .enumerate()
-        .map(|(i, raw)| o_word_of(raw, i as u32 + 1).unwrap_or(None))
-        .collect();
-    let (flow, flow_errors) = flow(&o_words);
+    let mut lines: Vec<&str> = text.lines().collect();
+    let mut o_words = subfile::o_words_of(&lines, 1);
+    let (mut flow, flow_errors) = flow(&o_words);
     errors.extend(flow_errors);
-    let mut run = Runner::new(o_words, flow);
-    let last_line = lines.len() as u32;
+    // Subroutine files join the program after its own lines.
+    let (files, missing) = subfile::load(&o_words, &opts.subroutine_dirs);
+    let own_lines = lines.len();
+    let mut units = subfile::Units::default();
+    for f in &files {
+        let start = lines.len();
+        let file_lines: Vec<&str> = f.text.lines().collect();
+        let file_o_words = subfile::o_words_of(&file_lines, 1);
+        units.append(&f.path, start, &file_o_words, &mut flow, &mut errors);
+        lines.extend(file_lines);
+        o_words.extend(file_o_words);
+    }
+    let mut run = Runner::new(o_words, flow, missing);
+    let last_line = own_lines as u32;
     let mut pc = 0;
-    while pc < lines.len() {
+    // The program ends at its own last line; the files after it run only when called.
+    while pc < lines.len() && pc != own_lines {
         let line = pc as u32 + 1;
         if st.ended {
             break; // LinuxCNC ignores everything after M2/M30.
@@ -309,6 +343,7 @@ pub fn interpret_with(text: &str, opts: &Options) -> Result<Program, Vec<Diagnos
                 .take_while(|(b, _)| *b < MAX_LINE_BYTES)
                 .count();
             errors.push(Diagnostic {
+                file: None,
                 line,
                 col: col as u32 + 1,
                 rule: "line-length",
@@ -327,8 +362,11 @@ pub fn interpret_with(text: &str, opts: &Options) -> Result<Program, Vec<Diagnos
                 continue;
             }
         };
+        // Moves and messages of a subroutine file carry the line of its call in the
+        // program: a block's source line is a line of the program's own file.
+        let shown_line = run.line_before(here, own_lines) as u32 + 1;
         for m in &parsed.messages {
-            prog.messages.push((line, m.clone()));
+            prog.messages.push((shown_line, m.clone()));
         }
         if let Some(o) = &parsed.o_word {
             if o.kind == OKind::ProgramNumber {
@@ -354,6 +392,11 @@ pub fn interpret_with(text: &str, opts: &Options) -> Result<Program, Vec<Diagnos
         if let Err(d) = execute(&mut st, &lw, &mut prog.moves) {
             errors.push(d);
         }
+        if shown_line != line {
+            prog.moves[before..]
+                .iter_mut()
+                .for_each(|m| *m.line_mut() = shown_line);
+        }
         errors.append(&mut st.deferred);
         if st.inverse_time {
             feed::inverse_time(&mut prog.moves[before..]);
@@ -364,9 +407,10 @@ pub fn interpret_with(text: &str, opts: &Options) -> Result<Program, Vec<Diagnos
     }
     // A line read again and again (in a loop) reports its problem once.
     let mut seen = std::collections::HashSet::new();
-    errors.retain(|d: &Diagnostic| seen.insert((d.line, d.col, d.message.clone())));
+    errors.retain(|d: &Diagnostic| seen.insert((d.file.clone(), d.line, d.col, d.message.clone())));
     if let Some(n) = &st.g62 {
         errors.push(Diagnostic {
+            file: None,
             line: n.line,
             col: n.col,
             rule: "G6.2",
@@ -381,6 +425,7 @@ pub fn interpret_with(text: &str, opts: &Options) -> Result<Program, Vec<Diagnos
     }
     if let Some(n) = &st.nurbs {
         errors.push(Diagnostic {
+            file: None,
             line: n.line,
             col: n.col,
             rule: "G5.2",
@@ -391,6 +436,7 @@ pub fn interpret_with(text: &str, opts: &Options) -> Result<Program, Vec<Diagnos
         prog.moves.push(Move::End { line: last_line });
     }
     prog.dialect = st.dialect.resolved();
+    errors.iter_mut().for_each(|d| units.locate(d));
     if errors.is_empty() {
         Ok(prog)
     } else {

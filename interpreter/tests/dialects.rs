@@ -20,11 +20,17 @@ fn moves(text: &str) -> Vec<Move> {
 
 /// The errors of a program as `(line, col, "rule: message")`.
 fn errors_as(text: &str, dialect: Option<Dialect>) -> Vec<(u32, u32, String)> {
-    interpret_with(text, &Options { dialect })
-        .expect_err("the program should be refused")
-        .into_iter()
-        .map(|d| (d.line, d.col, format!("{}: {}", d.rule, d.message)))
-        .collect()
+    interpret_with(
+        text,
+        &Options {
+            dialect,
+            ..Options::default()
+        },
+    )
+    .expect_err("the program should be refused")
+    .into_iter()
+    .map(|d| (d.line, d.col, format!("{}: {}", d.rule, d.message)))
+    .collect()
 }
 
 fn errors(text: &str) -> Vec<(u32, u32, String)> {
@@ -311,6 +317,7 @@ fn dialect_is_detected_forced_and_never_mixed() {
         "G1 X1 F100\n",
         &Options {
             dialect: Some(Dialect::Fanuc),
+            ..Options::default()
         },
     )
     .unwrap();
@@ -551,5 +558,178 @@ fn cnc_check_says_the_dialect_and_honours_the_forced_one() {
     assert!(
         text.contains(&format!("{file}:5:1: dialect: G05 P… is fanuc's")),
         "{text}"
+    );
+}
+
+/// A fresh directory for one test's files.
+fn temp_dir(test: &str) -> std::path::PathBuf {
+    let dir = std::env::temp_dir().join(format!("cnc-subs-{}-{test}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap_or_else(|e| panic!("{}: {e}", dir.display()));
+    dir
+}
+
+fn write(dir: &std::path::Path, name: &str, text: &str) {
+    std::fs::write(dir.join(name), text).unwrap_or_else(|e| panic!("{name}: {e}"));
+}
+
+fn with_dirs(
+    text: &str,
+    dirs: &[&std::path::Path],
+) -> Result<interpreter::program::Program, Vec<interpreter::parse::Diagnostic>> {
+    interpret_with(
+        text,
+        &Options {
+            subroutine_dirs: dirs.iter().map(|d| d.to_path_buf()).collect(),
+            ..Options::default()
+        },
+    )
+}
+
+#[test]
+fn subroutines_are_read_from_their_own_files() {
+    let dir = temp_dir("found");
+    // LinuxCNC lower-cases the name: o<Pocket> reads pocket.ngc.
+    write(
+        &dir,
+        "pocket.ngc",
+        "(a pocket)\no<pocket> sub\nG1 X#1 Y#2\no<corner> call\no<pocket> endsub\nM2\n%\n",
+    );
+    write(
+        &dir,
+        "corner.ngc",
+        "o<corner> sub\nG1 X0 Y0\no<corner> endsub\n",
+    );
+    let p = with_dirs("G0 X1\nF100\no<Pocket> call [5] [6]\nG0 Z1\nM2\n", &[&dir])
+        .unwrap_or_else(|e| panic!("{e:?}"));
+    let ends: Vec<(u32, [f64; 3])> = p
+        .moves
+        .iter()
+        .filter_map(|m| match m {
+            Move::Line { line, to, .. } => Some((*line, *to)),
+            _ => None,
+        })
+        .collect();
+    // Moves made in a subroutine file carry the line of the call in the program.
+    assert_eq!(
+        ends,
+        vec![
+            (1, [1.0, 0.0, 0.0]),
+            (3, [5.0, 6.0, 0.0]),
+            (3, [0.0, 0.0, 0.0]),
+            (4, [0.0, 0.0, 1.0]),
+        ]
+    );
+
+    // A program that defines the subroutine itself does not read the file.
+    let own = "F100\no<pocket> call [2]\nM2\no<pocket> sub\nG1 X#1\no<pocket> endsub\n";
+    let p = with_dirs(own, &[&dir]).unwrap_or_else(|e| panic!("{e:?}"));
+    assert!(matches!(
+        p.moves[0],
+        Move::Line {
+            to: [2.0, 0.0, 0.0],
+            ..
+        }
+    ));
+}
+
+#[test]
+fn subroutine_path_directories_are_searched_in_order() {
+    let (first, second) = (temp_dir("path1"), temp_dir("path2"));
+    write(
+        &second,
+        "probe.ngc",
+        "o<probe> sub\nG1 X7 F100\no<probe> endsub\n",
+    );
+    let p = with_dirs("o<probe> call\n", &[&first, &second]).unwrap_or_else(|e| panic!("{e:?}"));
+    assert!(matches!(
+        p.moves[0],
+        Move::Line {
+            to: [7.0, 0.0, 0.0],
+            line: 1,
+            ..
+        }
+    ));
+    write(
+        &first,
+        "probe.ngc",
+        "o<probe> sub\nG1 X3 F100\no<probe> endsub\n",
+    );
+    let p = with_dirs("o<probe> call\n", &[&first, &second]).unwrap_or_else(|e| panic!("{e:?}"));
+    assert!(matches!(
+        p.moves[0],
+        Move::Line {
+            to: [3.0, 0.0, 0.0],
+            ..
+        }
+    ));
+}
+
+#[test]
+fn errors_in_subroutine_files_name_the_file_and_its_line() {
+    let dir = temp_dir("errors");
+    write(
+        &dir,
+        "bad.ngc",
+        "o<bad> sub\n\nG1 X[1/0] F100\no<bad> endsub\n",
+    );
+    write(
+        &dir,
+        "loose.ngc",
+        "o<loose> sub\no2 endwhile\no<loose> endsub\n",
+    );
+    write(&dir, "other.ngc", "(no sub here)\nG1 X1\n");
+    write(
+        &dir,
+        "deep.ngc",
+        "o<deep> sub\no<deep> call\no<deep> endsub\n",
+    );
+    let text =
+        "G0 X1\n  o<bad> call\no<missing> call\no<other> call\no<deep> call\no<loose> call\nM2\n";
+    let e = with_dirs(text, &[&dir]).expect_err("refused");
+    let shown = interpreter::process::format_diagnostics("main.ngc", &e);
+    let bad = dir.join("bad.ngc").display().to_string();
+    let deep = dir.join("deep.ngc").display().to_string();
+    let loose = dir.join("loose.ngc").display().to_string();
+    let lines: Vec<&str> = shown.lines().collect();
+    assert!(
+        lines.contains(
+            &format!("{loose}:2:1: O-word: o2 endwhile does not match an open block").as_str()
+        ),
+        "{shown}"
+    );
+    assert!(
+        lines
+            .iter()
+            .any(|l| l.starts_with(&format!("{bad}:3:")) && l.contains("expression")),
+        "{shown}"
+    );
+    assert!(
+        lines.iter().any(|l| l.starts_with("main.ngc:3:1: O-word: o<missing> call: no subroutine o<missing> in this file, and no missing.ngc in ")),
+        "{shown}"
+    );
+    assert!(
+        lines
+            .iter()
+            .any(|l| l.starts_with("main.ngc:4:1: O-word: o<other> call: ")
+                && l.ends_with("other.ngc does not define o<other> sub")),
+        "{shown}"
+    );
+    // Endless recursion across files stops at the nesting limit, in the file.
+    assert!(
+        lines.contains(
+            &format!("{deep}:2:1: O-word: subroutines nested more than 50 deep").as_str()
+        ),
+        "{shown}"
+    );
+    // A name that would leave the directories is refused, not looked up.
+    let e = with_dirs("o<../deep> call\n", &[&dir]).expect_err("refused");
+    assert!(e[0].message.contains("only letters, digits"), "{e:?}");
+    // Without directories (the built-in demo, a program from memory) nothing is read.
+    let e = errors("o<bad> call\n");
+    assert_eq!(e[0].0, 1, "{e:?}");
+    assert!(
+        e[0].2.contains("no subroutine o<bad> in this file"),
+        "{e:?}"
     );
 }

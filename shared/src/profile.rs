@@ -38,32 +38,39 @@ impl Limits {
     }
 
     /// The highest speed (zero acceleration) from which `v_end` is reached within `d` mm,
-    /// or equally the highest speed reachable from `v_end` within `d` mm. Inverse of
-    /// [`change_distance`](Self::change_distance), found by bisection (not for the cycle).
+    /// or equally the highest speed reachable from `v_end` within `d` mm: the inverse of
+    /// [`change_distance`](Self::change_distance), in closed form (the planner calls it
+    /// twice a block), a hair below the exact root so that the distance it needs never
+    /// exceeds `d` by rounding.
+    ///
+    /// With `dv` the speed change: while the acceleration does not saturate
+    /// (`dv < acc²/jerk`), `d = (2·v_end + dv)·sqrt(dv/jerk)`, a cubic in `s = sqrt(dv)`
+    /// with one positive root; beyond, `d = (v_end + dv/2)·(dv/acc + acc/jerk)`, a
+    /// quadratic in `dv`. Both are taken in forms free of cancellation.
     pub fn reachable_speed(&self, v_end: f64, d: f64) -> f64 {
-        if d <= 0.0 {
+        if d <= 0.0 || d.is_nan() {
             return v_end;
         }
-        let (mut lo, mut hi) = (v_end, v_end + 1.0);
-        while self.change_distance(hi, v_end) < d {
-            lo = hi;
-            hi = v_end + 2.0 * (hi - v_end);
-            if hi > 1e9 {
-                return hi;
-            }
-        }
-        for _ in 0..100 {
-            let mid = 0.5 * (lo + hi);
-            if self.change_distance(mid, v_end) <= d {
-                lo = mid;
+        let (acc, jerk) = (self.acc, self.jerk);
+        let dv_sat = acc * acc / jerk;
+        let dv = if d < self.change_distance(v_end + dv_sat, v_end) {
+            // s³ + p·s = q with p = 2·v_end, q = d·sqrt(jerk).
+            let (p, q) = (2.0 * v_end, d * jerk.sqrt());
+            let s = if p > 0.0 {
+                let r = (p / 3.0).sqrt();
+                2.0 * r * ((q / (2.0 * r * r * r)).asinh() / 3.0).sinh()
             } else {
-                hi = mid;
-            }
-            if hi - lo <= 1e-12 * hi {
-                break;
-            }
-        }
-        lo
+                q.cbrt()
+            };
+            s * s
+        } else {
+            // dv² + b·dv + c = 0, c < 0 here: the positive root as -2c / (b + sqrt(b² - 4c)).
+            let b = 2.0 * v_end + dv_sat;
+            let c = 2.0 * v_end * dv_sat - 2.0 * acc * d;
+            -2.0 * c / (b + (b * b - 4.0 * c).sqrt())
+        };
+        // The hair: relative to the speed, whose rounding would otherwise eat it.
+        ((v_end + dv) * (1.0 - 1e-12)).max(v_end)
     }
 
     /// Can a machine at speed `v` and acceleration `a` (`|a| <= acc`) be at a speed of at
@@ -267,10 +274,19 @@ mod tests {
 
     #[test]
     fn reachable_speed_inverts_change_distance() {
-        for (v_end, d) in [(0.0, 4.5), (10.0, 0.3), (0.0, 1e-4), (30.0, 100.0)] {
-            let v = LIM.reachable_speed(v_end, d);
-            assert!((LIM.change_distance(v, v_end) - d).abs() < 1e-9 * d.max(1.0));
+        // Both branches (saturated or not), from rest and from speed, tiny to huge moves.
+        for v_end in [0.0, 1e-3, 10.0, 30.0, 500.0] {
+            for d in [1e-9, 1e-4, 0.3, 4.5, 100.0, 1e5] {
+                let v = LIM.reachable_speed(v_end, d);
+                let got = LIM.change_distance(v, v_end);
+                assert!(v >= v_end, "{v_end} {d}: {v}");
+                assert!(got <= d, "{v_end} {d}: needs {got}");
+                // And it is the highest such speed, to 1e-11 of itself.
+                let above = LIM.change_distance(v * (1.0 + 1e-11) + 1e-300, v_end);
+                assert!(above > d, "{v_end} {d}: {v} is not the highest");
+            }
         }
+        assert_eq!(LIM.reachable_speed(7.0, 0.0), 7.0);
     }
 
     #[test]

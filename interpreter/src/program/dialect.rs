@@ -95,6 +95,7 @@ impl DialectState {
         what: &'static str,
     ) -> Result<(), Diagnostic> {
         let err = |message: String| Diagnostic {
+            file: None,
             line,
             col,
             rule: "dialect",

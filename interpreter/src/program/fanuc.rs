@@ -91,6 +91,7 @@ impl FanucOpen {
             "PS1004"
         };
         Some(Diagnostic {
+            file: None,
             line,
             col,
             rule: "G06.2",

@@ -1,7 +1,9 @@
 //! The O-word flow of a running program: subroutine calls and returns, `if`/`elseif`/
-//! `else`, `while`, `do … while`, `repeat`, `break` and `continue`, within one file, as
-//! LinuxCNC runs them.
+//! `else`, `while`, `do … while`, `repeat`, `break` and `continue`, as LinuxCNC runs
+//! them, over the program's lines and those of the subroutine files it calls joined
+//! after them ([`super::subfile`]).
 
+use super::subfile::Missing;
 use crate::parse::{Diagnostic, Flow, OKind, OWord, Param, Params};
 
 /// A subroutine call in progress.
@@ -39,10 +41,12 @@ pub(super) struct Runner {
     jumps: u64,
     /// Lines run so far, the first time and again.
     lines_run: usize,
+    /// Called labels no file defines, with why (see [`super::subfile::load`]).
+    missing: Missing,
 }
 
 impl Runner {
-    pub(super) fn new(o_words: Vec<Option<OWord>>, flow: Flow) -> Self {
+    pub(super) fn new(o_words: Vec<Option<OWord>>, flow: Flow, missing: Missing) -> Self {
         Runner {
             o_words,
             flow,
@@ -51,7 +55,22 @@ impl Runner {
             branch: None,
             jumps: 0,
             lines_run: 0,
+            missing,
         }
+    }
+
+    /// The innermost line in progress before index `end`: a line there itself, or the
+    /// call there that led to it (the program's own lines come before `end`).
+    pub(super) fn line_before(&self, here: usize, end: usize) -> usize {
+        if here < end {
+            return here;
+        }
+        self.calls
+            .iter()
+            .rev()
+            .map(|c| c.ret - 1)
+            .find(|&call| call < end)
+            .unwrap_or(here)
     }
 
     /// Counts line `here` (0-based) as run; the error that stops the program when it
@@ -62,6 +81,7 @@ impl Runner {
             return Ok(());
         }
         Err(Diagnostic {
+            file: None,
             line: here as u32 + 1,
             col: 1,
             rule: "O-word",
@@ -130,12 +150,19 @@ impl Runner {
             }
             OKind::Call => match self.flow.subs.get(&o.label) {
                 None => errors.push(Diagnostic {
+                    file: None,
                     line,
                     col: o.col,
                     rule: "O-word",
-                    message: format!("o{} call: no subroutine o{} in this file", o.label, o.label),
+                    message: match self.missing.get(&o.label) {
+                        Some(why) => format!("o{} call: {why}", o.label),
+                        None => {
+                            format!("o{} call: no subroutine o{} in this file", o.label, o.label)
+                        }
+                    },
                 }),
                 Some(_) if self.calls.len() >= MAX_CALL_DEPTH => errors.push(Diagnostic {
+                    file: None,
                     line,
                     col: o.col,
                     rule: "O-word",
@@ -234,6 +261,7 @@ impl Runner {
             self.jumps += 1;
             if self.jumps > MAX_JUMPS {
                 errors.push(Diagnostic {
+                    file: None,
                     line,
                     col: o.col,
                     rule: "O-word",

@@ -158,6 +158,7 @@ fn g6_2_errors_name_the_rule() {
     // Without Q, a G6.2 is Fanuc's G06.2 unless the dialect is forced to LinuxCNC.
     let forced = Options {
         dialect: Some(Dialect::LinuxCnc),
+        ..Options::default()
     };
     let e = interpret_with("F100\nG6.2 X0 Y0 R1 K0 P2\n", &forced).unwrap_err();
     assert!(e[0].message.contains("method Q"), "{e:?}");
