@@ -118,6 +118,9 @@ pub enum Role {
         /// Read the program in this dialect (see `cnc run --dialect`).
         #[arg(long)]
         dialect: Option<crate::program::Dialect>,
+        /// Where subroutine files are looked for (see `cnc run --subroutine-path`).
+        #[arg(long)]
+        subroutine_path: Vec<PathBuf>,
     },
     Interpolator(interpolator::cli::Args),
     ServoSim(servo_sim::cli::Args),
@@ -363,6 +366,7 @@ pub fn main() -> ExitCode {
             repeat,
             throttle_ms,
             dialect,
+            subroutine_path,
         }) => run_interpreter_streaming(
             &common,
             program,
@@ -373,6 +377,7 @@ pub fn main() -> ExitCode {
                 repeat,
                 throttle: throttle_ms.map(std::time::Duration::from_millis),
                 dialect,
+                subroutine_dirs: subroutine_path,
             },
         ),
         Command::Role(Role::Interpolator(args)) => match interpolator::cli::run(&args) {

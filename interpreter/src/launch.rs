@@ -83,6 +83,11 @@ pub struct RunArgs {
     /// its codes (G5.x/G6.2 with Q: LinuxCNC; G06.2, G05 P10000: Fanuc).
     #[arg(long)]
     pub dialect: Option<crate::program::Dialect>,
+    /// A directory to look for subroutine files in (`o<name> call` of a subroutine the
+    /// program does not define reads `name.ngc`), after the program's own directory;
+    /// may be given more than once.
+    #[arg(long)]
+    pub subroutine_path: Vec<PathBuf>,
 }
 
 /// How long the survivors of a failed process get to stop by themselves.
@@ -253,9 +258,28 @@ fn run_inner(args: &RunArgs) -> Result<bool, String> {
     let src = Source::load(args.program.as_deref())?;
     let period_ns = args.period_us * 1000;
     // Bad input is rejected before any process starts, let alone any motion.
+    // Subroutine files are looked for beside the program first, as LinuxCNC looks in
+    // the directory of the program it opened, then in each `--subroutine-path`. The
+    // interpreter process reads the run directory's copy, so it is told where they are.
+    let beside = args
+        .program
+        .as_deref()
+        .and_then(std::path::Path::parent)
+        .map(|d| {
+            if d.as_os_str().is_empty() {
+                std::path::Path::new(".")
+            } else {
+                d
+            }
+        })
+        .and_then(|d| std::fs::canonicalize(d).ok());
+    let subroutine_dirs: Vec<PathBuf> = beside
+        .into_iter()
+        .chain(args.subroutine_path.iter().cloned())
+        .collect();
     let opts = crate::program::Options {
         dialect: args.dialect,
-        ..Default::default()
+        subroutine_dirs: subroutine_dirs.clone(),
     };
     let blocks = match process::compile_source(&src.name, &src.text, &opts, &machine, period_ns) {
         Ok(c) => c.blocks,
@@ -284,6 +308,9 @@ fn run_inner(args: &RunArgs) -> Result<bool, String> {
     }
     if let Some(d) = args.dialect {
         input.extend(["--dialect".into(), d.to_string()]);
+    }
+    for d in &subroutine_dirs {
+        input.extend(["--subroutine-path".into(), d.display().to_string()]);
     }
     // The length of the run for a progress bar, only where one is drawn.
     let expected_cycles = progress_wanted().then(|| {

@@ -194,7 +194,7 @@ pub fn load_replay(path: &Path, salvage: bool) -> Result<Replay, String> {
 }
 
 /// How a run streams its program beyond the plain case.
-#[derive(Debug, Clone, Copy)]
+#[derive(Debug, Clone)]
 pub struct Streaming {
     /// Run the program this many times in one go (soak tests): one stream of blocks with
     /// sequence numbers that keep counting, a rapid back to the start between repeats
@@ -204,6 +204,8 @@ pub struct Streaming {
     pub throttle: Option<Duration>,
     /// Read the program in this dialect instead of detecting it (`--dialect`).
     pub dialect: Option<program::Dialect>,
+    /// Where subroutine files are looked for, in order (see [`program::Options`]).
+    pub subroutine_dirs: Vec<PathBuf>,
 }
 
 impl Default for Streaming {
@@ -212,6 +214,7 @@ impl Default for Streaming {
             repeat: 1,
             throttle: None,
             dialect: None,
+            subroutine_dirs: Vec::new(),
         }
     }
 }
@@ -292,7 +295,7 @@ pub fn run_streaming<S: Service>(
             let name = cfg.program_name.clone().unwrap_or(src.name.clone());
             let opts = program::Options {
                 dialect: streaming.dialect,
-                ..Default::default()
+                subroutine_dirs: streaming.subroutine_dirs.clone(),
             };
             let c = compile_source(&name, &src.text, &opts, &cfg.machine, cfg.period_ns)?;
             dialect = c.dialect.map(|d| d.name().to_string());

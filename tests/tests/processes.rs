@@ -341,3 +341,48 @@ fn a_killed_servo_stops_the_stack_and_the_report_says_so() {
     assert_eq!(sp.len() as u64, rep["cycles"].as_u64().unwrap());
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+#[test]
+fn run_reads_subroutines_from_their_own_files() {
+    // `o<square> call` of a subroutine the program does not define: `cnc run` finds
+    // `square.ngc` in a `--subroutine-path`, although the interpreter process reads the
+    // run directory's copy of the program; without the path it refuses the call before
+    // anything starts, naming the program's line and column.
+    let dir = temp_dir("subfile");
+    std::fs::create_dir_all(dir.join("lib")).unwrap();
+    std::fs::write(
+        dir.join("lib/square.ngc"),
+        "o<square> sub\nG1 X#1 F600\nG1 Y#1\nG1 X0\nG1 Y0\no<square> endsub\nM2\n",
+    )
+    .unwrap();
+    let main = dir.join("main.ngc");
+    std::fs::write(&main, "G21 G90\no<square> call [5]\nM2\n").unwrap();
+    let out = Command::new(cnc_exe())
+        .args(["run", "--clock", "sim", "--no-report", "--out"])
+        .arg(dir.join("without"))
+        .arg(&main)
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success());
+    assert!(err.contains("main.ngc:2:1: O-word:"), "{err}");
+    let run = dir.join("with");
+    let out = Command::new(cnc_exe())
+        .args(["run", "--clock", "sim", "--no-report", "--subroutine-path"])
+        .arg(dir.join("lib"))
+        .arg("--out")
+        .arg(&run)
+        .arg(&main)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "cnc run failed:\n{}\n{}",
+        String::from_utf8_lossy(&out.stdout),
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let rep = report(&run);
+    assert_eq!(rep["outcome"], "done", "{rep:#}");
+    let len = rep["path_length_mm"].as_f64().unwrap();
+    assert!((len - 20.0).abs() < 1e-9, "a 5 mm square: {len} mm");
+}
