@@ -216,27 +216,13 @@ fn controlled_stop_does_not_allocate() {
     assert_eq!(allocs, 0, "{allocs} allocations in a controlled stop");
 }
 
-/// One pass over a quarter cylinder (a rational Bézier patch), as a surface block.
+/// One pass over a quarter cylinder (a rational Bézier patch), as a surface block, a
+/// little slanted across the patch.
 fn cylinder_pass() -> CommandBlock {
-    let (r, w) = (20.0, core::f64::consts::FRAC_1_SQRT_2);
-    let mut b = CommandBlock::empty(BlockKind::Motion, 0, 9);
-    b.flags = shared::protocol::FLAG_SURFACE;
-    b.degree = 1;
-    b.surface.degree_v = 2;
-    b.n_ctrl = 6;
-    for (i, x) in [0.0, 10.0].into_iter().enumerate() {
-        b.ctrl[3 * i] = [x, 0.0, r, 1.0];
-        b.ctrl[3 * i + 1] = [x, r, r, w];
-        b.ctrl[3 * i + 2] = [x, r, 0.0, 1.0];
-    }
+    let mut b = shared::path::quarter_cylinder_pass(20.0);
+    b.source_line = 9;
     b.surface.uv_start = [0.3, 0.0];
     b.surface.uv_end = [0.7, 1.0];
-    b.surface.tool_radius_mm = 3.0;
-    b.surface.tool_length_mm = 40.0;
-    b.surface.normal_sign = 1;
-    b.feed_mm_per_min = 1200.0;
-    b.acc_mm_per_s2 = 2000.0;
-    b.jerk_mm_per_s3 = 50_000.0;
     b.length_mm = shared::path::length(&b);
     b
 }

@@ -244,28 +244,60 @@ proptest! {
     }
 }
 
+/// LinuxCNC's butterfly (`g5_butterfly-xy.ngc`) with its cutting feed `F300` replaced,
+/// planned and stepped through the engine with the default machine.
+struct Butterfly {
+    text: String,
+    machine: Machine,
+    blocks: Vec<CommandBlock>,
+    est: interpreter::estimate::Estimate,
+}
+
+impl Butterfly {
+    fn at(feed_word: &str) -> Self {
+        let peers =
+            std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../tests/peers/linuxcnc");
+        let text = std::fs::read_to_string(peers.join("g5_butterfly-xy.ngc"))
+            .unwrap()
+            .replace("F300", feed_word);
+        let machine = Machine::default();
+        let program = interpret(&text).unwrap();
+        let mut blocks = build(&program.moves, &machine);
+        plan(&mut blocks, &machine, PERIOD_NS);
+        let est = interpreter::estimate::estimate(&blocks, &machine, PERIOD_NS).unwrap();
+        Butterfly {
+            text,
+            machine,
+            blocks,
+            est,
+        }
+    }
+
+    /// Is source line `line` one of the NURBS (`G5.2`) moves?
+    fn is_nurbs_line(&self, line: u32) -> bool {
+        self.text
+            .lines()
+            .nth(line as usize - 1)
+            .is_some_and(|l| l.contains("G5.2"))
+    }
+
+    /// Path length and time over the NURBS moves.
+    fn nurbs_length_and_time(&self) -> (f64, f64) {
+        self.est
+            .moves
+            .iter()
+            .filter(|m| self.is_nurbs_line(m.line))
+            .fold((0.0, 0.0), |(l, t), m| (l + m.length_mm, t + m.time_s))
+    }
+}
+
 /// The feed figure: LinuxCNC's butterfly at F600 with the default machine, average
 /// feed over the NURBS moves, from the engine's own per-line time (what `cnc check
 /// --estimate` prints). Printed with `--nocapture`.
 #[test]
 fn butterfly_at_f600_reaches_99_percent_of_the_feed() {
-    let peers = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../tests/peers/linuxcnc");
-    let text = std::fs::read_to_string(peers.join("g5_butterfly-xy.ngc"))
-        .unwrap()
-        .replace("F300", "F600");
-    let machine = Machine::default();
-    let program = interpret(&text).unwrap();
-    let mut blocks = build(&program.moves, &machine);
-    plan(&mut blocks, &machine, PERIOD_NS);
-    let est = interpreter::estimate::estimate(&blocks, &machine, PERIOD_NS).unwrap();
-    let src: Vec<&str> = text.lines().collect();
-    let (mut len, mut time) = (0.0, 0.0);
-    for m in &est.moves {
-        if src[m.line as usize - 1].contains("G5.2") {
-            len += m.length_mm;
-            time += m.time_s;
-        }
-    }
+    let run = Butterfly::at("F600");
+    let (len, time) = run.nurbs_length_and_time();
     let avg = len / time * 60.0;
     println!(
         "butterfly F600: {len:.2} mm of NURBS in {time:.3} s: average {avg:.1} mm/min ({:.2} %)",
@@ -282,22 +314,10 @@ fn butterfly_at_f600_reaches_99_percent_of_the_feed() {
 /// broken.
 #[test]
 fn butterfly_at_f6000_against_the_lower_bound_from_the_limits() {
-    let peers = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../tests/peers/linuxcnc");
-    let text = std::fs::read_to_string(peers.join("g5_butterfly-xy.ngc"))
-        .unwrap()
-        .replace("F300", "F6000");
-    let machine = Machine::default();
-    let program = interpret(&text).unwrap();
-    let mut blocks = build(&program.moves, &machine);
-    plan(&mut blocks, &machine, PERIOD_NS);
-    let est = interpreter::estimate::estimate(&blocks, &machine, PERIOD_NS).unwrap();
-    let src: Vec<&str> = text.lines().collect();
-    let nurbs_line = |line: u32| src[line as usize - 1].contains("G5.2");
-    let (mut len, mut time) = (0.0, 0.0);
-    for m in est.moves.iter().filter(|m| nurbs_line(m.line)) {
-        len += m.length_mm;
-        time += m.time_s;
-    }
+    let run = Butterfly::at("F6000");
+    let (len, time) = run.nurbs_length_and_time();
+    let (machine, blocks) = (&run.machine, &run.blocks);
+    let nurbs_line = |line: u32| run.is_nurbs_line(line);
     let axes = machine.axes.as_array();
     let tol = machine.chord_tolerance_mm;
     let (mut bound, mut bound_len) = (0.0, 0.0);

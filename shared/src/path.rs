@@ -166,34 +166,50 @@ pub fn length(block: &CommandBlock) -> f64 {
     nurbs::arc_length(block.knots(), 32, |u| norm(eval(block, u).d1))
 }
 
+/// A surface block with a known closed form, for tests and benches: a quarter of the
+/// cylinder `y² + z² = r²` (axis along X, from the top `z = r` round to the side `y = r`)
+/// as a rational Bézier patch of degree 1 along X (0 to 10 mm) and 2 around, one pass
+/// round it at `x = 5`, a ball of radius 3 with its reference point 40 above the tip,
+/// on the outside; 1200 mm/min, 2000 mm/s², 50 000 mm/s³, its contact length set.
+#[doc(hidden)]
+pub fn quarter_cylinder_pass(r: f64) -> CommandBlock {
+    use crate::protocol::{BlockKind, FLAG_SURFACE};
+    let w = core::f64::consts::FRAC_1_SQRT_2;
+    let mut b = CommandBlock::empty(BlockKind::Motion, 0, 1);
+    b.flags = FLAG_SURFACE;
+    b.degree = 1;
+    b.surface.degree_v = 2;
+    b.n_ctrl = 6;
+    for (i, x) in [0.0, 10.0].into_iter().enumerate() {
+        for (j, p) in [[x, 0.0, r, 1.0], [x, r, r, w], [x, r, 0.0, 1.0]]
+            .into_iter()
+            .enumerate()
+        {
+            if let Some(c) = b.ctrl.get_mut(3 * i + j) {
+                *c = p;
+            }
+        }
+    }
+    b.surface.uv_start = [0.5, 0.0];
+    b.surface.uv_end = [0.5, 1.0];
+    b.surface.tool_radius_mm = 3.0;
+    b.surface.tool_length_mm = 40.0;
+    // S_u × S_v: at the top +X × +Y = +Z, out of the cylinder, where the tool is.
+    b.surface.normal_sign = 1;
+    b.feed_mm_per_min = 1200.0;
+    b.acc_mm_per_s2 = 2000.0;
+    b.jerk_mm_per_s3 = 50_000.0;
+    b.length_mm = length(&b);
+    b
+}
+
 #[cfg(test)]
 #[allow(clippy::unwrap_used, clippy::indexing_slicing)]
 mod tests {
     use super::*;
-    use crate::protocol::{BlockKind, FLAG_SURFACE};
 
-    /// A quarter cylinder `y² + z² = r²` (z up, axis along x) as a rational Bézier patch,
-    /// degree 1 along x and 2 around; one pass around it at `x = 5`.
     fn cylinder_pass(r: f64) -> CommandBlock {
-        let w = core::f64::consts::FRAC_1_SQRT_2;
-        let mut b = CommandBlock::empty(BlockKind::Motion, 0, 1);
-        b.flags = FLAG_SURFACE;
-        b.degree = 1;
-        b.surface.degree_v = 2;
-        b.n_ctrl = 6;
-        for (i, x) in [0.0, 10.0].into_iter().enumerate() {
-            b.ctrl[3 * i] = [x, 0.0, r, 1.0];
-            b.ctrl[3 * i + 1] = [x, r, r, w];
-            b.ctrl[3 * i + 2] = [x, r, 0.0, 1.0];
-        }
-        b.surface.uv_start = [0.5, 0.0];
-        b.surface.uv_end = [0.5, 1.0];
-        b.surface.tool_radius_mm = 3.0;
-        b.surface.tool_length_mm = 40.0;
-        b.feed_mm_per_min = 600.0;
-        b.acc_mm_per_s2 = 1000.0;
-        b.jerk_mm_per_s3 = 10_000.0;
-        b
+        quarter_cylinder_pass(r)
     }
 
     #[test]

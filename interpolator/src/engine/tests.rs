@@ -366,38 +366,10 @@ fn a_motion_that_cannot_move_is_a_stall_fault_not_a_hang() {
     assert_eq!(t.pos_mm, [0.0; 3]);
 }
 
-/// A quarter cylinder `y² + z² = r²` (axis along X) as a rational Bézier patch, degree 1
-/// along X and 2 around, and one pass around it at `x = 5` from the top (`z = r`) to the
-/// side (`y = r`), with a ball of radius 3 and reference length 40.
-fn cylinder_pass(seq: u64, r: f64, feed: f64) -> CommandBlock {
-    let w = core::f64::consts::FRAC_1_SQRT_2;
-    let mut b = CommandBlock::empty(BlockKind::Motion, seq, seq as u32 + 1);
-    b.flags = shared::protocol::FLAG_SURFACE;
-    b.degree = 1;
-    b.surface.degree_v = 2;
-    b.n_ctrl = 6;
-    for (i, x) in [0.0, 10.0].into_iter().enumerate() {
-        b.ctrl[3 * i] = [x, 0.0, r, 1.0];
-        b.ctrl[3 * i + 1] = [x, r, r, w];
-        b.ctrl[3 * i + 2] = [x, r, 0.0, 1.0];
-    }
-    b.surface.uv_start = [0.5, 0.0];
-    b.surface.uv_end = [0.5, 1.0];
-    b.surface.tool_radius_mm = 3.0;
-    b.surface.tool_length_mm = 40.0;
-    // S_u × S_v: at the top +X × +Y = +Z, out of the cylinder, where the tool is.
-    b.surface.normal_sign = 1;
-    b.feed_mm_per_min = feed;
-    b.acc_mm_per_s2 = 2000.0;
-    b.jerk_mm_per_s3 = 50_000.0;
-    b.length_mm = path::length(&b);
-    b
-}
-
 #[test]
 fn surface_pass_publishes_the_tool_point_over_the_exact_contact_path() {
     let r = 20.0;
-    let b = cylinder_pass(0, r, 1200.0);
+    let b = path::quarter_cylinder_pass(r);
     b.validate().unwrap();
     let quarter = core::f64::consts::FRAC_PI_2 * r;
     assert!((b.length_mm - quarter).abs() < 1e-9);
