@@ -51,12 +51,12 @@ pub fn check_part(name: &str, text: &str, machine: &shared::Machine) -> Result<S
             "    surface #{}: {}B-spline, degrees p={} q={}, {} x {} control points, knots {} + {}",
             sf.id,
             if sf.rational { "rational " } else { "" },
-            sf.degree_u,
-            sf.degree_v,
-            sf.n_u,
-            sf.n_v,
-            sf.knots_u.len(),
-            sf.knots_v.len()
+            sf.geometry.degree_u,
+            sf.geometry.degree_v,
+            sf.geometry.n_u,
+            sf.geometry.n_v,
+            sf.geometry.knots_u.len(),
+            sf.geometry.knots_v.len()
         );
         let _ = writeln!(
             o,

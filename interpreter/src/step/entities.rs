@@ -6,7 +6,8 @@ use super::p21::{Exchange, Instance, Param, Record};
 use super::{
     BallEndmill, FreeformStep, PathMode, Placement, StepError, StepSurface, Technology, UvStrategy,
 };
-use shared::nurbs::surface::{Passes, SurfaceData};
+use crate::surface_blocks::OwnedSurface;
+use shared::nurbs::surface::Passes;
 
 /// Surfaces larger than this in either direction are refused by the reader (the planner
 /// and the block splitter allocate per control point).
@@ -373,26 +374,20 @@ impl<'a> Ctx<'a> {
         let s = StepSurface {
             id: inst.id,
             line: inst.line,
-            degree_u: p,
-            degree_v: q,
-            n_u,
-            n_v,
-            knots_u,
-            knots_v,
-            ctrl,
+            geometry: OwnedSurface {
+                degree_u: p,
+                degree_v: q,
+                n_u,
+                n_v,
+                knots_u,
+                knots_v,
+                ctrl,
+            },
             rational: rational.is_some(),
             workpiece: to_machine.clone(),
         };
-        let data = SurfaceData {
-            degree_u: p,
-            degree_v: q,
-            knots_u: &s.knots_u,
-            knots_v: &s.knots_v,
-            n_u,
-            n_v,
-            ctrl: &s.ctrl,
-        };
-        data.validate(MAX_READ_CTRL)
+        s.data()
+            .validate(MAX_READ_CTRL)
             .map_err(|e| err(inst, "surface", e.to_string()))?;
         Ok(s)
     }

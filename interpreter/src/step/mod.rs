@@ -48,6 +48,7 @@ pub mod check;
 pub mod entities;
 pub mod p21;
 
+use crate::surface_blocks::OwnedSurface;
 use shared::nurbs::surface::{Passes, SurfaceData};
 
 /// One problem of a STEP file: where, which instance, which rule.
@@ -155,14 +156,9 @@ impl Placement {
 pub struct StepSurface {
     pub id: u64,
     pub line: u32,
-    pub degree_u: usize,
-    pub degree_v: usize,
-    pub n_u: usize,
-    pub n_v: usize,
-    pub knots_u: Vec<f64>,
-    pub knots_v: Vec<f64>,
-    /// `[x, y, z, w]`, row-major `ctrl[i * n_v + j]`, in machine coordinates.
-    pub ctrl: Vec<[f64; 4]>,
+    /// Control points `[x, y, z, w]` (row-major `ctrl[i * n_v + j]`) in machine
+    /// coordinates.
+    pub geometry: OwnedSurface,
     pub rational: bool,
     /// Workpiece (file) coordinates to machine coordinates, as applied to `ctrl`.
     pub workpiece: Placement,
@@ -170,15 +166,7 @@ pub struct StepSurface {
 
 impl StepSurface {
     pub fn data(&self) -> SurfaceData<'_> {
-        SurfaceData {
-            degree_u: self.degree_u,
-            degree_v: self.degree_v,
-            knots_u: &self.knots_u,
-            knots_v: &self.knots_v,
-            n_u: self.n_u,
-            n_v: self.n_v,
-            ctrl: &self.ctrl,
-        }
+        self.geometry.data()
     }
 }
 

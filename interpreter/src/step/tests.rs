@@ -52,16 +52,19 @@ fn seed_surface_reads_as_the_seed_describes_it() {
     let steps = read_part(SEED).unwrap();
     assert_eq!(steps.len(), 1);
     let s = &steps[0];
-    assert_eq!((s.surface.degree_u, s.surface.degree_v), (2, 2));
-    assert_eq!((s.surface.n_u, s.surface.n_v), (10, 10));
+    assert_eq!(
+        (s.surface.geometry.degree_u, s.surface.geometry.degree_v),
+        (2, 2)
+    );
+    assert_eq!((s.surface.geometry.n_u, s.surface.geometry.n_v), (10, 10));
     let k: Vec<f64> = [0.0, 0.0, 0.0]
         .into_iter()
         .chain((1..8).map(|i| i as f64 / 8.0))
         .chain([1.0, 1.0, 1.0])
         .collect();
-    assert_eq!(s.surface.knots_u, k);
-    assert_eq!(s.surface.knots_v, k);
-    assert!(s.surface.ctrl.iter().all(|c| c[3] == 1.0));
+    assert_eq!(s.surface.geometry.knots_u, k);
+    assert_eq!(s.surface.geometry.knots_v, k);
+    assert!(s.surface.geometry.ctrl.iter().all(|c| c[3] == 1.0));
     assert!(!s.surface.rational);
     assert_eq!(s.tool.diameter_mm, 6.0);
     assert_eq!(s.tool.length_mm, 100.0);
@@ -77,24 +80,27 @@ fn seed_surface_reads_as_the_seed_describes_it() {
 fn rational_torus_and_cubic_examples_read() {
     let t = &read_part(TORUS).unwrap()[0];
     assert!(t.surface.rational);
-    assert_eq!((t.surface.n_u, t.surface.n_v), (3, 3));
+    assert_eq!((t.surface.geometry.n_u, t.surface.geometry.n_v), (3, 3));
     let c = std::f64::consts::FRAC_1_SQRT_2;
-    assert!((t.surface.ctrl[4][3] - 0.5).abs() < 1e-15);
-    assert!((t.surface.ctrl[1][3] - c).abs() < 1e-15);
+    assert!((t.surface.geometry.ctrl[4][3] - 0.5).abs() < 1e-15);
+    assert!((t.surface.geometry.ctrl[1][3] - c).abs() < 1e-15);
     assert_eq!(t.strategy.stepover_mm, Some(2.0));
     // Setup origin (0,0,-20), then the workpiece at (20,10,5) turned 30° about z.
     let p0 = t.surface.workpiece.apply([0.0; 3]);
     assert!((p0[0] - 20.0).abs() < 1e-12 && (p0[1] - 10.0).abs() < 1e-12);
     assert!((p0[2] + 15.0).abs() < 1e-12);
     let q = &read_part(CUBIC).unwrap()[0];
-    assert_eq!((q.surface.degree_u, q.surface.degree_v), (3, 3));
+    assert_eq!(
+        (q.surface.geometry.degree_u, q.surface.geometry.degree_v),
+        (3, 3)
+    );
     assert_eq!(q.strategy.mode, PathMode::Forward);
     assert_eq!(q.strategy.passes, Passes::AlongV);
     assert_eq!(q.strategy.sideward_sign, -1.0);
     // Feature placement (5, 5, 0): the first control point moves by it.
     assert_eq!(
-        q.surface.ctrl[0][..3],
-        [5.0, 5.0, 5.0 * 0.0 + q.surface.ctrl[0][2]]
+        q.surface.geometry.ctrl[0][..3],
+        [5.0, 5.0, 5.0 * 0.0 + q.surface.geometry.ctrl[0][2]]
     );
 }
 

@@ -206,13 +206,7 @@ fn example_blocks_validate_and_join_up() {
 fn a_large_surface_is_cut_per_patch() {
     let mut step = read_part(SEED).unwrap().remove(0);
     let b = big();
-    step.surface.degree_u = b.degree_u;
-    step.surface.degree_v = b.degree_v;
-    step.surface.n_u = b.n_u;
-    step.surface.n_v = b.n_v;
-    step.surface.knots_u = b.knots_u.clone();
-    step.surface.knots_v = b.knots_v.clone();
-    step.surface.ctrl = b.ctrl.clone();
+    step.surface.geometry = b;
     step.strategy.scallop_mm = 0.1;
     let cmds = check_blocks(&step);
     let path = plan(&step).unwrap();
