@@ -17,9 +17,10 @@
 //! * `surface_eval/p2q2`, `surface_eval/p3q3`: the seed's 10x10 rational surface,
 //!   `(S, S_u, S_v)` plus the unit normal along a zig-zag of 100 rows of 100 points, `u`
 //!   fixed in each row. `extended` is the evaluator set up for that path
-//!   ([`Passes::AlongV`]: it keeps the partial sums over `u` through a row);
-//!   `extended_no_reuse` is the same evaluator set up the other way, so it recomputes
-//!   them at every point: the cost on a path that holds neither parameter fixed.
+//!   ([`Passes::AlongV`]: it keeps the partial sums over `u` through a row, and the row
+//!   through the current `v` span as polynomials in `v`); `extended_no_reuse` is the
+//!   same evaluator set up for [`Passes::Free`], so it keeps nothing between points: the
+//!   cost on a path that holds neither parameter fixed.
 //!
 //! The conventional method is so slow that it runs on every tenth point only (1 000 per
 //! iteration); the throughput figures (elements per second) stay per point, so compare
@@ -238,7 +239,7 @@ fn surface_eval(c: &mut Criterion) {
         // The zig-zag holds u fixed in each pass.
         for (name, passes) in [
             ("extended", Passes::AlongV),
-            ("extended_no_reuse", Passes::AlongU),
+            ("extended_no_reuse", Passes::Free),
         ] {
             let mut fast = FastSurface::with_passes(&data, passes).expect("valid surface");
             g.bench_function(name, |b| {

@@ -8,7 +8,7 @@
 //! publishes as the set-point ([`tool_point`]). [`eval`] gives the set-point path, the one
 //! the machine follows and reports compare with; [`length`] the contact path's length.
 
-use crate::nurbs::surface::{SurfaceData, SurfacePoint, MAX_SURF_DEGREE};
+use crate::nurbs::surface::{Passes, SurfaceData, SurfacePoint, MAX_SURF_DEGREE};
 use crate::nurbs::{self, CurvePoint};
 use crate::protocol::{CommandBlock, Helix, NO_AXIS};
 
@@ -40,6 +40,20 @@ pub fn patch(block: &CommandBlock) -> SurfaceData<'_> {
         n_u: p + 1,
         n_v: q + 1,
         ctrl: block.ctrl(),
+    }
+}
+
+/// Which parameter a surface block's pass holds fixed, for the evaluator that runs it
+/// ([`crate::nurbs::surface::FastSurface::with_passes`]): iso-parametric passes keep
+/// their partial sums and polynomials through the whole pass.
+pub fn passes(block: &CommandBlock) -> Passes {
+    let (a, b) = (block.surface.uv_start, block.surface.uv_end);
+    if a[1] == b[1] {
+        Passes::AlongU
+    } else if a[0] == b[0] {
+        Passes::AlongV
+    } else {
+        Passes::Free
     }
 }
 

@@ -39,16 +39,22 @@
 //! Degrees 1..=5 are specialised at compile time ([`CurveEval<P>`], and [`FastCurve`]
 //! dispatches to those) so every loop unrolls and the scratch arrays live in registers;
 //! degrees 6..=9 share one kernel with the degree read at run time. Every kernel is also
-//! compiled for AVX2 and chosen at construction when the CPU has it: one homogeneous
-//! point is one 256-bit register. Both forms do the same IEEE operations in the same
-//! order (Rust never contracts a multiply and an add into an FMA), so they give the same
-//! bits, tested; a log replayed on a CPU without AVX2 still reproduces a run exactly.
+//! compiled for AVX2 with FMA and chosen at construction when the CPU has both: one
+//! homogeneous point is one 256-bit register, and a Horner step one fused multiply-add.
+//! The per-point sums use `f64::mul_add` in both forms: IEEE 754 defines the fused
+//! operation's result exactly (one rounding), so the AVX2 kernel and the baseline give
+//! the same bits, tested, and a log replayed on a CPU without FMA still reproduces a run
+//! exactly (slowly there: `mul_add` becomes a library call). Everything done once per
+//! knot crossing uses plain operations, shared by both kernels.
 //!
-//! What bounds the cost: per point `4(3p - 3)` multiply-adds (one vector instruction
-//! each with AVX2), one division and about fifteen flops for the quotient rule, plus the
-//! range check and the result written through memory: at p = 3 about 25 dependent vector
-//! operations in three parallel chains, a few ns; the division's latency and the call
-//! overhead are what remain at p = 1. Measured figures: `shared/BENCHMARKS.md`.
+//! What bounds the cost: per point `4(3p - 3)` fused multiply-adds (one vector
+//! instruction each with AVX2: `3p - 3` of them), one division and about fifteen flops
+//! for the quotient rule, plus the range check and the result written through memory:
+//! at p = 3, six vector FMAs in three independent chains, then the division and the
+//! quotient rule (its chain: division, point, first, second derivative, about 40 cycles
+//! of latency that consecutive points overlap). The measured 4–6 ns at p = 1..3 is that
+//! fixed part: the out-of-line call, the 80-byte result and the division's latency; the
+//! degree adds about 0.6 ns per step (`shared/BENCHMARKS.md`).
 //!
 //! The evaluator owns a copy of the curve (fixed capacity: [`MAX_CTRL`] control points,
 //! premultiplied once at construction), so it holds no borrow and can live in the
@@ -135,6 +141,14 @@ impl<const K: usize> SpanCursor<K> {
         self.span
     }
 
+    pub(crate) fn degree(&self) -> usize {
+        self.degree
+    }
+
+    pub(crate) fn knot(&self, i: usize) -> f64 {
+        self.knots[i]
+    }
+
     /// Clamps `u` into the domain without `f64::clamp` (which panics on NaN bounds);
     /// NaN stays NaN and yields NaN results, never a panic.
     #[inline(always)]
@@ -193,7 +207,7 @@ impl<const K: usize> SpanCursor<K> {
     }
 
     /// Loads the registers for span `s` (`degree <= s < n_ctrl`, non-empty).
-    fn load(&mut self, s: usize) {
+    pub(crate) fn load(&mut self, s: usize) {
         let p = self.degree;
         self.span = s;
         let (a, b) = (self.knots[s], self.knots[s + 1]);
@@ -348,7 +362,7 @@ struct Core {
 pub(crate) fn simd_available() -> bool {
     #[cfg(target_arch = "x86_64")]
     {
-        std::arch::is_x86_feature_detected!("avx2")
+        std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("fma")
     }
     #[cfg(not(target_arch = "x86_64"))]
     {
@@ -416,57 +430,14 @@ impl Core {
         self.load_power_form();
     }
 
-    /// The span's Taylor expansion about its centre `m`: `c0[k] = r^(k)(m) / k!`.
-    ///
-    /// `r^(k)(m) = Σ_r N_{s-p+k+r, p-k}(m) Q^(k)_r` (The NURBS Book eq. 3.8 and 3.3):
-    /// the basis functions of degree `p - k` are level `p - k` of one pass of the
-    /// triangular recurrence at `m`, and the `Q^(k)` are the window's `k`-th difference
-    /// points, `Q^(k)_r = (p-k+1) / (u_{s+r+1} - u_{s-p+r+k}) · (Q^(k-1)_{r+1} -
-    /// Q^(k-1)_r)`. Every denominator spans the current (non-empty) span, so none is zero.
-    /// About `p³/2` four-component operations, once per knot crossing.
+    /// The span's Taylor expansion about its centre: [`span_power_form`] of the window,
+    /// and the coefficients of its first two derivatives.
     fn load_power_form(&mut self) {
-        let c = &self.cursor;
-        let (p, s) = (c.degree, c.span);
-        let (a, b) = (c.knots[s], c.knots[s + 1]);
-        let m = 0.5 * (a + b);
-        self.mid = m;
-        // levels[j][r] = N_{s-j+r, j}(m), A2.2 keeping every level.
-        let mut levels = [[0.0f64; ORD]; ORD];
-        levels[0][0] = 1.0;
-        for j in 1..=p {
-            let mut saved = 0.0;
-            for r in 0..j {
-                let left = m - c.knots[s + 1 + r - j];
-                let right = c.knots[s + 1 + r] - m;
-                let temp = levels[j - 1][r] / (right + left);
-                levels[j][r] = saved + right * temp;
-                saved = left * temp;
-            }
-            levels[j][j] = saved;
-        }
-        let mut diff = self.win;
-        let mut fact = 1.0;
-        self.c0 = [[0.0; 4]; ORD];
-        for k in 0..=p {
-            if k > 0 {
-                fact *= k as f64;
-                let scale = (p - k + 1) as f64;
-                for r in 0..=p - k {
-                    let f = scale / (c.knots[s + r + 1] - c.knots[s - p + r + k]);
-                    for i in 0..4 {
-                        diff[r][i] = f * (diff[r + 1][i] - diff[r][i]);
-                    }
-                }
-            }
-            let basis = &levels[p - k];
-            let mut sum = [0.0f64; 4];
-            for r in 0..=p - k {
-                axpy(&mut sum, basis[r], &diff[r]);
-            }
-            for i in 0..4 {
-                self.c0[k][i] = sum[i] / fact;
-            }
-        }
+        let p = self.cursor.degree;
+        let (mid, levels) = mid_levels(&self.cursor);
+        let c0 = span_power_form(&self.cursor, &levels, &self.win[..=p]);
+        self.mid = mid;
+        self.c0 = c0;
         self.c1 = [[0.0; 4]; ORD];
         self.c2 = [[0.0; 4]; ORD];
         for k in 0..p {
@@ -544,14 +515,14 @@ impl Core {
     /// [`Self::eval_fixed`] compiled for AVX2: the four homogeneous components of every
     /// Horner step and the three of the quotient rule go one vector instruction each.
     #[cfg(target_arch = "x86_64")]
-    #[target_feature(enable = "avx2")]
+    #[target_feature(enable = "avx2,fma")]
     #[inline(never)]
     fn eval_fixed_avx2<const P: usize>(&mut self, u: f64) -> CurvePoint {
         self.eval_power(P, u)
     }
 
     #[cfg(target_arch = "x86_64")]
-    #[target_feature(enable = "avx2")]
+    #[target_feature(enable = "avx2,fma")]
     #[inline(never)]
     fn eval_general_avx2(&mut self, u: f64) -> CurvePoint {
         self.eval_power(self.cursor.degree, u)
@@ -587,36 +558,149 @@ impl Core {
     }
 }
 
-/// `Σ coef[k] t^k` for `k <= deg`, on homogeneous points.
+/// The basis functions of every degree `j <= p` at the centre `m` of the cursor's
+/// current span, `levels[j][r] = N_{s-j+r, j}(m)` (A2.2 keeping every level, with the
+/// span's reciprocals for the divisions): what [`span_power_form`] needs, shared by every
+/// polynomial of the span.
+pub(crate) fn mid_levels<const K: usize>(c: &SpanCursor<K>) -> (f64, [[f64; ORD]; ORD]) {
+    let (p, s) = (c.degree.min(MAX_DEGREE), c.span);
+    let m = 0.5 * (c.knots[s] + c.knots[s + 1]);
+    let mut levels = [[0.0f64; ORD]; ORD];
+    levels[0][0] = 1.0;
+    for j in 1..=p {
+        let mut saved = 0.0;
+        for r in 0..j {
+            let left = m - c.kl[j - r];
+            let right = c.kr[r + 1] - m;
+            let temp = levels[j - 1][r] * c.inv[j][r];
+            levels[j][r] = saved + right * temp;
+            saved = left * temp;
+        }
+        levels[j][j] = saved;
+    }
+    (m, levels)
+}
+
+/// The Taylor expansion about the centre `m` of the cursor's current span of the
+/// degree-`p` homogeneous polynomial `r(u) = Σ_r N_{s-p+r, p}(u) pts[r]` (`pts` the
+/// `p + 1` points of the span's window, `levels` from [`mid_levels`]):
+/// `c[k] = r^(k)(m) / k!`.
+///
+/// `r^(k)(m) = Σ_r N_{s-p+k+r, p-k}(m) Q^(k)_r` (The NURBS Book eq. 3.8 and 3.3):
+/// the basis functions of degree `p - k` are level `p - k` of one pass of the
+/// triangular recurrence at `m`, and the `Q^(k)` are the window's `k`-th difference
+/// points, `Q^(k)_r = (p-k+1) / (u_{s+r+1} - u_{s-p+r+k}) · (Q^(k-1)_{r+1} -
+/// Q^(k-1)_r)`. Every denominator spans the current (non-empty) span, so none is zero,
+/// and each is one of the cursor's reciprocals: no division here. About `p²`
+/// four-component operations, once per knot crossing (curves) or per pass and crossing
+/// (surfaces).
+pub(crate) fn span_power_form<const K: usize>(
+    c: &SpanCursor<K>,
+    levels: &[[f64; ORD]; ORD],
+    pts: &[[f64; 4]],
+) -> [[f64; 4]; ORD] {
+    let p = c.degree.min(MAX_DEGREE);
+    let mut diff = [[0.0f64; 4]; ORD];
+    for (d, q) in diff.iter_mut().zip(pts.iter().take(p + 1)) {
+        *d = *q;
+    }
+    let mut fact = 1.0;
+    let mut out = [[0.0f64; 4]; ORD];
+    for k in 0..=p {
+        if k > 0 {
+            fact *= k as f64;
+            let scale = (p - k + 1) as f64;
+            for r in 0..=p - k {
+                let f = scale * c.inv[p - k + 1][r];
+                for i in 0..4 {
+                    diff[r][i] = f * (diff[r + 1][i] - diff[r][i]);
+                }
+            }
+        }
+        let basis = &levels[p - k];
+        let inv_fact = 1.0 / fact;
+        let mut sum = [0.0f64; 4];
+        for r in 0..=p - k {
+            axpy(&mut sum, basis[r], &diff[r]);
+        }
+        for i in 0..4 {
+            out[k][i] = sum[i] * inv_fact;
+        }
+    }
+    out
+}
+
+/// The power form of the basis functions of the cursor's current span about its centre
+/// `m`: `N_{s-p+j, p}(m + t) = Σ_k mat[k][j] t^k`, so that any polynomial
+/// `Σ_j N_{s-p+j, p} pts[j]` of the span has the Taylor coefficients
+/// `c[k] = Σ_j mat[k][j] pts[j]`: the same construction as [`span_power_form`], run on
+/// the unit points. Returns `m` and `mat`.
+pub(crate) fn basis_power_matrix<const K: usize>(c: &SpanCursor<K>) -> (f64, [[f64; ORD]; ORD]) {
+    let p = c.degree.min(MAX_DEGREE);
+    let (m, levels) = mid_levels(c);
+    // diff[r][j]: the k-th difference point r of the unit points, component j.
+    let mut diff = [[0.0f64; ORD]; ORD];
+    for (r, row) in diff.iter_mut().enumerate().take(p + 1) {
+        row[r] = 1.0;
+    }
+    let mut mat = [[0.0f64; ORD]; ORD];
+    let mut fact = 1.0;
+    for k in 0..=p {
+        if k > 0 {
+            fact *= k as f64;
+            let scale = (p - k + 1) as f64;
+            for r in 0..=p - k {
+                let f = scale * c.inv[p - k + 1][r];
+                for j in 0..=p {
+                    diff[r][j] = f * (diff[r + 1][j] - diff[r][j]);
+                }
+            }
+        }
+        let inv_fact = 1.0 / fact;
+        for j in 0..=p {
+            let mut sum = 0.0;
+            for r in 0..=p - k {
+                sum += levels[p - k][r] * diff[r][j];
+            }
+            mat[k][j] = sum * inv_fact;
+        }
+    }
+    (m, mat)
+}
+
+/// `Σ coef[k] t^k` for `k <= deg`, on homogeneous points, each step one fused
+/// multiply-add per component (one rounding: the same bits on every CPU, see
+/// [`simd_available`]).
 #[inline(always)]
-fn horner(coef: &[[f64; 4]; ORD], deg: usize, t: f64) -> [f64; 4] {
+pub(crate) fn horner(coef: &[[f64; 4]; ORD], deg: usize, t: f64) -> [f64; 4] {
     let mut acc = coef[deg];
     for k in (0..deg).rev() {
         for i in 0..4 {
-            acc[i] = acc[i] * t + coef[k][i];
+            acc[i] = acc[i].mul_add(t, coef[k][i]);
         }
     }
     acc
 }
 
 /// Extended space back to Cartesian (seed 001 eq. 3.5–3.7): point, first and second
-/// derivative from the homogeneous `r`, `r'`, `r''`, one division.
+/// derivative from the homogeneous `r`, `r'`, `r''`, one division. Written on all four
+/// lanes (the weight lane's results are dropped) so it stays in vector registers.
 #[inline(always)]
 fn quotient(span: usize, a0: &[f64; 4], a1: &[f64; 4], a2: &[f64; 4]) -> CurvePoint {
     let inv_w = 1.0 / a0[3];
     let (w1, w2) = (a1[3], a2[3]);
-    let mut out = CurvePoint {
-        span,
-        ..CurvePoint::default()
-    };
-    for k in 0..3 {
-        let pk = a0[k] * inv_w;
-        let d1 = (a1[k] - w1 * pk) * inv_w;
-        out.p[k] = pk;
-        out.d1[k] = d1;
-        out.d2[k] = (a2[k] - 2.0 * w1 * d1 - w2 * pk) * inv_w;
+    let (mut p, mut d1, mut d2) = ([0.0; 4], [0.0; 4], [0.0; 4]);
+    for k in 0..4 {
+        p[k] = a0[k] * inv_w;
+        d1[k] = (-w1).mul_add(p[k], a1[k]) * inv_w;
+        d2[k] = (-w2).mul_add(p[k], (-2.0 * w1).mul_add(d1[k], a2[k])) * inv_w;
     }
-    out
+    CurvePoint {
+        p: [p[0], p[1], p[2]],
+        d1: [d1[0], d1[1], d1[2]],
+        d2: [d2[0], d2[1], d2[2]],
+        span,
+    }
 }
 
 /// Why an evaluator could not be built.

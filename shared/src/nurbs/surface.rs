@@ -16,19 +16,34 @@
 //! Moving data across points, too: a tool path over a surface runs in passes along which
 //! one parameter is fixed (iso-parametric, zig-zag: seed 000's tool paths, ISO 14649's
 //! `UV_STRATEGY`). The evaluator is told which ([`Passes`]) and contracts that parameter
-//! first; the partial sums (`a_i`, `b_i` above) depend on that parameter and the window
-//! only, so they are kept and reused while it does not change, and a point costs the
-//! other direction's basis and `12(q+1)` multiply-adds. The order of every sum is fixed
-//! by the [`Passes`] setting alone, never by the history of calls, so an evaluator gives
-//! the same bits as a fresh one with the same setting, on any path; a path that does not
-//! hold the parameter fixed just recomputes the partial sums at every point.
+//! first, once per pass: the partial sums (`a_i`, `b_i` above, for every row of the net
+//! the pass can reach) depend on the fixed parameter only. Along the pass, each span of
+//! the running direction then holds the pass as three four-component polynomials in
+//! the running parameter about the span's centre (the point, its derivative along and
+//! across the pass), the surface version of the curves' power form: made at each knot
+//! crossing from the partial sums and the span's basis power form (computed once with
+//! the surface) in `2(p+1)²` multiply-adds, and evaluated at each point by three Horner
+//! chains, `3p - 1` vector multiply-adds. The order of every sum is fixed by the
+//! [`Passes`] setting alone, never by the history of calls, so an evaluator gives the
+//! same bits as a fresh one with the same setting, on any path; a path that does not
+//! hold its parameter fixed just redoes the contraction at every point, and
+//! [`Passes::Free`] contracts the `(p+1)×(q+1)` window directly for paths that hold
+//! neither.
+//!
+//! The quotient rule and the normal share one two-lane division: the tangents'
+//! numerators `w·r_u − w_u·r` and `w·r_v − w_v·r` are `w²·S_u` and `w²·S_v`, so their
+//! cross product has the normal's direction before any division, and `1/w` and
+//! `1/|n|` are taken together. What bounds a point, p = q = 2 on a pass: five vector
+//! FMAs, the cross product, one square root and that division, a chain of about 60
+//! cycles that consecutive points overlap; the knot crossings (every 12 points on the
+//! seed's zig-zag of 100 × 100) add about a fifth (`shared/BENCHMARKS.md`).
 //!
 //! Capacity (fixed, no allocation): degrees up to [`MAX_SURF_DEGREE`] = 5 and at most
-//! [`MAX_SURF_CTRL`] = 16 control points in each direction (8 kB of homogeneous points in
-//! the evaluator). Control points are row-major: `ctrl[i * n_v + j]` is `P_ij`, `i` along
+//! [`MAX_SURF_CTRL`] = 16 control points in each direction (8 kB of homogeneous points and
+//! 9 kB of span polynomials in the evaluator). Control points are row-major: `ctrl[i * n_v + j]` is `P_ij`, `i` along
 //! `u`, stored `[x, y, z, w]` with the weight not premultiplied.
 
-use super::fast::{axpy, SpanCursor, ORD};
+use super::fast::{axpy, basis_power_matrix, horner, SpanCursor, ORD};
 use super::{validate, CurveError};
 
 /// The highest degree in either direction of a surface.
@@ -186,6 +201,9 @@ pub enum Passes {
     AlongU,
     /// Passes run along `v`, `u` fixed in each.
     AlongV,
+    /// Neither parameter is held: nothing is kept between points (the double sum is
+    /// contracted in `v` first at every point).
+    Free,
 }
 
 /// Surface evaluator with moving data in both directions.
@@ -195,21 +213,74 @@ pub struct FastSurface {
     cv: SpanCursor<MAX_SURF_KNOTS>,
     degree_u: usize,
     degree_v: usize,
+    n_u: usize,
+    n_v: usize,
     /// `[w·x, w·y, w·z, w]` of `P_ij` at `hw[i][j]`.
     hw: [[[f64; 4]; MAX_SURF_CTRL]; MAX_SURF_CTRL],
-    /// `hw[span_u-p+r][span_v-q+c]` at `win[r][c]`.
+    /// `hw[span_u-p+r][span_v-q+c]` at `win[r][c]` ([`Passes::Free`] only).
     win: [[[f64; 4]; SORD]; SORD],
     passes: Passes,
-    /// The fixed parameter's bits the partial sums below belong to (`None` after a
-    /// window reload).
+    /// The fixed parameter's bits the partial sums below belong to (`None` until the
+    /// first point).
     key: Option<u64>,
-    /// Partial sums over the fixed direction: values and derivatives of that direction's
-    /// basis against each row (`AlongU`) or column (`AlongV`) of the window.
-    part_n: [[f64; 4]; SORD],
-    part_d: [[f64; 4]; SORD],
+    /// Partial sums over the fixed direction, for every control point index `k` of the
+    /// running direction: `part_n[k] = Σ_r N_r(fixed) r_{..}` and `part_d` the same with
+    /// the fixed direction's `N'` (rows of the net for `AlongU`, columns for `AlongV`).
+    /// They hold through the whole pass, whatever spans the running parameter crosses.
+    part_n: [[f64; 4]; MAX_SURF_CTRL],
+    part_d: [[f64; 4]; MAX_SURF_CTRL],
+    /// The running direction's span the polynomials below belong to (`usize::MAX` when
+    /// they are stale).
+    pass_span: usize,
+    /// Centre of that span: the polynomials are in `t = (running parameter) - mid`.
+    mid: f64,
+    /// The pass through the span as polynomials in the running parameter (moving data
+    /// of the pass, [`span_power_form`] of the partial sums): the homogeneous point
+    /// `c0`, its derivative along the pass `c1`, and its derivative across `cx`.
+    c0: [[f64; 4]; ORD],
+    c1: [[f64; 4]; ORD],
+    cx: [[f64; 4]; ORD],
+    /// Per direction (`[u, v]`) and span, the centre and the basis functions' power
+    /// form ([`basis_power_matrix`]): computed once with the surface, so crossing a knot
+    /// costs `2(p+1)²` multiply-adds and no recurrence.
+    spans: [SpanPolys; 2],
     /// Whether the AVX2 kernel may run (same operations, same bits; see
     /// [`super::fast`]).
     simd: bool,
+}
+
+/// The power form of the basis of every span of one direction.
+#[derive(Debug, Clone)]
+struct SpanPolys {
+    /// `mid[s]`: the centre of span `s`.
+    mid: [f64; MAX_SURF_CTRL],
+    /// `mat[s][k][j]`: coefficient of `t^k` of `N_{s-p+j}(mid[s] + t)`.
+    mat: [[[f64; SORD]; SORD]; MAX_SURF_CTRL],
+}
+
+impl SpanPolys {
+    /// For every non-empty span of the cursor's knots (the cursor is moved).
+    fn new(c: &mut SpanCursor<MAX_SURF_KNOTS>, n_ctrl: usize) -> Self {
+        let mut out = SpanPolys {
+            mid: [0.0; MAX_SURF_CTRL],
+            mat: [[[0.0; SORD]; SORD]; MAX_SURF_CTRL],
+        };
+        let first = c.span();
+        for s in c.degree()..n_ctrl.min(MAX_SURF_CTRL) {
+            if c.knot(s) < c.knot(s + 1) {
+                c.load(s);
+                let (m, mat) = basis_power_matrix(c);
+                out.mid[s] = m;
+                for (dst, src) in out.mat[s].iter_mut().zip(&mat) {
+                    for (d, x) in dst.iter_mut().zip(src) {
+                        *d = *x;
+                    }
+                }
+            }
+        }
+        c.load(first);
+        out
+    }
 }
 
 impl FastSurface {
@@ -222,17 +293,31 @@ impl FastSurface {
                 hw[i][j] = [c[0] * c[3], c[1] * c[3], c[2] * c[3], c[3]];
             }
         }
+        let mut cu = SpanCursor::new(s.degree_u, s.knots_u, s.n_u);
+        let mut cv = SpanCursor::new(s.degree_v, s.knots_v, s.n_v);
+        let spans = [
+            SpanPolys::new(&mut cu, s.n_u),
+            SpanPolys::new(&mut cv, s.n_v),
+        ];
         let mut out = FastSurface {
-            cu: SpanCursor::new(s.degree_u, s.knots_u, s.n_u),
-            cv: SpanCursor::new(s.degree_v, s.knots_v, s.n_v),
+            cu,
+            cv,
             degree_u: s.degree_u,
             degree_v: s.degree_v,
+            n_u: s.n_u,
+            n_v: s.n_v,
             hw,
             win: [[[0.0; 4]; SORD]; SORD],
             passes: Passes::default(),
             key: None,
-            part_n: [[0.0; 4]; SORD],
-            part_d: [[0.0; 4]; SORD],
+            part_n: [[0.0; 4]; MAX_SURF_CTRL],
+            part_d: [[0.0; 4]; MAX_SURF_CTRL],
+            pass_span: usize::MAX,
+            mid: 0.0,
+            c0: [[0.0; 4]; ORD],
+            c1: [[0.0; 4]; ORD],
+            cx: [[0.0; 4]; ORD],
+            spans,
             simd: super::fast::simd_available(),
         };
         out.load_window();
@@ -254,7 +339,6 @@ impl FastSurface {
                 *w = *h;
             }
         }
-        self.key = None;
     }
 
     /// `(u_min, u_max, v_min, v_max)`.
@@ -275,7 +359,7 @@ impl FastSurface {
     pub fn eval(&mut self, u: f64, v: f64) -> SurfacePoint {
         #[cfg(target_arch = "x86_64")]
         if self.simd {
-            // SAFETY: `simd` is set only when the running CPU reports AVX2.
+            // SAFETY: `simd` is set only when the running CPU reports AVX2 and FMA.
             return unsafe { self.eval_avx2(u, v) };
         }
         self.eval_baseline(u, v)
@@ -289,7 +373,7 @@ impl FastSurface {
     }
 
     #[cfg(target_arch = "x86_64")]
-    #[target_feature(enable = "avx2")]
+    #[target_feature(enable = "avx2,fma")]
     #[inline(never)]
     fn eval_avx2(&mut self, u: f64, v: f64) -> SurfacePoint {
         self.dispatch(u, v)
@@ -311,71 +395,185 @@ impl FastSurface {
     fn eval_deg(&mut self, p: usize, q: usize, u: f64, v: f64) -> SurfacePoint {
         let (u, moved_u) = self.cu.enter(u);
         let (v, moved_v) = self.cv.enter(v);
-        if moved_u || moved_v {
-            self.load_window();
-        }
         let (p, q) = (p.min(MAX_SURF_DEGREE), q.min(MAX_SURF_DEGREE));
-        let (mut r0, mut ru, mut rv) = ([0.0f64; 4], [0.0f64; 4], [0.0f64; 4]);
-        match self.passes {
+        let (r0, ru, rv) = match self.passes {
             Passes::AlongU => {
-                // v fixed: per row r, a_r = Σ_c N_c(v) r_rc and b_r = Σ_c N'_c(v) r_rc.
+                // v fixed: the pass is Σ_i N_i(u) a_i with a_i = Σ_j N_j(v) r_ij, and its
+                // derivative across Σ_i N_i(u) b_i with b_i = Σ_j N'_j(v) r_ij.
                 if self.key != Some(v.to_bits()) {
-                    let bv = self.cv.ders(q, v);
-                    for (r, row) in self.win.iter().enumerate().take(p + 1) {
-                        let (mut a, mut b) = ([0.0f64; 4], [0.0f64; 4]);
-                        for (c, pt) in row.iter().enumerate().take(q + 1) {
-                            axpy(&mut a, bv.n[c], pt);
-                            axpy(&mut b, bv.d1[c], pt);
-                        }
-                        self.part_n[r] = a;
-                        self.part_d[r] = b;
-                    }
+                    self.contract(Direction::V, v);
                     self.key = Some(v.to_bits());
                 }
-                let bu = self.cu.ders(p, u);
-                for r in 0..=p {
-                    axpy(&mut r0, bu.n[r], &self.part_n[r]);
-                    axpy(&mut ru, bu.d1[r], &self.part_n[r]);
-                    axpy(&mut rv, bu.n[r], &self.part_d[r]);
+                if self.pass_span != self.cu.span() {
+                    self.load_pass(Direction::U, p);
                 }
+                self.pass_at(p, u - self.mid)
             }
             Passes::AlongV => {
-                // u fixed: per column c, a_c = Σ_r N_r(u) r_rc and b_c = Σ_r N'_r(u) r_rc.
+                // u fixed: the same with the roles of u and v exchanged.
                 if self.key != Some(u.to_bits()) {
-                    let bu = self.cu.ders(p, u);
-                    for c in 0..=q {
-                        let (mut a, mut b) = ([0.0f64; 4], [0.0f64; 4]);
-                        for (r, row) in self.win.iter().enumerate().take(p + 1) {
-                            axpy(&mut a, bu.n[r], &row[c]);
-                            axpy(&mut b, bu.d1[r], &row[c]);
-                        }
-                        self.part_n[c] = a;
-                        self.part_d[c] = b;
-                    }
+                    self.contract(Direction::U, u);
                     self.key = Some(u.to_bits());
                 }
+                if self.pass_span != self.cv.span() {
+                    self.load_pass(Direction::V, q);
+                }
+                let (r0, rv, ru) = self.pass_at(q, v - self.mid);
+                (r0, ru, rv)
+            }
+            Passes::Free => {
+                if moved_u || moved_v {
+                    self.load_window();
+                }
+                // Per row r of the window, a_r = Σ_c N_c(v) r_rc and b_r = Σ_c N'_c(v) r_rc.
                 let bv = self.cv.ders(q, v);
-                for c in 0..=q {
-                    axpy(&mut r0, bv.n[c], &self.part_n[c]);
-                    axpy(&mut rv, bv.d1[c], &self.part_n[c]);
-                    axpy(&mut ru, bv.n[c], &self.part_d[c]);
+                let bu = self.cu.ders(p, u);
+                let (mut r0, mut ru, mut rv) = ([0.0f64; 4], [0.0f64; 4], [0.0f64; 4]);
+                for (r, row) in self.win.iter().enumerate().take(p + 1) {
+                    let (mut a, mut b) = ([0.0f64; 4], [0.0f64; 4]);
+                    for (c, pt) in row.iter().enumerate().take(q + 1) {
+                        fma4(&mut a, bv.n[c], pt);
+                        fma4(&mut b, bv.d1[c], pt);
+                    }
+                    fma4(&mut r0, bu.n[r], &a);
+                    fma4(&mut ru, bu.d1[r], &a);
+                    fma4(&mut rv, bu.n[r], &b);
+                }
+                (r0, ru, rv)
+            }
+        };
+        quotient(&r0, &ru, &rv, self.cu.span(), self.cv.span())
+    }
+
+    /// The partial sums over the fixed direction `dir` at its parameter `x`, for every
+    /// control point index of the running direction; the pass polynomials go stale.
+    /// Out of the kernels and without fused operations (once per pass), so both kernels
+    /// share it.
+    #[inline(never)]
+    fn contract(&mut self, dir: Direction, x: f64) {
+        match dir {
+            Direction::V => {
+                let (q, sv) = (self.degree_v, self.cv.span());
+                let b = self.cv.ders(q, x);
+                for (i, row) in self.hw.iter().enumerate().take(self.n_u) {
+                    let (mut a, mut d) = ([0.0f64; 4], [0.0f64; 4]);
+                    for (c, pt) in row[sv - q..=sv].iter().enumerate() {
+                        axpy(&mut a, b.n[c], pt);
+                        axpy(&mut d, b.d1[c], pt);
+                    }
+                    self.part_n[i] = a;
+                    self.part_d[i] = d;
+                }
+            }
+            Direction::U => {
+                let (p, su) = (self.degree_u, self.cu.span());
+                let b = self.cu.ders(p, x);
+                let rows = &self.hw[su - p..=su];
+                for j in 0..self.n_v {
+                    let (mut a, mut d) = ([0.0f64; 4], [0.0f64; 4]);
+                    for (r, row) in rows.iter().enumerate() {
+                        axpy(&mut a, b.n[r], &row[j]);
+                        axpy(&mut d, b.d1[r], &row[j]);
+                    }
+                    self.part_n[j] = a;
+                    self.part_d[j] = d;
                 }
             }
         }
-        let inv_w = 1.0 / r0[3];
-        let mut out = SurfacePoint {
-            span_u: self.cu.span(),
-            span_v: self.cv.span(),
-            ..SurfacePoint::default()
+        self.pass_span = usize::MAX;
+    }
+
+    /// The pass through the running direction's current span as polynomials about the
+    /// span's centre, from the partial sums and the span's basis power form: once per
+    /// pass and span, `2(deg+1)²` multiply-adds.
+    #[inline(always)]
+    #[allow(clippy::needless_range_loop)] // the indices are the formula's
+    fn load_pass(&mut self, running: Direction, deg: usize) {
+        let (cursor, polys) = match running {
+            Direction::U => (&self.cu, &self.spans[0]),
+            Direction::V => (&self.cv, &self.spans[1]),
         };
-        for k in 0..3 {
-            let pk = r0[k] * inv_w;
-            out.p[k] = pk;
-            out.du[k] = (ru[k] - ru[3] * pk) * inv_w;
-            out.dv[k] = (rv[k] - rv[3] * pk) * inv_w;
+        let (deg, s) = (deg.min(MAX_SURF_DEGREE), cursor.span());
+        let (mid, mat) = (polys.mid[s], &polys.mat[s]);
+        let (pn, pd) = (&self.part_n[s - deg..=s], &self.part_d[s - deg..=s]);
+        for k in 0..=deg {
+            let (mut a, mut b) = ([0.0f64; 4], [0.0f64; 4]);
+            for j in 0..=deg {
+                fma4(&mut a, mat[k][j], &pn[j]);
+                fma4(&mut b, mat[k][j], &pd[j]);
+            }
+            self.c0[k] = a;
+            self.cx[k] = b;
         }
-        out.normal = unit_normal(out.du, out.dv);
-        out
+        for k in 0..deg {
+            let f = (k + 1) as f64;
+            for i in 0..4 {
+                self.c1[k][i] = f * self.c0[k + 1][i];
+            }
+        }
+        self.mid = mid;
+        self.pass_span = s;
+    }
+
+    /// The homogeneous point, its derivative along the pass and across it, at `t` from
+    /// the running span's centre: three Horner chains of degree `deg`, `deg - 1`, `deg`.
+    #[inline(always)]
+    fn pass_at(&self, deg: usize, t: f64) -> ([f64; 4], [f64; 4], [f64; 4]) {
+        let r0 = horner(&self.c0, deg, t);
+        let along = horner(&self.c1, deg.saturating_sub(1), t);
+        let across = horner(&self.cx, deg, t);
+        (r0, along, across)
+    }
+}
+
+/// Extended space back to Cartesian (seed 000 eq. 18–19) and the unit normal, from the
+/// homogeneous point `r` and its partial derivatives. With `w = r[3]`, the tangents'
+/// numerators `a = w·r_u − r_u[3]·r` and `b = w·r_v − r_v[3]·r` are `w²·S_u` and `w²·S_v`,
+/// so `a × b` has the normal's direction already: its length and `w` are inverted by one
+/// two-lane division, instead of the normal waiting for the division that makes `S_u`.
+#[inline(always)]
+fn quotient(
+    r: &[f64; 4],
+    ru: &[f64; 4],
+    rv: &[f64; 4],
+    span_u: usize,
+    span_v: usize,
+) -> SurfacePoint {
+    let w = r[3];
+    let (mut a, mut b) = ([0.0; 3], [0.0; 3]);
+    for k in 0..3 {
+        a[k] = ru[k].mul_add(w, -ru[3] * r[k]);
+        b[k] = rv[k].mul_add(w, -rv[3] * r[k]);
+    }
+    let n = [
+        a[1].mul_add(b[2], -a[2] * b[1]),
+        a[2].mul_add(b[0], -a[0] * b[2]),
+        a[0].mul_add(b[1], -a[1] * b[0]),
+    ];
+    let len = n[0].mul_add(n[0], n[1].mul_add(n[1], n[2] * n[2])).sqrt();
+    let [inv_w, inv_len] = [1.0 / w, 1.0 / len];
+    let inv_w2 = inv_w * inv_w;
+    let normal = if len > 0.0 {
+        [n[0] * inv_len, n[1] * inv_len, n[2] * inv_len]
+    } else {
+        [0.0; 3]
+    };
+    SurfacePoint {
+        p: [r[0] * inv_w, r[1] * inv_w, r[2] * inv_w],
+        du: [a[0] * inv_w2, a[1] * inv_w2, a[2] * inv_w2],
+        dv: [b[0] * inv_w2, b[1] * inv_w2, b[2] * inv_w2],
+        normal,
+        span_u,
+        span_v,
+    }
+}
+
+/// `acc += s · c` on a homogeneous point with fused multiply-adds (one rounding each, so
+/// every CPU gives the same bits).
+#[inline(always)]
+fn fma4(acc: &mut [f64; 4], s: f64, c: &[f64; 4]) {
+    for i in 0..4 {
+        acc[i] = s.mul_add(c[i], acc[i]);
     }
 }
 
@@ -494,9 +692,14 @@ mod tests {
 
     #[test]
     fn seed_case_matches_references_finite_differences_and_normal() {
-        for rational in [false, true] {
+        for (rational, passes) in [
+            (false, Passes::AlongU),
+            (true, Passes::AlongU),
+            (true, Passes::AlongV),
+            (true, Passes::Free),
+        ] {
             let s = seed_surface(rational);
-            let mut f = FastSurface::new(&s.data()).expect("valid surface");
+            let mut f = FastSurface::with_passes(&s.data(), passes).expect("valid surface");
             let n = 48;
             // Zig-zag: rows of increasing u, alternately increasing and decreasing v,
             // through every knot line (multiples of 1/8 are hit exactly).
@@ -510,7 +713,7 @@ mod tests {
                         conventional_surface(&s.data(), u, v),
                     ] {
                         if let Some(m) = mismatch(&e, &want, s.scale()) {
-                            panic!("rational {rational} at ({u}, {v}): {m}");
+                            panic!("rational {rational}, {passes:?}, at ({u}, {v}): {m}");
                         }
                     }
                     check_normal(&e);
@@ -604,7 +807,9 @@ mod tests {
             pts.extend((0..=20).map(|k| (k as f64 / 20.0 * u1, pv)));
             pts.extend((0..=20).map(|k| (pu, k as f64 / 20.0 * v1)));
             let mut along_v = FastSurface::with_passes(&s.data(), Passes::AlongV).expect("valid");
+            let mut free = FastSurface::with_passes(&s.data(), Passes::Free).expect("valid");
             let mut baseline = FastSurface::new(&s.data()).expect("valid surface");
+            let mut baseline_v = FastSurface::with_passes(&s.data(), Passes::AlongV).expect("valid");
             for (u, v) in pts {
                 let e = f.eval(u, v);
                 let mut g = FastSurface::new(&s.data()).expect("valid surface");
@@ -613,8 +818,12 @@ mod tests {
                 let t = along_v.eval(u, v);
                 let mut h = FastSurface::with_passes(&s.data(), Passes::AlongV).expect("valid");
                 prop_assert_eq!(t, h.eval(u, v));
+                prop_assert_eq!(t, baseline_v.eval_baseline(u, v), "AVX2 and baseline kernels");
+                let x = free.eval(u, v);
+                let mut h = FastSurface::with_passes(&s.data(), Passes::Free).expect("valid");
+                prop_assert_eq!(x, h.eval(u, v));
                 for want in [piegl_tiller_surface(&s.data(), u, v), conventional_surface(&s.data(), u, v)] {
-                    for (name, got) in [("along u", &e), ("along v", &t)] {
+                    for (name, got) in [("along u", &e), ("along v", &t), ("free", &x)] {
                         if let Some(m) = mismatch(got, &want, s.scale()) {
                             prop_assert!(false, "{name}: p = {} q = {} at ({u}, {v}): {m}", s.p, s.q);
                         }
