@@ -559,25 +559,30 @@ impl Core {
 }
 
 /// The basis functions of every degree `j <= p` at the centre `m` of the cursor's
-/// current span, `levels[j][r] = N_{s-j+r, j}(m)` (A2.2 keeping every level, with the
-/// span's reciprocals for the divisions): what [`span_power_form`] needs, shared by every
-/// polynomial of the span.
+/// current span, `levels[j][r] = N_{s-j+r, j}(m)`: the levels of
+/// [`SpanCursor::terms`], each one kept as it is made. What [`span_power_form`] and
+/// [`basis_power_matrix`] need.
 pub(crate) fn mid_levels<const K: usize>(c: &SpanCursor<K>) -> (f64, [[f64; ORD]; ORD]) {
     let (p, s) = (c.degree.min(MAX_DEGREE), c.span);
     let m = 0.5 * (c.knots[s] + c.knots[s + 1]);
-    let mut levels = [[0.0f64; ORD]; ORD];
-    levels[0][0] = 1.0;
-    for j in 1..=p {
-        let mut saved = 0.0;
-        for r in 0..j {
-            let left = m - c.kl[j - r];
-            let right = c.kr[r + 1] - m;
-            let temp = levels[j - 1][r] * c.inv[j][r];
-            levels[j][r] = saved + right * temp;
-            saved = left * temp;
-        }
-        levels[j][j] = saved;
+    let (mut left, mut right) = ([0.0; ORD], [0.0; ORD]);
+    for i in 1..=p {
+        left[i] = m - c.kl[i];
+        right[i] = c.kr[i] - m;
     }
+    let mut n = [0.0; ORD];
+    n[0] = 1.0;
+    let mut levels = [[0.0f64; ORD]; ORD];
+    levels[0] = n;
+    macro_rules! level {
+        ($($j:literal)*) => {$(
+            if p >= $j {
+                c.level::<$j>(&mut n, &left, &right);
+                levels[$j] = n;
+            }
+        )*};
+    }
+    level!(1 2 3 4 5 6 7 8 9);
     (m, levels)
 }
 
