@@ -360,7 +360,7 @@ struct Geometry {
 impl Geometry {
     fn load(&mut self, b: &CommandBlock) -> Result<(), Fault> {
         if b.is_surface() {
-            let s = FastSurface::with_passes(&path::patch(b), path::passes(b)).map_err(|_| {
+            let s = path::pass_evaluator(b).map_err(|_| {
                 Fault::Protocol(ProtocolError::BadField {
                     seq: b.seq,
                     field: "surface patch",

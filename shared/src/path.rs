@@ -8,7 +8,9 @@
 //! publishes as the set-point ([`tool_point`]). [`eval`] gives the set-point path, the one
 //! the machine follows and reports compare with; [`length`] the contact path's length.
 
-use crate::nurbs::surface::{Passes, SurfaceData, SurfacePoint, MAX_SURF_DEGREE};
+use crate::nurbs::surface::{
+    FastSurface, Passes, SurfaceData, SurfaceError, SurfacePoint, MAX_SURF_DEGREE,
+};
 use crate::nurbs::{self, CurvePoint};
 use crate::protocol::{CommandBlock, Helix, NO_AXIS};
 
@@ -43,17 +45,17 @@ pub fn patch(block: &CommandBlock) -> SurfaceData<'_> {
     }
 }
 
-/// Which parameter a surface block's pass holds fixed, for the evaluator that runs it
-/// ([`crate::nurbs::surface::FastSurface::with_passes`]): iso-parametric passes keep
+/// The evaluator for a surface block's pass ([`FastSurface`]): iso-parametric passes keep
 /// their partial sums and polynomials through the whole pass.
-pub fn passes(block: &CommandBlock) -> Passes {
+pub fn pass_evaluator(block: &CommandBlock) -> Result<FastSurface, SurfaceError> {
     let (a, b) = (block.surface.uv_start, block.surface.uv_end);
+    let patch = patch(block);
     if a[1] == b[1] {
-        Passes::AlongU
+        FastSurface::with_passes(&patch, Passes::AlongU)
     } else if a[0] == b[0] {
-        Passes::AlongV
+        FastSurface::with_passes(&patch, Passes::AlongV)
     } else {
-        Passes::Free
+        FastSurface::for_any_path(&patch)
     }
 }
 

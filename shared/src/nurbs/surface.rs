@@ -27,8 +27,8 @@
 //! [`Passes`] setting alone, never by the history of calls, so an evaluator gives the
 //! same bits as a fresh one with the same setting, on any path; a path that does not
 //! hold its parameter fixed just redoes the contraction at every point, and
-//! [`Passes::Free`] contracts the `(p+1)×(q+1)` window directly for paths that hold
-//! neither.
+//! [`FastSurface::for_any_path`] contracts the `(p+1)×(q+1)` window directly for paths
+//! that hold neither.
 //!
 //! The quotient rule and the normal share one two-lane division: the tangents'
 //! numerators `w·r_u − w_u·r` and `w·r_v − w_v·r` are `w²·S_u` and `w²·S_v`, so their
@@ -201,9 +201,6 @@ pub enum Passes {
     AlongU,
     /// Passes run along `v`, `u` fixed in each.
     AlongV,
-    /// Neither parameter is held: nothing is kept between points (the double sum is
-    /// contracted in `v` first at every point).
-    Free,
 }
 
 /// Surface evaluator with moving data in both directions.
@@ -217,9 +214,10 @@ pub struct FastSurface {
     n_v: usize,
     /// `[w·x, w·y, w·z, w]` of `P_ij` at `hw[i][j]`.
     hw: [[[f64; 4]; MAX_SURF_CTRL]; MAX_SURF_CTRL],
-    /// `hw[span_u-p+r][span_v-q+c]` at `win[r][c]` ([`Passes::Free`] only).
+    /// `hw[span_u-p+r][span_v-q+c]` at `win[r][c]` (for paths that hold neither parameter).
     win: [[[f64; 4]; SORD]; SORD],
-    passes: Passes,
+    /// `None`: a path that holds neither parameter ([`FastSurface::for_any_path`]).
+    passes: Option<Passes>,
     /// The fixed parameter's bits the partial sums below belong to (`None` until the
     /// first point).
     key: Option<u64>,
@@ -308,7 +306,7 @@ impl FastSurface {
             n_v: s.n_v,
             hw,
             win: [[[0.0; 4]; SORD]; SORD],
-            passes: Passes::default(),
+            passes: Some(Passes::default()),
             key: None,
             part_n: [[0.0; 4]; MAX_SURF_CTRL],
             part_d: [[0.0; 4]; MAX_SURF_CTRL],
@@ -327,7 +325,16 @@ impl FastSurface {
     /// The same evaluator for a tool path whose passes run as `passes` says.
     pub fn with_passes(s: &SurfaceData<'_>, passes: Passes) -> Result<Self, SurfaceError> {
         let mut out = Self::new(s)?;
-        out.passes = passes;
+        out.passes = Some(passes);
+        Ok(out)
+    }
+
+    /// The same evaluator for a path that holds neither parameter fixed: it keeps
+    /// nothing between points and contracts the `(p+1)×(q+1)` window directly (the
+    /// double sum in `v` first) at every point.
+    pub fn for_any_path(s: &SurfaceData<'_>) -> Result<Self, SurfaceError> {
+        let mut out = Self::new(s)?;
+        out.passes = None;
         Ok(out)
     }
 
@@ -397,7 +404,7 @@ impl FastSurface {
         let (v, moved_v) = self.cv.enter(v);
         let (p, q) = (p.min(MAX_SURF_DEGREE), q.min(MAX_SURF_DEGREE));
         let (r0, ru, rv) = match self.passes {
-            Passes::AlongU => {
+            Some(Passes::AlongU) => {
                 // v fixed: the pass is Σ_i N_i(u) a_i with a_i = Σ_j N_j(v) r_ij, and its
                 // derivative across Σ_i N_i(u) b_i with b_i = Σ_j N'_j(v) r_ij.
                 if self.key != Some(v.to_bits()) {
@@ -409,7 +416,7 @@ impl FastSurface {
                 }
                 self.pass_at(p, u - self.mid)
             }
-            Passes::AlongV => {
+            Some(Passes::AlongV) => {
                 // u fixed: the same with the roles of u and v exchanged.
                 if self.key != Some(u.to_bits()) {
                     self.contract(Direction::U, u);
@@ -421,7 +428,7 @@ impl FastSurface {
                 let (r0, rv, ru) = self.pass_at(q, v - self.mid);
                 (r0, ru, rv)
             }
-            Passes::Free => {
+            None => {
                 if moved_u || moved_v {
                     self.load_window();
                 }
@@ -693,13 +700,17 @@ mod tests {
     #[test]
     fn seed_case_matches_references_finite_differences_and_normal() {
         for (rational, passes) in [
-            (false, Passes::AlongU),
-            (true, Passes::AlongU),
-            (true, Passes::AlongV),
-            (true, Passes::Free),
+            (false, Some(Passes::AlongU)),
+            (true, Some(Passes::AlongU)),
+            (true, Some(Passes::AlongV)),
+            (true, None),
         ] {
             let s = seed_surface(rational);
-            let mut f = FastSurface::with_passes(&s.data(), passes).expect("valid surface");
+            let mut f = match passes {
+                Some(passes) => FastSurface::with_passes(&s.data(), passes),
+                None => FastSurface::for_any_path(&s.data()),
+            }
+            .expect("valid surface");
             let n = 48;
             // Zig-zag: rows of increasing u, alternately increasing and decreasing v,
             // through every knot line (multiples of 1/8 are hit exactly).
@@ -807,7 +818,7 @@ mod tests {
             pts.extend((0..=20).map(|k| (k as f64 / 20.0 * u1, pv)));
             pts.extend((0..=20).map(|k| (pu, k as f64 / 20.0 * v1)));
             let mut along_v = FastSurface::with_passes(&s.data(), Passes::AlongV).expect("valid");
-            let mut free = FastSurface::with_passes(&s.data(), Passes::Free).expect("valid");
+            let mut free = FastSurface::for_any_path(&s.data()).expect("valid");
             let mut baseline = FastSurface::new(&s.data()).expect("valid surface");
             let mut baseline_v = FastSurface::with_passes(&s.data(), Passes::AlongV).expect("valid");
             for (u, v) in pts {
@@ -820,7 +831,7 @@ mod tests {
                 prop_assert_eq!(t, h.eval(u, v));
                 prop_assert_eq!(t, baseline_v.eval_baseline(u, v), "AVX2 and baseline kernels");
                 let x = free.eval(u, v);
-                let mut h = FastSurface::with_passes(&s.data(), Passes::Free).expect("valid");
+                let mut h = FastSurface::for_any_path(&s.data()).expect("valid");
                 prop_assert_eq!(x, h.eval(u, v));
                 for want in [piegl_tiller_surface(&s.data(), u, v), conventional_surface(&s.data(), u, v)] {
                     for (name, got) in [("along u", &e), ("along v", &t), ("free", &x)] {
