@@ -68,6 +68,7 @@ fn a_million_evaluations_allocate_nothing() {
     let mut surfaces = [
         FastSurface::with_passes(&data, Passes::AlongU).expect("valid surface"),
         FastSurface::with_passes(&data, Passes::AlongV).expect("valid surface"),
+        FastSurface::for_any_path(&data).expect("valid surface"),
     ];
 
     let before = count();
@@ -101,5 +102,5 @@ fn a_million_evaluations_allocate_nothing() {
     arm(false);
     let allocs = count() - before;
     assert!(acc.is_finite());
-    assert_eq!(allocs, 0, "{allocs} allocations in 2 million evaluations");
+    assert_eq!(allocs, 0, "{allocs} allocations in 2.5 million evaluations");
 }
