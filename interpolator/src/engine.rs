@@ -53,8 +53,14 @@ pub const STALL_SECONDS: u64 = 2;
 /// (its distance with the lower speed: stricter than both).
 const MAX_AHEAD: usize = 16;
 
-/// Bisection steps for the moment in a cycle where braking must begin: `T/2³⁰`.
-const SWITCH_BISECTIONS: usize = 30;
+/// Resolution of the moment in a cycle where braking must begin, or a limit is passed,
+/// as a fraction of the period: `T/2³⁰` (what 30 halvings of the period give).
+const SWITCH_RESOLUTION: f64 = 1.0 / (1u64 << 30) as f64;
+
+/// Most evaluations [`latest_ok`] spends on one moment: regula falsi steps, then halvings
+/// if those have not closed the bracket (62 halvings exhaust any bracket in the period).
+const SWITCH_STEPS: usize = 24;
+const SWITCH_HALVINGS: usize = 62;
 
 /// Where the blocks come from: the iceoryx2 subscriber in a run, a slice in tests.
 pub trait BlockSource {
@@ -882,6 +888,7 @@ impl Engine {
                 }
             };
         let eps = 1e-12;
+        let tol = t * SWITCH_RESOLUTION;
         // The cycle's motion is pieced together: the preferred motion, and from the first
         // moment a limit would be lost, the quickest braking for it; along that braking
         // another limit may bind later in the cycle, and so on.
@@ -900,15 +907,7 @@ impl Engine {
                     .and_then(|i| ahead.get(i))
                     .filter(|l| end.s > l.d)
                     .map(|l| {
-                        let (mut lo, mut hi) = (t0, t);
-                        for _ in 0..SWITCH_BISECTIONS {
-                            let mid = 0.5 * (lo + hi);
-                            if at(mid).s <= l.d {
-                                lo = mid;
-                            } else {
-                                hi = mid;
-                            }
-                        }
+                        let lo = latest_ok(t0, t, tol, |tau| l.d - at(tau).s);
                         let x = at(lo);
                         let peak = x.v + x.a.max(0.0).powi(2) / (2.0 * l.next.jerk);
                         (lo, l.v - peak)
@@ -923,16 +922,16 @@ impl Engine {
                 let tau = if room(c, at(t0)) < -eps {
                     t0
                 } else {
-                    let (mut lo, mut hi) = (t0, t_end);
-                    for _ in 0..SWITCH_BISECTIONS {
-                        let mid = 0.5 * (lo + hi);
-                        if room(c, at(mid)) >= -eps {
-                            lo = mid;
-                        } else {
-                            hi = mid;
-                        }
+                    // A limit still kept at the earliest moment found so far for another
+                    // cannot be the first lost: no need to find its own moment.
+                    let hi = match first {
+                        Some((_, tb, _)) if tb < t_end => tb,
+                        _ => t_end,
+                    };
+                    if hi < t_end && room(c, at(hi)) >= -eps {
+                        continue;
                     }
-                    lo
+                    latest_ok(t0, hi, tol, |tau| room(c, at(tau)) + eps)
                 };
                 // Ties (limits already lost together) go to the harder braking.
                 let x = at(tau);
@@ -1187,6 +1186,55 @@ impl Engine {
         }
         Ok(())
     }
+}
+
+/// The latest moment in `[lo, hi]` at which the margin `f` is still `>= 0`, given
+/// `f(hi) < 0`, to within `tol`: `lo` itself when `f(lo) < 0` already.
+///
+/// The margins here (room left before a limit, distance left to a block end) are smooth
+/// between the profile's phase changes, so regula falsi with the Illinois correction
+/// closes in on the sign change in a handful of evaluations where halving the period
+/// takes 30; a step that would not land strictly inside the bracket (an infinite margin,
+/// a flat one) halves it instead, and once [`SWITCH_STEPS`] are spent only halvings
+/// follow. Whatever the path, the moment returned is one where `f >= 0` was seen (or
+/// `lo`), as with plain bisection, so a limit found kept there is kept.
+fn latest_ok(lo: f64, hi: f64, tol: f64, f: impl Fn(f64) -> f64) -> f64 {
+    let (mut a, mut b) = (lo, hi);
+    let mut fa = f(a);
+    if fa.is_nan() || fa < 0.0 {
+        return lo;
+    }
+    let mut fb = f(b);
+    // Which end moved last: +1 the ok end, -1 the other (Illinois halves the stale one).
+    let mut moved = 0i8;
+    for step in 0..SWITCH_STEPS + SWITCH_HALVINGS {
+        if b - a <= tol {
+            break;
+        }
+        let secant = b - fb * (b - a) / (fb - fa);
+        let c = if step < SWITCH_STEPS && secant > a && secant < b {
+            secant
+        } else {
+            0.5 * (a + b)
+        };
+        let fc = f(c);
+        if fc >= 0.0 {
+            a = c;
+            fa = fc;
+            if moved == 1 {
+                fb *= 0.5;
+            }
+            moved = 1;
+        } else {
+            b = c;
+            fb = fc;
+            if moved == -1 {
+                fa *= 0.5;
+            }
+            moved = -1;
+        }
+    }
+    a
 }
 
 /// The parameter `ds` mm of path further on from `u`: the second-order Taylor step of
