@@ -430,14 +430,20 @@ impl Core {
         self.load_power_form();
     }
 
-    /// The span's Taylor expansion about its centre: [`span_power_form`] of the window,
-    /// and the coefficients of its first two derivatives.
+    /// The span's Taylor expansion about its centre (the window through the span's
+    /// [`basis_power_matrix`]) and the coefficients of its first two derivatives.
     fn load_power_form(&mut self) {
-        let p = self.cursor.degree;
-        let (mid, levels) = mid_levels(&self.cursor);
-        let c0 = span_power_form(&self.cursor, &levels, &self.win[..=p]);
+        let p = self.cursor.degree.min(MAX_DEGREE);
+        let (mid, mat) = basis_power_matrix(&self.cursor);
         self.mid = mid;
-        self.c0 = c0;
+        self.c0 = [[0.0; 4]; ORD];
+        for k in 0..=p {
+            let mut sum = [0.0f64; 4];
+            for j in 0..=p {
+                axpy(&mut sum, mat[k][j], &self.win[j]);
+            }
+            self.c0[k] = sum;
+        }
         self.c1 = [[0.0; 4]; ORD];
         self.c2 = [[0.0; 4]; ORD];
         for k in 0..p {
@@ -560,8 +566,7 @@ impl Core {
 
 /// The basis functions of every degree `j <= p` at the centre `m` of the cursor's
 /// current span, `levels[j][r] = N_{s-j+r, j}(m)`: the levels of
-/// [`SpanCursor::terms`], each one kept as it is made. What [`span_power_form`] and
-/// [`basis_power_matrix`] need.
+/// [`SpanCursor::terms`], each one kept as it is made. What [`basis_power_matrix`] needs.
 pub(crate) fn mid_levels<const K: usize>(c: &SpanCursor<K>) -> (f64, [[f64; ORD]; ORD]) {
     let (p, s) = (c.degree.min(MAX_DEGREE), c.span);
     let m = 0.5 * (c.knots[s] + c.knots[s + 1]);
@@ -586,60 +591,19 @@ pub(crate) fn mid_levels<const K: usize>(c: &SpanCursor<K>) -> (f64, [[f64; ORD]
     (m, levels)
 }
 
-/// The Taylor expansion about the centre `m` of the cursor's current span of the
-/// degree-`p` homogeneous polynomial `r(u) = Σ_r N_{s-p+r, p}(u) pts[r]` (`pts` the
-/// `p + 1` points of the span's window, `levels` from [`mid_levels`]):
-/// `c[k] = r^(k)(m) / k!`.
+/// The power form of the basis functions of the cursor's current span about its centre
+/// `m`: `N_{s-p+j, p}(m + t) = Σ_k mat[k][j] t^k`, so that any polynomial
+/// `r(u) = Σ_j N_{s-p+j, p}(u) pts[j]` of the span has the Taylor coefficients
+/// `c[k] = r^(k)(m) / k! = Σ_j mat[k][j] pts[j]`. Returns `m` and `mat`.
 ///
 /// `r^(k)(m) = Σ_r N_{s-p+k+r, p-k}(m) Q^(k)_r` (The NURBS Book eq. 3.8 and 3.3):
 /// the basis functions of degree `p - k` are level `p - k` of one pass of the
-/// triangular recurrence at `m`, and the `Q^(k)` are the window's `k`-th difference
-/// points, `Q^(k)_r = (p-k+1) / (u_{s+r+1} - u_{s-p+r+k}) · (Q^(k-1)_{r+1} -
-/// Q^(k-1)_r)`. Every denominator spans the current (non-empty) span, so none is zero,
-/// and each is one of the cursor's reciprocals: no division here. About `p²`
-/// four-component operations, once per knot crossing (curves) or per pass and crossing
-/// (surfaces).
-pub(crate) fn span_power_form<const K: usize>(
-    c: &SpanCursor<K>,
-    levels: &[[f64; ORD]; ORD],
-    pts: &[[f64; 4]],
-) -> [[f64; 4]; ORD] {
-    let p = c.degree.min(MAX_DEGREE);
-    let mut diff = [[0.0f64; 4]; ORD];
-    for (d, q) in diff.iter_mut().zip(pts.iter().take(p + 1)) {
-        *d = *q;
-    }
-    let mut fact = 1.0;
-    let mut out = [[0.0f64; 4]; ORD];
-    for k in 0..=p {
-        if k > 0 {
-            fact *= k as f64;
-            let scale = (p - k + 1) as f64;
-            for r in 0..=p - k {
-                let f = scale * c.inv[p - k + 1][r];
-                for i in 0..4 {
-                    diff[r][i] = f * (diff[r + 1][i] - diff[r][i]);
-                }
-            }
-        }
-        let basis = &levels[p - k];
-        let inv_fact = 1.0 / fact;
-        let mut sum = [0.0f64; 4];
-        for r in 0..=p - k {
-            axpy(&mut sum, basis[r], &diff[r]);
-        }
-        for i in 0..4 {
-            out[k][i] = sum[i] * inv_fact;
-        }
-    }
-    out
-}
-
-/// The power form of the basis functions of the cursor's current span about its centre
-/// `m`: `N_{s-p+j, p}(m + t) = Σ_k mat[k][j] t^k`, so that any polynomial
-/// `Σ_j N_{s-p+j, p} pts[j]` of the span has the Taylor coefficients
-/// `c[k] = Σ_j mat[k][j] pts[j]`: the same construction as [`span_power_form`], run on
-/// the unit points. Returns `m` and `mat`.
+/// triangular recurrence at `m` ([`mid_levels`]), and the `Q^(k)` are the `k`-th
+/// difference points, `Q^(k)_r = (p-k+1) / (u_{s+r+1} - u_{s-p+r+k}) · (Q^(k-1)_{r+1} -
+/// Q^(k-1)_r)`, here run on the unit points (`pts[j]` = the `j`-th unit vector). Every
+/// denominator spans the current (non-empty) span, so none is zero, and each is one of
+/// the cursor's reciprocals: no division but `1/k!`. About `p³/2` operations, once per
+/// knot crossing (curves) or once per span when a surface is built.
 pub(crate) fn basis_power_matrix<const K: usize>(c: &SpanCursor<K>) -> (f64, [[f64; ORD]; ORD]) {
     let p = c.degree.min(MAX_DEGREE);
     let (m, levels) = mid_levels(c);

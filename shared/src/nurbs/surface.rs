@@ -233,7 +233,7 @@ pub struct FastSurface {
     /// Centre of that span: the polynomials are in `t = (running parameter) - mid`.
     mid: f64,
     /// The pass through the span as polynomials in the running parameter (moving data
-    /// of the pass, [`span_power_form`] of the partial sums): the homogeneous point
+    /// of the pass: the partial sums through the span's basis power form): the point
     /// `c0`, its derivative along the pass `c1`, and its derivative across `cx`.
     c0: [[f64; 4]; ORD],
     c1: [[f64; 4]; ORD],
