@@ -249,6 +249,9 @@ fn corner(a0: [f64; 3], a1: [f64; 3], b0: [f64; 3], b1: [f64; 3], tol: f64) -> O
     })
 }
 
+/// What is left of a trimmed line: start, end, and whether it is kept as a move.
+type Piece = ([f64; 3], [f64; 3], bool);
+
 /// The moves with the lines trimmed and the blends inserted after the lines they end.
 fn emit(moves: &[Move], plans: &[Option<Corner>]) -> Vec<Move> {
     // Trim at the start of each line (from the corner before it).
@@ -258,7 +261,7 @@ fn emit(moves: &[Move], plans: &[Option<Corner>]) -> Vec<Move> {
     }
     // Where each line's remaining piece starts and ends, and whether it is left at all.
     // A line used up by the blends at both ends leaves one point, shared by both.
-    let mut pieces: Vec<Option<([f64; 3], [f64; 3], bool)>> = vec![None; moves.len()];
+    let mut pieces: Vec<Option<Piece>> = vec![None; moves.len()];
     for (i, m) in moves.iter().enumerate() {
         if let Move::Line { from, to, .. } = m {
             let (a, b) = (trim_start[i], plans[i].map_or(0.0, |c| c.trim_mm));

@@ -61,7 +61,10 @@ fn fmt(v: f64) -> String {
 }
 
 /// Start, end and unit direction of a motion move (lines and blends).
-fn ends(m: &Move) -> Option<([f64; 3], [f64; 3], [f64; 3], [f64; 3])> {
+/// Start, end, start tangent, end tangent.
+type Ends = ([f64; 3], [f64; 3], [f64; 3], [f64; 3]);
+
+fn ends(m: &Move) -> Option<Ends> {
     match m {
         Move::Line { from, to, .. } => {
             let u = unit(sub(*to, *from));
