@@ -873,8 +873,15 @@ impl Engine {
                 Some(l) if x.s > l.d => f64::INFINITY,
                 // Easing off now keeps the speed below it for good: no hurry. (The
                 // acceleration need not be back to zero where a limit is passed: what
-                // follows it has limits of its own.)
-                Some(l) if x.v + x.a.max(0.0).powi(2) / (2.0 * l.lim.jerk) <= l.v => f64::INFINITY,
+                // follows it has limits of its own. The easing may go on past it, so
+                // under the lower jerk of the blocks before and after it: a block with
+                // a smaller jerk budget, as a curve after a line, would otherwise be
+                // entered too fast to ease off within its feed.)
+                Some(l)
+                    if x.v + x.a.max(0.0).powi(2) / (2.0 * l.lim.jerk.min(l.next.jerk)) <= l.v =>
+                {
+                    f64::INFINITY
+                }
                 Some(l) => l.d - x.s - l.lim.brake_distance(x, l.v),
                 None => f64::INFINITY,
             }

@@ -22,6 +22,8 @@ use shared::protocol::{BlockKind, CommandBlock, Helix, FLAG_RAPID, FLAG_STOP_AT_
 use shared::Machine;
 use std::f64::consts::{FRAC_PI_2, PI};
 
+pub mod blend;
+
 /// Most quadratic segments (of at most 90°) in one arc block: 2n+1 control points.
 const ARC_SEGMENTS_PER_BLOCK: usize = (MAX_CTRL - 1) / 2;
 
@@ -202,6 +204,9 @@ fn split_at_cusps(c: SplitCurve, machine: &Machine) -> Vec<SplitCurve> {
 
 /// Turns moves into unplanned command blocks (feeds are the caps, speeds not yet set).
 pub fn build(moves: &[Move], machine: &Machine) -> Vec<CommandBlock> {
+    // `G64 P`: corners between feed lines blended first (see [`blend`]).
+    let blended = blend::corners(moves);
+    let moves: &[Move] = &blended;
     // Most moves make one block; blocks are large, so growing the list by copying costs.
     let mut out: Vec<CommandBlock> = Vec::with_capacity(moves.len());
     // `G61.1` exact stop mode: every move ends at rest.
@@ -281,8 +286,8 @@ pub fn build(moves: &[Move], machine: &Machine) -> Vec<CommandBlock> {
             }
             Move::End { line } => out.push(CommandBlock::empty(BlockKind::ProgramEnd, 0, *line)),
             Move::PathMode { control, .. } => {
-                // Without corner blending, `G61` and `G64` (whatever its tolerance) both
-                // follow the exact path; only `G61.1` changes the plan.
+                // `G64 P` corners are blended above; otherwise `G61` and `G64` both
+                // follow the exact path. `G61.1` stops at the end of every move.
                 exact_stop = matches!(control, PathControl::ExactStop);
             }
             // A programmed stop: the machine is at rest when it is reached.

@@ -1,0 +1,431 @@
+use super::*;
+use crate::blocks::{build, plan};
+use crate::program::interpret;
+use shared::nurbs::{self, CurvePoint};
+use shared::protocol::BlockKind;
+use shared::Machine;
+
+fn moves(text: &str) -> Vec<Move> {
+    interpret(text).unwrap().moves
+}
+
+fn blended(text: &str) -> Vec<Move> {
+    corners(&moves(text)).into_owned()
+}
+
+/// The blends of a move list: (source line, control points, feed).
+fn blends(ms: &[Move]) -> Vec<(u32, Vec<[f64; 4]>, f64)> {
+    ms.iter()
+        .filter_map(|m| match m {
+            Move::Nurbs {
+                line,
+                degree: 5,
+                ctrl,
+                feed,
+                ..
+            } => Some((*line, ctrl.clone(), *feed)),
+            _ => None,
+        })
+        .collect()
+}
+
+const KNOTS: [f64; 12] = [0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0];
+
+fn at(ctrl: &[[f64; 4]], t: f64) -> CurvePoint {
+    nurbs::eval(5, &KNOTS, ctrl, t)
+}
+
+fn unit(v: [f64; 3]) -> [f64; 3] {
+    let n = norm(v);
+    v.map(|x| x / n)
+}
+
+fn curvature(e: &CurvePoint) -> f64 {
+    norm(cross(e.d1, e.d2)) / norm(e.d1).powi(3)
+}
+
+fn dist_to_segment(p: [f64; 3], a: [f64; 3], b: [f64; 3]) -> f64 {
+    let d = sub(b, a);
+    let s = (dot(sub(p, a), d) / dot(d, d)).clamp(0.0, 1.0);
+    norm(sub(p, add(a, d.map(|x| x * s))))
+}
+
+fn dist_to_polyline(p: [f64; 3], pts: &[[f64; 3]]) -> f64 {
+    pts.windows(2)
+        .map(|w| dist_to_segment(p, w[0], w[1]))
+        .fold(f64::INFINITY, f64::min)
+}
+
+fn fmt(v: f64) -> String {
+    format!("{v:.6}")
+}
+
+/// Start, end and unit direction of a motion move (lines and blends).
+/// Start, end, start tangent, end tangent.
+type Ends = ([f64; 3], [f64; 3], [f64; 3], [f64; 3]);
+
+fn ends(m: &Move) -> Option<Ends> {
+    match m {
+        Move::Line { from, to, .. } => {
+            let u = unit(sub(*to, *from));
+            Some((*from, *to, u, u))
+        }
+        Move::Nurbs { ctrl, .. } => {
+            let (a, b) = (at(ctrl, 0.0), at(ctrl, 1.0));
+            Some((a.p, b.p, unit(a.d1), unit(b.d1)))
+        }
+        _ => None,
+    }
+}
+
+/// Every blend joins what comes before and after it at the very same point, with the
+/// same tangent (1e-12) and zero curvature (relative to its size).
+fn assert_g2_joins(ms: &[Move]) {
+    let motion: Vec<&Move> = ms.iter().filter(|m| ends(m).is_some()).collect();
+    for w in motion.windows(2) {
+        let (_, end, _, t_end) = ends(w[0]).unwrap();
+        let (start, _, t_start, _) = ends(w[1]).unwrap();
+        assert_eq!(end, start, "{:?} then {:?}", w[0], w[1]);
+        let is_blend = |m: &Move| matches!(m, Move::Nurbs { .. });
+        if is_blend(w[0]) || is_blend(w[1]) {
+            assert!(
+                norm(sub(t_end, t_start)) < 1e-12,
+                "tangent {t_end:?} {t_start:?}"
+            );
+        }
+    }
+    for (_, ctrl, _) in blends(ms) {
+        let size = norm(sub(
+            [ctrl[5][0], ctrl[5][1], ctrl[5][2]],
+            [ctrl[0][0], ctrl[0][1], ctrl[0][2]],
+        ));
+        for t in [0.0, 1.0] {
+            let k = curvature(&at(&ctrl, t));
+            assert!(k * size < 1e-12, "curvature {k} at t = {t}, size {size}");
+        }
+    }
+}
+
+/// A corner of `turn_deg` between two lines of `leg` mm, under `G64 P<tol>`.
+fn corner_program(turn_deg: f64, leg: f64, tol: f64) -> (String, [[f64; 3]; 3]) {
+    let t = turn_deg.to_radians();
+    let c = [leg, 0.0, 0.0];
+    let e = [leg + leg * t.cos(), leg * t.sin(), 0.0];
+    let text = format!(
+        "G21 G64 P{tol}\nG1 X{} F3000\nX{} Y{}\nM2\n",
+        fmt(leg),
+        fmt(e[0]),
+        fmt(e[1])
+    );
+    (
+        text,
+        [
+            [0.0; 3],
+            c,
+            [fmt(e[0]).parse().unwrap(), fmt(e[1]).parse().unwrap(), 0.0],
+        ],
+    )
+}
+
+/// Largest distance from the blend (sampled) to the polyline, and from the polyline
+/// near the corner to the blend (sampled): both ways of the Hausdorff distance.
+fn deviations(ctrl: &[[f64; 4]], poly: &[[f64; 3]]) -> (f64, f64) {
+    let n = 4000;
+    let pts: Vec<[f64; 3]> = (0..=n).map(|i| at(ctrl, i as f64 / n as f64).p).collect();
+    let out = pts
+        .iter()
+        .map(|p| dist_to_polyline(*p, poly))
+        .fold(0.0, f64::max);
+    // The polyline's points between the trim points: the two trimmed pieces.
+    let (s, e) = (
+        [ctrl[0][0], ctrl[0][1], ctrl[0][2]],
+        [ctrl[5][0], ctrl[5][1], ctrl[5][2]],
+    );
+    let c = poly[1];
+    let m = 400;
+    let back = (0..=2 * m)
+        .map(|i| {
+            let x = if i <= m {
+                add(s, sub(c, s).map(|v| v * i as f64 / m as f64))
+            } else {
+                add(c, sub(e, c).map(|v| v * (i - m) as f64 / m as f64))
+            };
+            let (k, _) = pts
+                .iter()
+                .enumerate()
+                .map(|(k, p)| (k, norm(sub(*p, x))))
+                .fold((0, f64::INFINITY), |a, b| if b.1 < a.1 { b } else { a });
+            // Refine between the neighbouring samples (the distance is unimodal there).
+            let d = |t: f64| norm(sub(at(ctrl, t).p, x));
+            let (mut lo, mut hi) = (
+                (k.max(1) - 1) as f64 / n as f64,
+                ((k + 1).min(n)) as f64 / n as f64,
+            );
+            for _ in 0..100 {
+                let (m1, m2) = (lo + (hi - lo) / 3.0, hi - (hi - lo) / 3.0);
+                if d(m1) < d(m2) {
+                    hi = m2;
+                } else {
+                    lo = m1;
+                }
+            }
+            d(0.5 * (lo + hi))
+        })
+        .fold(0.0, f64::max);
+    (out, back)
+}
+
+#[test]
+fn blend_meets_each_line_with_its_tangent_and_zero_curvature() {
+    for turn in [1.0, 30.0, 90.0, 135.0, 170.0] {
+        let (text, _) = corner_program(turn, 10.0, 0.01);
+        let ms = blended(&text);
+        assert_eq!(blends(&ms).len(), 1, "{turn}°");
+        assert_g2_joins(&ms);
+        // The lines are trimmed, not dropped: line, blend, line.
+        let kinds: Vec<_> = ms
+            .iter()
+            .filter(|m| ends(m).is_some())
+            .map(|m| matches!(m, Move::Nurbs { .. }))
+            .collect();
+        assert_eq!(kinds, [false, true, false], "{turn}°");
+    }
+}
+
+#[test]
+fn deviation_is_within_the_tolerance_and_reaches_it_on_long_legs() {
+    for tol in [0.01, 0.1] {
+        for turn in [1.0, 10.0, 45.0, 90.0, 120.0, 150.0, 170.0] {
+            let (text, poly) = corner_program(turn, 200.0, tol);
+            let ms = blended(&text);
+            let b = blends(&ms);
+            assert_eq!(b.len(), 1);
+            let (out, back) = deviations(&b[0].1, &poly);
+            // The tool never leaves the programmed lines by more than tol·cos(θ/2)
+            // (the closed form), the corner is missed by tol: the two paths are tol
+            // apart (Hausdorff), to the sampling's accuracy.
+            let half = (0.5 * turn).to_radians();
+            assert!(out <= tol * (1.0 + 1e-9), "{turn}° P{tol}: out {out}");
+            assert!(
+                (out - tol * half.cos()).abs() < 1e-6 * tol,
+                "{turn}° P{tol}: out {out} vs {}",
+                tol * half.cos()
+            );
+            assert!(back <= tol * (1.0 + 1e-9), "{turn}° P{tol}: back {back}");
+            assert!(back >= (1.0 - 1e-9) * tol, "{turn}° P{tol}: back {back}");
+            // And the corner point itself is tol from the blend's middle.
+            let mid = at(&b[0].1, 0.5).p;
+            assert!((norm(sub(mid, poly[1])) - tol).abs() < 1e-12, "{mid:?}");
+        }
+    }
+}
+
+#[test]
+fn short_legs_shrink_the_blend_to_half_of_each() {
+    // 90° with P1 would need legs of 2 × 3.3 mm; 2 mm legs give half of each.
+    let (text, poly) = corner_program(90.0, 2.0, 1.0);
+    let b = blends(&blended(&text));
+    let start = [b[0].1[0][0], b[0].1[0][1], b[0].1[0][2]];
+    assert!(norm(sub(start, [1.0, 0.0, 0.0])) < 1e-12, "{start:?}");
+    let (c1, c2) = ratios(90.0);
+    let h = 2.0 * mid_weight(c1, c2) * 1.0 * (45.0f64).to_radians().sin();
+    let (out, back) = deviations(&b[0].1, &poly);
+    assert!(h < 0.35, "{h}");
+    assert!(
+        (out - h * (45.0f64).to_radians().cos()).abs() < 1e-9,
+        "{out} vs {h}"
+    );
+    assert!((back - h).abs() < 1e-9 * h, "{back} vs {h}");
+    // Two corners on one short leg share it: the leg is used up, the blends meet at its
+    // middle with one tangent and zero curvature, and never overlap.
+    let ms = blended("G64 P1\nG1 X10 F3000\nY1\nX0\nM2\n");
+    let b = blends(&ms);
+    assert_eq!(b.len(), 2);
+    assert_eq!(b[0].1[5], b[1].1[0]);
+    assert_eq!(b[0].1[5], [10.0, 0.5, 0.0, 1.0]);
+    assert_g2_joins(&ms);
+    assert_eq!(
+        ms.iter().filter(|m| matches!(m, Move::Line { .. })).count(),
+        2
+    );
+}
+
+#[test]
+fn no_blend_without_a_tolerance_or_outside_g64_p() {
+    for mode in [
+        "",
+        "G61\n",
+        "G61.1\n",
+        "G64\n",
+        "G64 P0\n",
+        "G64 P0.01\nG61\n",
+    ] {
+        let m = moves(&format!("{mode}G1 X10 F3000\nY10\nX0\nM2\n"));
+        let out = corners(&m);
+        assert!(matches!(out, Cow::Borrowed(_)), "{mode:?}");
+        assert_eq!(&*out, &m[..]);
+    }
+    // The mode in force for the move that ends at the corner decides: the first corner
+    // is under G61, the second under G64 P.
+    let ms = blended("G61\nG1 X10 F3000\nG64 P0.01\nY10\nG61\nX0\nM2\n");
+    let b = blends(&ms);
+    assert_eq!(b.len(), 1);
+    assert_eq!(b[0].0, 4, "the blend carries the line of Y10");
+    assert_g2_joins(&ms);
+}
+
+#[test]
+fn collinear_and_nearly_collinear_legs_need_no_blend() {
+    assert!(blends(&blended("G64 P0.01\nG1 X10 F3000\nX20\nM2\n")).is_empty());
+    // A turn of 5e-5 rad: below MIN_TURN_RAD.
+    let y = 10.0 * (5e-5f64).tan();
+    let text = format!("G64 P0.01\nG1 X10 F3000\nX20 Y{y:.9}\nM2\n");
+    assert!(blends(&blended(&text)).is_empty());
+    // 2e-4 rad: blended, over half of each leg (the tolerance would allow far more).
+    let y = 10.0 * (2e-4f64).tan();
+    let text = format!("G64 P0.01\nG1 X10 F3000\nX20 Y{y:.9}\nM2\n");
+    let ms = blended(&text);
+    let b = blends(&ms);
+    assert_eq!(b.len(), 1);
+    assert!((b[0].1[0][0] - 5.0).abs() < 1e-12);
+    assert_g2_joins(&ms);
+}
+
+#[test]
+fn degenerate_legs_are_not_blended() {
+    // The interpreter drops a move to where the tool already is: the corner around it
+    // is one corner, and blended.
+    let ms = blended("G64 P0.01\nG1 X10 F3000\nX10\nY10\nM2\n");
+    assert_eq!(blends(&ms).len(), 1);
+    // A zero-length or sub-micrometre leg handed to the pass: no blend at its corners.
+    let line = |from: [f64; 3], to: [f64; 3]| Move::Line {
+        line: 1,
+        from,
+        to,
+        rapid: false,
+        feed: 3000.0,
+    };
+    let mode = Move::PathMode {
+        line: 1,
+        control: PathControl::Blend {
+            tolerance_mm: Some(0.01),
+            naive_cam_mm: None,
+        },
+    };
+    let (a, b, c) = ([10.0, 0.0, 0.0], [10.0, 5e-7, 0.0], [10.0, 10.0, 0.0]);
+    for mid in [a, b] {
+        let ms = vec![
+            mode.clone(),
+            line([0.0; 3], a),
+            line(a, mid),
+            line(mid, c),
+            line(c, [0.0, 10.0, 0.0]),
+        ];
+        let out = corners(&ms);
+        // Only the corner at (10, 10) between two real legs is blended.
+        assert_eq!(blends(&out).len(), 1, "{mid:?}");
+        assert_eq!(blends(&out)[0].1[5][1], 10.0);
+        assert_g2_joins(&out);
+    }
+}
+
+#[test]
+fn reversals_stop_exactly() {
+    for turn in [180.0, 175.0] {
+        let (text, _) = corner_program(turn, 10.0, 0.01);
+        let ms = moves(&text);
+        assert!(matches!(corners(&ms), Cow::Borrowed(_)), "{turn}°");
+        let machine = Machine::default();
+        let mut b = build(&ms, &machine);
+        plan(&mut b, &machine, 1_000_000);
+        assert_eq!(b[0].end_feed_mm_per_min, 0.0, "{turn}°: exact stop");
+    }
+    let (text, _) = corner_program(165.0, 10.0, 0.01);
+    assert_eq!(blends(&blended(&text)).len(), 1);
+}
+
+#[test]
+fn rapids_are_not_blended() {
+    for text in [
+        "G64 P0.01\nG0 X10\nY10\nM2\n",
+        "G64 P0.01\nG0 X10\nG1 Y10 F3000\nM2\n",
+        "G64 P0.01\nG1 X10 F3000\nG0 Y10\nM2\n",
+    ] {
+        assert!(blends(&blended(text)).is_empty(), "{text}");
+    }
+}
+
+#[test]
+fn non_planar_corners_in_3d() {
+    let text = "G64 P0.05\nG1 X10 F2000\nY10\nZ10\nX0 Y0 Z0\nX5 Y1 Z-3\nM2\n";
+    let ms = blended(text);
+    let b = blends(&ms);
+    assert_eq!(b.len(), 4);
+    assert_g2_joins(&ms);
+    let poly: Vec<[f64; 3]> = vec![
+        [0.0; 3],
+        [10.0, 0.0, 0.0],
+        [10.0, 10.0, 0.0],
+        [10.0, 10.0, 10.0],
+        [0.0; 3],
+        [5.0, 1.0, -3.0],
+    ];
+    for (k, (_, ctrl, _)) in b.iter().enumerate() {
+        let corner = poly[k + 1];
+        let (out, back) = deviations(ctrl, &poly[k..k + 3]);
+        assert!(out <= 0.05 * (1.0 + 1e-9), "corner {k}: {out}");
+        assert!(back <= 0.05 * (1.0 + 1e-9), "corner {k}: {back}");
+        // Each blend lies in the plane of its two legs.
+        let n = unit(cross(sub(corner, poly[k]), sub(poly[k + 2], corner)));
+        for p in ctrl {
+            assert!(dot(sub([p[0], p[1], p[2]], corner), n).abs() < 1e-12);
+        }
+    }
+}
+
+#[test]
+fn the_planner_passes_a_blended_corner_without_stopping() {
+    let machine = Machine::default();
+    let planned = |text: &str| {
+        let mut b = build(&moves(text), &machine);
+        plan(&mut b, &machine, 1_000_000);
+        b
+    };
+    let exact = planned("G61\nG1 X10 F3000\nY10\nM2\n");
+    assert_eq!(exact[0].end_feed_mm_per_min, 0.0, "90° corner: exact stop");
+    let b = planned("G64 P0.01\nG1 X10 F3000\nY10 F2000\nM2\n");
+    let motion: Vec<_> = b
+        .iter()
+        .filter(|b| b.kind == BlockKind::Motion as u32)
+        .collect();
+    assert_eq!(motion.len(), 3);
+    let (line, blend, next) = (motion[0], motion[1], motion[2]);
+    assert_eq!(blend.degree, 5);
+    assert_eq!(blend.source_line, 2);
+    // The blend's curvature sets its cap, below both feeds; the junctions line→blend→line
+    // are smooth: passed at that cap, not reduced as kinks.
+    let cap = blend.feed_mm_per_min;
+    assert!(cap > 0.0 && cap < 2000.0, "{cap}");
+    assert!((line.end_feed_mm_per_min - cap).abs() < 1e-9 * cap);
+    assert!((blend.end_feed_mm_per_min - cap).abs() < 1e-9 * cap);
+    assert!((next.start_feed_mm_per_min - cap).abs() < 1e-9 * cap);
+}
+
+#[test]
+fn the_blend_feed_is_the_lower_of_the_two() {
+    let b = blends(&blended("G64 P0.01\nG1 X10 F3000\nY10 F1000\nM2\n"));
+    assert_eq!(b[0].2, 1000.0);
+    assert_eq!(b[0].0, 2);
+}
+
+#[test]
+fn ratios_follow_the_table() {
+    assert_eq!(ratios(0.0), (0.6, 0.15));
+    assert_eq!(ratios(90.0), (0.616, 0.278));
+    let (c1, c2) = ratios(95.0);
+    assert!((c1 - 0.6265).abs() < 1e-12 && (c2 - 0.289).abs() < 1e-12);
+    for d in 0..=170 {
+        let (c1, c2) = ratios(d as f64);
+        assert!(0.0 <= c2 && c2 < c1 && c1 < 1.0);
+    }
+}
