@@ -1,7 +1,7 @@
 //! What `cnc check` costs on a large program (issue #5): 100 000 generated lines, read,
-//! checked, built into blocks and planned ([`process::compile_with`], the function
-//! `cnc check` calls), and read and checked only ([`program::interpret`]), in lines per
-//! second.
+//! checked, built into blocks, planned and validated ([`process::check_with`], the
+//! function `cnc check` calls), and read and checked only ([`program::interpret`]), in
+//! lines per second.
 //!
 //! Two programs: plain `G1` lines, as CAM output for a 3-D surface is, and a mix of
 //! `G1`, `G2`, `G5.2 … G5.3` and `G6.2` blocks. `CHECK_BENCH_WRITE=DIR` also writes them
@@ -37,7 +37,7 @@ fn bench(c: &mut Criterion) {
     for (name, text) in &programs {
         let lines = text.lines().count() as u64;
         // A program the checker refuses would measure the wrong thing.
-        let blocks = process::compile_with(text, &Options::default(), &machine, PERIOD_NS)
+        let blocks = process::check_with(text, &Options::default(), &machine, PERIOD_NS)
             .unwrap_or_else(|e| panic!("{name}: {:?}", &e[..e.len().min(3)]))
             .1
             .len();
@@ -48,7 +48,7 @@ fn bench(c: &mut Criterion) {
         });
         g.bench_function(format!("{name}/read+plan"), |b| {
             b.iter(|| {
-                process::compile_with(text, &Options::default(), &machine, PERIOD_NS)
+                process::check_with(text, &Options::default(), &machine, PERIOD_NS)
                     .map(|(_, blocks)| blocks.len())
             })
         });

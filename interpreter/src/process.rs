@@ -4,7 +4,8 @@
 use crate::parse::Diagnostic;
 use crate::publish::{publish, Finish, Pace};
 use crate::report::InterpreterSummary;
-use crate::{blocks, program};
+use crate::blocks::{self, Block};
+use crate::program;
 use iceoryx2::prelude::Service;
 use shared::cmdlog::CommandLog;
 use shared::protocol::{BlockKind, CommandBlock, FLAG_RAPID};
@@ -66,16 +67,29 @@ pub fn compile_with(
     machine: &Machine,
     period_ns: u64,
 ) -> Result<(program::Program, Vec<CommandBlock>), Vec<Diagnostic>> {
+    check_with(text, opts, machine, period_ns).map(|(prog, b)| (prog, blocks::commands(&b)))
+}
+
+/// What `cnc check` runs: reads, checks, builds and plans, and validates every block as
+/// it will be sent; the blocks as [`blocks::build`] holds them (straight moves compact),
+/// [`blocks::commands`] turns them into those [`compile_with`] gives.
+pub fn check_with(
+    text: &str,
+    opts: &program::Options,
+    machine: &Machine,
+    period_ns: u64,
+) -> Result<(program::Program, Vec<Block>), Vec<Diagnostic>> {
     let prog = program::interpret_with(text, opts)?;
     let mut blocks = blocks::build(&prog.moves, machine);
     blocks::plan(&mut blocks, machine, period_ns);
     // Nothing leaves this process unless a receiver would accept it.
     let bad: Vec<Diagnostic> = blocks
         .iter()
-        .filter_map(|b| {
-            b.validate().err().map(|e| Diagnostic {
+        .enumerate()
+        .filter_map(|(seq, b)| {
+            b.command(seq as u64).validate().err().map(|e| Diagnostic {
                 file: None,
-                line: b.source_line,
+                line: b.source_line(),
                 col: 1,
                 rule: "internal",
                 message: e.to_string(),

@@ -5,7 +5,7 @@ fn planned(text: &str) -> Vec<CommandBlock> {
     let machine = Machine::default();
     let mut b = build(&interpret(text).unwrap().moves, &machine);
     plan(&mut b, &machine, 1_000_000);
-    b
+    commands(&b)
 }
 
 #[test]
