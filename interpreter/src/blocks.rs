@@ -698,38 +698,40 @@ pub fn plan_alone(b: &mut CommandBlock, machine: &Machine, feed: f64) {
 pub fn plan<B: Plannable>(blocks: &mut [B], machine: &Machine, period_ns: u64) {
     let period_s = period_ns as f64 * 1e-9;
     let n = blocks.len();
-    let mut shapes: Vec<Option<Shape>> = vec![None; n];
-    for (b, sh) in blocks.iter_mut().zip(shapes.iter_mut()) {
-        if !b.is_motion() {
-            continue;
-        }
-        let feed = b.feed_mm_per_min();
-        let (length, shp) = {
-            let g = b.geometry();
-            let length = match g {
-                Geometry::Straight(d) => path::norm(d),
-                Geometry::Curve(c) => path::length(c),
-            };
-            (length, shape(g, machine, period_s, feed / 60.0))
-        };
-        let limits = Jerk {
-            acc: shp.acc,
-            jerk: shp.jerk,
-        };
-        b.set_caps(length, feed.min(shp.v_cap * 60.0), limits);
-        *sh = Some(shp);
-    }
-    // Junction speed limits (mm/s) at the end of each block.
+    // Junction speed limits (mm/s) at the end of each block, each found as soon as the
+    // block after it has its shape (a junction needs only its two blocks').
     let mut end = vec![0.0f64; n];
-    for i in 0..n.saturating_sub(1) {
-        let (b, nb) = (&blocks[i], &blocks[i + 1]);
-        let rapid_change = (b.flags() ^ nb.flags()) & FLAG_RAPID != 0;
-        let stop = b.flags() & FLAG_STOP_AT_END != 0;
-        if let (Some(sa), Some(sb), false) = (&shapes[i], &shapes[i + 1], rapid_change || stop) {
-            end[i] = junction_speed(sa, sb, machine, period_s)
-                .min(b.feed_mm_per_min() / 60.0)
-                .min(nb.feed_mm_per_min() / 60.0);
+    let mut before: Option<Shape> = None;
+    for i in 0..n {
+        let b = &mut blocks[i];
+        let shp = b.is_motion().then(|| {
+            let feed = b.feed_mm_per_min();
+            let (length, shp) = {
+                let g = b.geometry();
+                let length = match g {
+                    Geometry::Straight(d) => path::norm(d),
+                    Geometry::Curve(c) => path::length(c),
+                };
+                (length, shape(g, machine, period_s, feed / 60.0))
+            };
+            let limits = Jerk {
+                acc: shp.acc,
+                jerk: shp.jerk,
+            };
+            b.set_caps(length, feed.min(shp.v_cap * 60.0), limits);
+            shp
+        });
+        if let (Some(sa), Some(sb), Some(j)) = (&before, &shp, i.checked_sub(1)) {
+            let (b, nb) = (&blocks[j], &blocks[i]);
+            let rapid_change = (b.flags() ^ nb.flags()) & FLAG_RAPID != 0;
+            let stop = b.flags() & FLAG_STOP_AT_END != 0;
+            if !(rapid_change || stop) {
+                end[j] = junction_speed(sa, sb, machine, period_s)
+                    .min(b.feed_mm_per_min() / 60.0)
+                    .min(nb.feed_mm_per_min() / 60.0);
+            }
         }
+        before = shp;
     }
     // Backward pass: every block must be able to slow to its end speed.
     let mut start = vec![0.0f64; n];

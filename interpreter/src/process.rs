@@ -36,7 +36,10 @@ impl Source {
                 .map_err(|e| format!("{}: {e}", p.display()))
                 .map(|bytes| Source {
                     name: p.display().to_string(),
-                    text: String::from_utf8_lossy(&bytes).into_owned(),
+                    // Valid UTF-8 (nearly every program) is taken as it is, not copied.
+                    text: String::from_utf8(bytes).unwrap_or_else(|e| {
+                        String::from_utf8_lossy(e.as_bytes()).into_owned()
+                    }),
                 }),
         }
     }
@@ -87,7 +90,7 @@ pub fn check_with(
         .iter()
         .enumerate()
         .filter_map(|(seq, b)| {
-            b.command(seq as u64).validate().err().map(|e| Diagnostic {
+            b.validate(seq as u64).err().map(|e| Diagnostic {
                 file: None,
                 line: b.source_line(),
                 col: 1,

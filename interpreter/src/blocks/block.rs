@@ -9,7 +9,9 @@
 
 use super::{Geometry, Plannable};
 use shared::profile::Limits as Jerk;
-use shared::protocol::{BlockKind, CommandBlock, Helix, FLAG_RAPID};
+use shared::protocol::{
+    validate_plan, BlockKind, CommandBlock, Helix, ProtocolError, FLAG_RAPID, FLAG_SURFACE,
+};
 
 /// A straight motion block (a `G0` or `G1` move): as a [`CommandBlock`], the degree-1
 /// NURBS from `from` to `to` with unit weights on the knots `0 0 1 1`.
@@ -62,6 +64,37 @@ impl Straight {
         ]
     }
 
+    /// What [`CommandBlock::validate`] says of [`command(seq)`](Self::command), without
+    /// making the block: a degree-1 curve on the knots `0 0 1 1` with unit weights is
+    /// valid when its end points are finite, and then its planned values are checked.
+    pub fn validate(&self, seq: u64) -> Result<BlockKind, ProtocolError> {
+        if self.flags & FLAG_SURFACE != 0 {
+            // Not a curve at all for a receiver: it says why.
+            return self.command(seq).validate();
+        }
+        if let Some(i) = [self.from, self.to]
+            .iter()
+            .position(|p| p.iter().any(|v| !v.is_finite()))
+        {
+            return Err(ProtocolError::NotFinite {
+                seq,
+                field: "ctrl",
+                index: i as u32,
+            });
+        }
+        validate_plan(
+            seq,
+            [
+                self.feed_mm_per_min,
+                self.start_feed_mm_per_min,
+                self.end_feed_mm_per_min,
+            ],
+            self.length_mm,
+            [self.acc_mm_per_s2, self.jerk_mm_per_s3],
+        )?;
+        Ok(BlockKind::Motion)
+    }
+
     /// The block as it is sent, numbered `seq`.
     pub fn command(&self, seq: u64) -> CommandBlock {
         let mut b = CommandBlock::empty(BlockKind::Motion, seq, self.source_line);
@@ -104,6 +137,14 @@ impl Block {
         match self {
             Block::Straight(s) => s.command(seq),
             Block::Whole(b) => CommandBlock { seq, ..**b },
+        }
+    }
+
+    /// [`CommandBlock::validate`] of [`command(seq)`](Self::command).
+    pub fn validate(&self, seq: u64) -> Result<BlockKind, ProtocolError> {
+        match self {
+            Block::Straight(s) => s.validate(seq),
+            Block::Whole(_) => self.command(seq).validate(),
         }
     }
 
