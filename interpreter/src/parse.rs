@@ -216,22 +216,23 @@ impl Cursor {
         self.pos = 0;
         self.line = line;
         // Most lines are ASCII words without a comment: each byte is a character that is
-        // either dropped (whitespace) or kept, at the column after its index.
-        let bytes = text.as_bytes();
-        if bytes.iter().all(|&b| b.is_ascii() && b != b'(' && b != b';') {
-            for (i, &b) in bytes.iter().enumerate() {
-                match b {
-                    // `char::is_whitespace` in ASCII
-                    b' ' | b'\t'..=b'\r' => {}
-                    b'%' if self.chars.is_empty() => {} // tape start/end marker
-                    _ => self
-                        .chars
-                        .push((char::from(b.to_ascii_uppercase()), i as u32 + 1)),
+        // either dropped (whitespace) or kept, at the column after its index. A comment
+        // or a character beyond ASCII sends the line the long way, from its start.
+        for (i, &b) in text.as_bytes().iter().enumerate() {
+            match b {
+                b'(' | b';' | 0x80.. => {
+                    self.chars.clear();
+                    return significant_chars(text.chars(), line, &mut self.chars, messages);
                 }
+                // `char::is_whitespace` in ASCII
+                b' ' | b'\t'..=b'\r' => {}
+                b'%' if self.chars.is_empty() => {} // tape start/end marker
+                _ => self
+                    .chars
+                    .push((char::from(b.to_ascii_uppercase()), i as u32 + 1)),
             }
-            return Ok(());
         }
-        significant_chars(text.chars(), line, &mut self.chars, messages)
+        Ok(())
     }
 }
 
@@ -479,8 +480,9 @@ fn o_head(cur: &mut Cursor, col: u32) -> Result<OWord, Diagnostic> {
 /// structure before running it), or `None` for a line without one.
 pub fn o_word_of(text: &str, line: u32) -> Result<Option<OWord>, Diagnostic> {
     // Most lines have no `O` at all: no need to read them into a cursor.
-    let bytes = text.as_bytes();
-    if !bytes.contains(&b'o') && !bytes.contains(&b'O') {
+    // (`b | 0x20` is `o` for `o` and `O` only; a fold without an early exit runs
+    // over many bytes at once.)
+    if !text.bytes().fold(false, |o, b| o | (b | 0x20 == b'o')) {
         return Ok(None);
     }
     let mut cur = significant(text, line, &mut Vec::new())?;

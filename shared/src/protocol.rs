@@ -355,31 +355,25 @@ pub fn validate_plan(
     length_mm: f64,
     [acc, jerk]: [f64; 2],
 ) -> Result<(), ProtocolError> {
+    let bad = |field: &'static str| Err(ProtocolError::BadField { seq, field });
     // The cap must be positive; the planned speeds may be zero (a stop).
     if !feed.is_finite() || feed <= 0.0 {
-        return Err(ProtocolError::BadField {
-            seq,
-            field: "feed_mm_per_min",
-        });
+        return bad("feed_mm_per_min");
     }
-    for (field, f) in [
-        ("start_feed_mm_per_min", start_feed),
-        ("end_feed_mm_per_min", end_feed),
-    ] {
-        if !f.is_finite() || f < 0.0 {
-            return Err(ProtocolError::BadField { seq, field });
-        }
+    if !start_feed.is_finite() || start_feed < 0.0 {
+        return bad("start_feed_mm_per_min");
+    }
+    if !end_feed.is_finite() || end_feed < 0.0 {
+        return bad("end_feed_mm_per_min");
     }
     if !length_mm.is_finite() || length_mm < 0.0 {
-        return Err(ProtocolError::BadField {
-            seq,
-            field: "length_mm",
-        });
+        return bad("length_mm");
     }
-    for (field, v) in [("acc_mm_per_s2", acc), ("jerk_mm_per_s3", jerk)] {
-        if !v.is_finite() || v <= 0.0 {
-            return Err(ProtocolError::BadField { seq, field });
-        }
+    if !acc.is_finite() || acc <= 0.0 {
+        return bad("acc_mm_per_s2");
+    }
+    if !jerk.is_finite() || jerk <= 0.0 {
+        return bad("jerk_mm_per_s3");
     }
     Ok(())
 }
