@@ -13,8 +13,12 @@
 //! plan: their caps, limits and junctions come from the tool reference point path `M`,
 //! which the machine follows (`set_point_eval`), scaled to the contact point feed the
 //! block's speeds are in.
+//!
+//! A program's blocks are held as [`Block`]s until they are sent: a straight move in a
+//! few numbers, anything else whole (see [`block`]); the planner takes either form
+//! ([`Plannable`]) and [`commands`] gives the [`CommandBlock`]s.
 
-mod block;
+pub mod block;
 
 pub use block::{commands, Block, Straight};
 
@@ -364,7 +368,7 @@ fn shape(g: Geometry, machine: &Machine, period_s: f64, feed_mm_s: f64) -> Shape
     let feed_mm_s = feed_mm_s * ratio;
     let (one_pt, one_dk);
     let sampled: Samples;
-    let (pts, dk, jumps): (&[([f64; 3], [f64; 3])], &[[f64; 3]], &[f64]) = match g {
+    let (pts, dk, jumps): (&[Frame], &[[f64; 3]], &[f64]) = match g {
         // A straight segment has one tangent and no curvature: one sample says it all
         // (the samples below would each find the same, at a hundred times the cost).
         Geometry::Straight(d) => {
@@ -473,8 +477,11 @@ fn straight(b: &CommandBlock) -> Option<[f64; 3]> {
         .then(|| [c[1][0] - c[0][0], c[1][1] - c[0][1], c[1][2] - c[0][2]])
 }
 
+/// A unit tangent with the curvature vector there.
+type Frame = ([f64; 3], [f64; 3]);
+
 /// Unit tangents with curvature vectors, curvature derivatives, curvature jumps.
-type Samples = (Vec<([f64; 3], [f64; 3])>, Vec<[f64; 3]>, Vec<f64>);
+type Samples = (Vec<Frame>, Vec<[f64; 3]>, Vec<f64>);
 
 /// Samples of a curved block for [`shape`]: unit tangent and curvature vector at each,
 /// the curvature's derivative along the path at each, and the curvature jumps at its
@@ -733,8 +740,8 @@ pub fn plan<B: Plannable>(blocks: &mut [B], machine: &Machine, period_ns: u64) {
         }
         before = shp;
     }
-    // Backward pass: every block must be able to slow to its end speed.
-    let mut start = vec![0.0f64; n];
+    // Backward pass: every block must be able to slow to its end speed. A block's end
+    // speed is final once the block after it has been passed, so its feeds are set here.
     for i in (0..n).rev() {
         if !blocks[i].is_motion() {
             continue;
@@ -745,9 +752,10 @@ pub fn plan<B: Plannable>(blocks: &mut [B], machine: &Machine, period_ns: u64) {
         } else {
             0.0
         };
-        start[i] = entry.min(blocks[i].limits().reachable_speed(end[i], len));
+        let start = entry.min(blocks[i].limits().reachable_speed(end[i], len));
+        blocks[i].set_feeds(start * 60.0, end[i] * 60.0);
         if i > 0 {
-            end[i - 1] = start[i];
+            end[i - 1] = start;
         }
     }
     // No forward pass: the interpolator accelerates as fast as its limits allow by
@@ -755,11 +763,6 @@ pub fn plan<B: Plannable>(blocks: &mut [B], machine: &Machine, period_ns: u64) {
     // reachable from its start with zero acceleration at both) would hold it to a
     // staircase of stops in acceleration at every block end: on a chain of tiny segments
     // from rest, a crawl.
-    for (i, b) in blocks.iter_mut().enumerate() {
-        if b.is_motion() {
-            b.set_feeds(start[i] * 60.0, end[i] * 60.0);
-        }
-    }
 }
 
 #[cfg(test)]

@@ -210,7 +210,12 @@ fn significant(text: &str, line: u32, messages: &mut Vec<String>) -> Result<Curs
 
 impl Cursor {
     /// Makes this cursor [`significant`]'s of `text`, reusing its buffer.
-    fn fill(&mut self, text: &str, line: u32, messages: &mut Vec<String>) -> Result<(), Diagnostic> {
+    fn fill(
+        &mut self,
+        text: &str,
+        line: u32,
+        messages: &mut Vec<String>,
+    ) -> Result<(), Diagnostic> {
         self.chars.clear();
         self.chars.reserve(text.len());
         self.pos = 0;
@@ -379,7 +384,7 @@ fn read_into(
                 // when it spells one; otherwise the word simply lacks its value.
                 let starts_value = match cur.peek() {
                     None => false,
-                    Some('A'..='Z') => at_function(&cur),
+                    Some('A'..='Z') => at_function(cur),
                     Some(_) => true,
                 };
                 if !starts_value {
@@ -716,7 +721,10 @@ mod tests {
         assert_eq!((e.line, e.col), (7, 8));
         // Columns count characters, not bytes.
         let e = read_line("G1 (é) X$", 1, &Params::default()).unwrap_err();
-        assert_eq!((e.col, e.message.as_str()), (9, "expected a value, found `$`"));
+        assert_eq!(
+            (e.col, e.message.as_str()),
+            (9, "expected a value, found `$`")
+        );
         let e = read_line("G1 (open", 3, &Params::default()).unwrap_err();
         assert_eq!((e.line, e.col), (3, 4));
         let e = read_line("G1 X[1+2 Y1", 1, &Params::default()).unwrap_err();

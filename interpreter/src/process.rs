@@ -1,11 +1,11 @@
 //! The interpreter process: read and check the program, build and plan the blocks, log
 //! and publish them, report.
 
+use crate::blocks::{self, Block};
 use crate::parse::Diagnostic;
+use crate::program;
 use crate::publish::{publish, Finish, Pace};
 use crate::report::InterpreterSummary;
-use crate::blocks::{self, Block};
-use crate::program;
 use iceoryx2::prelude::Service;
 use shared::cmdlog::CommandLog;
 use shared::protocol::{BlockKind, CommandBlock, FLAG_RAPID};
@@ -37,9 +37,8 @@ impl Source {
                 .map(|bytes| Source {
                     name: p.display().to_string(),
                     // Valid UTF-8 (nearly every program) is taken as it is, not copied.
-                    text: String::from_utf8(bytes).unwrap_or_else(|e| {
-                        String::from_utf8_lossy(e.as_bytes()).into_owned()
-                    }),
+                    text: String::from_utf8(bytes)
+                        .unwrap_or_else(|e| String::from_utf8_lossy(e.as_bytes()).into_owned()),
                 }),
         }
     }

@@ -49,7 +49,14 @@ impl Hash {
         self.bytes(s.as_bytes());
     }
     fn block(&mut self, b: &CommandBlock) {
-        for v in [b.protocol, b.kind, b.source_line, b.flags, b.degree, b.n_ctrl] {
+        for v in [
+            b.protocol,
+            b.kind,
+            b.source_line,
+            b.flags,
+            b.degree,
+            b.n_ctrl,
+        ] {
             self.u64(v.into());
         }
         self.u64(b.seq);
@@ -67,7 +74,11 @@ impl Hash {
         let h = &b.helix;
         self.u64(h.axis.into());
         self.u64(h.dir as u64);
-        for v in h.center_mm.iter().chain(&[h.start_mm, h.mm_per_rad, h.seg_rad]) {
+        for v in h
+            .center_mm
+            .iter()
+            .chain(&[h.start_mm, h.mm_per_rad, h.seg_rad])
+        {
             self.f64(*v);
         }
         for v in b.knots.iter().chain(b.ctrl.iter().flatten()) {
@@ -231,9 +242,9 @@ fn blocks_and_plans_are_as_they_were() {
         }
         match GOLDEN_BLOCKS.iter().find(|g| g.0 == name) {
             Some(&(_, want_n, want)) if (want_n, want) == (n, hash) => {}
-            Some(&(_, want_n, want)) => {
-                wrong.push(format!("{name}: {n} {hash:#018x}, was {want_n} {want:#018x}"))
-            }
+            Some(&(_, want_n, want)) => wrong.push(format!(
+                "{name}: {n} {hash:#018x}, was {want_n} {want:#018x}"
+            )),
             None => wrong.push(format!("{name}: no golden value")),
         }
     }
@@ -282,5 +293,9 @@ fn diagnostics_are_as_they_were() {
         println!("diagnostics: ({cases}, {:#018x})", h.0);
         return;
     }
-    assert_eq!((cases, h.0), GOLDEN, "diagnostics of mutated programs changed");
+    assert_eq!(
+        (cases, h.0),
+        GOLDEN,
+        "diagnostics of mutated programs changed"
+    );
 }
