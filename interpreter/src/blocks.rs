@@ -13,6 +13,14 @@
 //! plan: their caps, limits and junctions come from the tool reference point path `M`,
 //! which the machine follows (`set_point_eval`), scaled to the contact point feed the
 //! block's speeds are in.
+//!
+//! A program's blocks are held as [`Block`]s until they are sent: a straight move in a
+//! few numbers, anything else whole (see [`block`]); the planner takes either form
+//! ([`Plannable`]) and [`commands`] gives the [`CommandBlock`]s.
+
+pub mod block;
+
+pub use block::{commands, Block, Straight};
 
 use crate::program::{Move, PathControl, Plane};
 use shared::nurbs::{self, SplitCurve, MAX_CTRL};
@@ -27,14 +35,13 @@ pub mod blend;
 /// Most quadratic segments (of at most 90°) in one arc block: 2n+1 control points.
 const ARC_SEGMENTS_PER_BLOCK: usize = (MAX_CTRL - 1) / 2;
 
-fn curve_block(line: u32, c: &SplitCurve, helix: Helix, feed: f64, rapid: bool) -> CommandBlock {
+fn curve_block(line: u32, c: &SplitCurve, helix: Helix, feed: f64) -> CommandBlock {
     let mut b = CommandBlock::empty(BlockKind::Motion, 0, line);
     b.degree = c.degree as u32;
     b.n_ctrl = c.ctrl.len() as u32;
     b.knots[..c.knots.len()].copy_from_slice(&c.knots);
     b.ctrl[..c.ctrl.len()].copy_from_slice(&c.ctrl);
     b.helix = helix;
-    b.flags = if rapid { FLAG_RAPID } else { 0 };
     b.feed_mm_per_min = feed;
     b
 }
@@ -105,7 +112,6 @@ fn arc_blocks(
             },
             helix,
             feed,
-            false,
         ));
         seg += count;
     }
@@ -202,19 +208,20 @@ fn split_at_cusps(c: SplitCurve, machine: &Machine) -> Vec<SplitCurve> {
     out
 }
 
-/// Turns moves into unplanned command blocks (feeds are the caps, speeds not yet set).
-pub fn build(moves: &[Move], machine: &Machine) -> Vec<CommandBlock> {
+/// Turns moves into unplanned blocks (feeds are the caps, speeds not yet set), numbered
+/// in order when they become [`CommandBlock`]s ([`commands`]).
+pub fn build(moves: &[Move], machine: &Machine) -> Vec<Block> {
     // `G64 P`: corners between feed lines blended first (see [`blend`]).
     let blended = blend::corners(moves);
     let moves: &[Move] = &blended;
-    // Most moves make one block; blocks are large, so growing the list by copying costs.
-    let mut out: Vec<CommandBlock> = Vec::with_capacity(moves.len());
+    // Most moves make one block.
+    let mut out: Vec<Block> = Vec::with_capacity(moves.len());
     // `G61.1` exact stop mode: every move ends at rest.
     let mut exact_stop = false;
-    let stop_after_last = |out: &mut Vec<CommandBlock>| {
+    let stop_after_last = |out: &mut Vec<Block>| {
         if let Some(b) = out.last_mut() {
-            if b.kind == BlockKind::Motion as u32 {
-                b.flags |= FLAG_STOP_AT_END;
+            if b.is_motion() {
+                *b.flags_mut() |= FLAG_STOP_AT_END;
             }
         }
     };
@@ -233,12 +240,7 @@ pub fn build(moves: &[Move], machine: &Machine) -> Vec<CommandBlock> {
                 } else {
                     feed.min(machine.max_feed_mm_per_min)
                 };
-                let c = SplitCurve {
-                    degree: 1,
-                    knots: vec![0.0, 0.0, 1.0, 1.0],
-                    ctrl: vec![[from[0], from[1], from[2], 1.0], [to[0], to[1], to[2], 1.0]],
-                };
-                out.push(curve_block(*line, &c, Helix::NONE, f, *rapid));
+                out.push(Block::Straight(Straight::new(*line, *from, *to, *rapid, f)));
             }
             Move::Arc {
                 line,
@@ -254,7 +256,7 @@ pub fn build(moves: &[Move], machine: &Machine) -> Vec<CommandBlock> {
                 let n = plane.normal();
                 let f = feed.min(machine.max_feed_mm_per_min);
                 let blocks = arc_blocks(*line, *from, *center, *plane, sweep, to[n] - from[n], f);
-                out.extend(blocks);
+                out.extend(blocks.into_iter().map(Block::from));
                 // The arc's exact end in the plane is the programmed end (to rounding).
             }
             Move::Nurbs {
@@ -275,16 +277,18 @@ pub fn build(moves: &[Move], machine: &Machine) -> Vec<CommandBlock> {
                 // worst of the whole curve.
                 for span in nurbs::split_to_capacity(curve, (*degree + 1).min(MAX_CTRL)) {
                     for piece in split_at_cusps(span, machine) {
-                        out.push(curve_block(*line, &piece, Helix::NONE, f, false));
+                        out.push(curve_block(*line, &piece, Helix::NONE, f).into());
                     }
                 }
             }
             Move::Dwell { line, seconds } => {
                 let mut b = CommandBlock::empty(BlockKind::Dwell, 0, *line);
                 b.dwell_ns = (seconds * 1e9).round() as u64;
-                out.push(b);
+                out.push(b.into());
             }
-            Move::End { line } => out.push(CommandBlock::empty(BlockKind::ProgramEnd, 0, *line)),
+            Move::End { line } => {
+                out.push(CommandBlock::empty(BlockKind::ProgramEnd, 0, *line).into())
+            }
             Move::PathMode { control, .. } => {
                 // `G64 P` corners are blended above; otherwise `G61` and `G64` both
                 // follow the exact path. `G61.1` stops at the end of every move.
@@ -298,9 +302,6 @@ pub fn build(moves: &[Move], machine: &Machine) -> Vec<CommandBlock> {
         if exact_stop && out.len() > before {
             stop_after_last(&mut out);
         }
-    }
-    for (i, b) in out.iter_mut().enumerate() {
-        b.seq = i as u64;
     }
     out
 }
@@ -355,7 +356,7 @@ const NORMAL_SHARE: f64 = 0.5;
 /// axis's velocity share `v·|T_i|` within its limit, and one period's chord within the
 /// chord tolerance (exact form: a chord `c` of a circle of radius `r` deviates
 /// `r - sqrt(r² - c²/4)`). The tangential limits are what is left at the cap speed.
-fn shape(b: &CommandBlock, machine: &Machine, period_s: f64, feed_mm_s: f64) -> Shape {
+fn shape(g: Geometry, machine: &Machine, period_s: f64, feed_mm_s: f64) -> Shape {
     let axes = machine.axes.as_array();
     let a_path = machine.path_acc_mm_per_s2;
     let j_path = machine.path_jerk_mm_per_s3;
@@ -364,39 +365,45 @@ fn shape(b: &CommandBlock, machine: &Machine, period_s: f64, feed_mm_s: f64) -> 
     // the caps and limits found for `M` are scaled back to the contact path, along which
     // the feed is programmed and the profile runs (conservative where the ratio varies;
     // the ratio's own change along the block is left out of the tangential terms).
-    let ratio = if b.is_surface() {
-        surface_speed_ratio(b)
-    } else {
-        1.0
+    let surface = matches!(g, Geometry::Curve(b) if b.is_surface());
+    let ratio = match g {
+        Geometry::Curve(b) if surface => surface_speed_ratio(b),
+        _ => 1.0,
     };
     let feed_mm_s = feed_mm_s * ratio;
-    let (pts, dk, jumps) = match straight(b) {
+    let (one_pt, one_dk);
+    let sampled: Samples;
+    let (pts, dk, jumps): (&[Frame], &[[f64; 3]], &[f64]) = match g {
         // A straight segment has one tangent and no curvature: one sample says it all
         // (the samples below would each find the same, at a hundred times the cost).
-        Some(d) => {
+        Geometry::Straight(d) => {
             let len = path::norm(d);
             if len > 0.0 {
-                (
-                    vec![(d.map(|x| x / len), [0.0; 3])],
-                    vec![[0.0; 3]],
-                    Vec::new(),
-                )
+                one_pt = [(d.map(|x| x / len), [0.0; 3])];
+                one_dk = [[0.0; 3]];
+                (&one_pt, &one_dk, &[])
             } else {
-                (Vec::new(), Vec::new(), Vec::new())
+                (&[], &[], &[])
             }
         }
-        None if b.is_surface() => surface_samples(b),
-        None => samples(b),
+        Geometry::Curve(b) => {
+            sampled = if surface {
+                surface_samples(b)
+            } else {
+                samples(b)
+            };
+            (&sampled.0, &sampled.1, &sampled.2)
+        }
     };
     let first = pts.first().copied().unwrap_or(([1.0, 0.0, 0.0], [0.0; 3]));
     let last = pts.last().copied().unwrap_or(first);
     let mut v = feed_mm_s;
-    for jump in &jumps {
+    for jump in jumps {
         if *jump > 1e-9 {
             v = v.min((NORMAL_SHARE * j_path * period_s / jump).sqrt());
         }
     }
-    for ((t, k), dk) in pts.iter().zip(&dk) {
+    for ((t, k), dk) in pts.iter().zip(dk) {
         let kappa = path::norm(*k);
         if kappa > 1e-12 {
             let rho = 1.0 / kappa;
@@ -424,7 +431,7 @@ fn shape(b: &CommandBlock, machine: &Machine, period_s: f64, feed_mm_s: f64) -> 
     }
     // What the cap speed leaves to the profile along the path.
     let mut acc = a_path;
-    for ((t, k), dk) in pts.iter().zip(&dk) {
+    for ((t, k), dk) in pts.iter().zip(dk) {
         let kappa = path::norm(*k);
         let an = v * v * kappa;
         acc = acc.min((a_path * a_path - an * an).max(0.0).sqrt());
@@ -443,7 +450,7 @@ fn shape(b: &CommandBlock, machine: &Machine, period_s: f64, feed_mm_s: f64) -> 
         }
     }
     let mut jerk = j_path;
-    for ((t, k), dk) in pts.iter().zip(&dk) {
+    for ((t, k), dk) in pts.iter().zip(dk) {
         let kappa = path::norm(*k);
         jerk = jerk.min(j_path - 3.0 * v * acc * kappa - v * v * v * path::norm(*dk));
         for (i, ax) in axes.iter().enumerate() {
@@ -463,7 +470,7 @@ fn shape(b: &CommandBlock, machine: &Machine, period_s: f64, feed_mm_s: f64) -> 
         t_end: last.0,
         k_start: first.1,
         k_end: last.1,
-        surface_ratio: b.is_surface().then_some(ratio),
+        surface_ratio: surface.then_some(ratio),
     }
 }
 
@@ -475,8 +482,11 @@ fn straight(b: &CommandBlock) -> Option<[f64; 3]> {
         .then(|| [c[1][0] - c[0][0], c[1][1] - c[0][1], c[1][2] - c[0][2]])
 }
 
+/// A unit tangent with the curvature vector there.
+type Frame = ([f64; 3], [f64; 3]);
+
 /// Unit tangents with curvature vectors, curvature derivatives, curvature jumps.
-type Samples = (Vec<([f64; 3], [f64; 3])>, Vec<[f64; 3]>, Vec<f64>);
+type Samples = (Vec<Frame>, Vec<[f64; 3]>, Vec<f64>);
 
 /// Samples of a curved block for [`shape`]: unit tangent and curvature vector at each,
 /// the curvature's derivative along the path at each, and the curvature jumps at its
@@ -659,6 +669,34 @@ fn junction_speed(a: &Shape, b: &Shape, machine: &Machine, period_s: f64) -> f64
     v
 }
 
+/// A motion block's path as the planner sees it.
+#[derive(Debug, Clone, Copy)]
+pub enum Geometry<'a> {
+    /// A straight segment (degree 1, two control points, no helix, not a surface
+    /// block), by its chord.
+    Straight([f64; 3]),
+    /// Any other curve, or a surface block.
+    Curve(&'a CommandBlock),
+}
+
+/// What the planner reads and fills in of a block, held whole ([`CommandBlock`]: a
+/// surface part, a single move) or as [`build`] holds a program's ([`Block`]).
+pub trait Plannable {
+    fn is_motion(&self) -> bool;
+    /// `FLAG_*` bits.
+    fn flags(&self) -> u32;
+    /// The path of a motion block.
+    fn geometry(&self) -> Geometry<'_>;
+    fn feed_mm_per_min(&self) -> f64;
+    fn length_mm(&self) -> f64;
+    /// The tangential acceleration and jerk the block's profile may use.
+    fn limits(&self) -> Jerk;
+    /// Sets the length, the feed cap and the profile limits.
+    fn set_caps(&mut self, length_mm: f64, feed_mm_per_min: f64, limits: Jerk);
+    /// Sets the planned feeds at the start and the end.
+    fn set_feeds(&mut self, start_mm_per_min: f64, end_mm_per_min: f64);
+}
+
 /// Plans one motion block standing alone (from rest to rest) at `feed` mm/min.
 pub fn plan_alone(b: &mut CommandBlock, machine: &Machine, feed: f64) {
     b.feed_mm_per_min = feed;
@@ -669,53 +707,60 @@ pub fn plan_alone(b: &mut CommandBlock, machine: &Machine, feed: f64) {
 /// block: a look-ahead over the whole program (the interpreter reads all of it before
 /// any motion). A backward then a forward pass, with the jerk-limited distances of
 /// [`shared::profile`], make every block's start and end speed reachable.
-pub fn plan(blocks: &mut [CommandBlock], machine: &Machine, period_ns: u64) {
+pub fn plan<B: Plannable>(blocks: &mut [B], machine: &Machine, period_ns: u64) {
     let period_s = period_ns as f64 * 1e-9;
-    let motion = |b: &CommandBlock| b.kind == BlockKind::Motion as u32;
     let n = blocks.len();
-    let mut shapes: Vec<Option<Shape>> = vec![None; n];
-    for (b, sh) in blocks.iter_mut().zip(shapes.iter_mut()) {
-        if !motion(b) {
-            continue;
-        }
-        b.length_mm = straight(b).map_or_else(|| path::length(b), path::norm);
-        let shp = shape(b, machine, period_s, b.feed_mm_per_min / 60.0);
-        b.feed_mm_per_min = b.feed_mm_per_min.min(shp.v_cap * 60.0);
-        b.acc_mm_per_s2 = shp.acc;
-        b.jerk_mm_per_s3 = shp.jerk;
-        *sh = Some(shp);
-    }
-    let lim = |b: &CommandBlock| Jerk {
-        acc: b.acc_mm_per_s2,
-        jerk: b.jerk_mm_per_s3,
-    };
-    // Junction speed limits (mm/s) at the end of each block.
+    // Junction speed limits (mm/s) at the end of each block, each found as soon as the
+    // block after it has its shape (a junction needs only its two blocks').
     let mut end = vec![0.0f64; n];
-    for i in 0..n.saturating_sub(1) {
-        let (b, nb) = (&blocks[i], &blocks[i + 1]);
-        let rapid_change = (b.flags ^ nb.flags) & FLAG_RAPID != 0;
-        let stop = b.flags & FLAG_STOP_AT_END != 0;
-        if let (Some(sa), Some(sb), false) = (&shapes[i], &shapes[i + 1], rapid_change || stop) {
-            end[i] = junction_speed(sa, sb, machine, period_s)
-                .min(b.feed_mm_per_min / 60.0)
-                .min(nb.feed_mm_per_min / 60.0);
+    let mut before: Option<Shape> = None;
+    for i in 0..n {
+        let b = &mut blocks[i];
+        let shp = b.is_motion().then(|| {
+            let feed = b.feed_mm_per_min();
+            let (length, shp) = {
+                let g = b.geometry();
+                let length = match g {
+                    Geometry::Straight(d) => path::norm(d),
+                    Geometry::Curve(c) => path::length(c),
+                };
+                (length, shape(g, machine, period_s, feed / 60.0))
+            };
+            let limits = Jerk {
+                acc: shp.acc,
+                jerk: shp.jerk,
+            };
+            b.set_caps(length, feed.min(shp.v_cap * 60.0), limits);
+            shp
+        });
+        if let (Some(sa), Some(sb), Some(j)) = (&before, &shp, i.checked_sub(1)) {
+            let (b, nb) = (&blocks[j], &blocks[i]);
+            let rapid_change = (b.flags() ^ nb.flags()) & FLAG_RAPID != 0;
+            let stop = b.flags() & FLAG_STOP_AT_END != 0;
+            if !(rapid_change || stop) {
+                end[j] = junction_speed(sa, sb, machine, period_s)
+                    .min(b.feed_mm_per_min() / 60.0)
+                    .min(nb.feed_mm_per_min() / 60.0);
+            }
         }
+        before = shp;
     }
-    // Backward pass: every block must be able to slow to its end speed.
-    let mut start = vec![0.0f64; n];
+    // Backward pass: every block must be able to slow to its end speed. A block's end
+    // speed is final once the block after it has been passed, so its feeds are set here.
     for i in (0..n).rev() {
-        if !motion(&blocks[i]) {
+        if !blocks[i].is_motion() {
             continue;
         }
-        let len = blocks[i].length_mm;
-        let entry = if i > 0 && motion(&blocks[i - 1]) {
+        let len = blocks[i].length_mm();
+        let entry = if i > 0 && blocks[i - 1].is_motion() {
             end[i - 1]
         } else {
             0.0
         };
-        start[i] = entry.min(lim(&blocks[i]).reachable_speed(end[i], len));
+        let start = entry.min(blocks[i].limits().reachable_speed(end[i], len));
+        blocks[i].set_feeds(start * 60.0, end[i] * 60.0);
         if i > 0 {
-            end[i - 1] = start[i];
+            end[i - 1] = start;
         }
     }
     // No forward pass: the interpolator accelerates as fast as its limits allow by
@@ -723,12 +768,6 @@ pub fn plan(blocks: &mut [CommandBlock], machine: &Machine, period_ns: u64) {
     // reachable from its start with zero acceleration at both) would hold it to a
     // staircase of stops in acceleration at every block end: on a chain of tiny segments
     // from rest, a crawl.
-    for (i, b) in blocks.iter_mut().enumerate() {
-        if motion(b) {
-            b.start_feed_mm_per_min = start[i] * 60.0;
-            b.end_feed_mm_per_min = end[i] * 60.0;
-        }
-    }
 }
 
 #[cfg(test)]

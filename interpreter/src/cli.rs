@@ -297,8 +297,9 @@ pub fn main() -> ExitCode {
                 dialect,
                 subroutine_dirs: beside.into_iter().chain(subroutine_path).collect(),
             };
-            match process::compile_with(&src.text, &opts, &machine, period_ns) {
+            match process::check_with(&src.text, &opts, &machine, period_ns) {
                 Ok((prog, blocks)) if estimate => {
+                    let blocks = crate::blocks::commands(&blocks);
                     match crate::estimate::estimate(&blocks, &machine, period_ns) {
                         Ok(est) if json => {
                             println!("{}", serde_json::to_string_pretty(&est).unwrap_or_default());

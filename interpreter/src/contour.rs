@@ -838,7 +838,7 @@ mod tests {
         let prog = crate::program::interpret(program).expect("a good program");
         let mut b = crate::blocks::build(&prog.moves, &Machine::default());
         crate::blocks::plan(&mut b, &Machine::default(), 1_000_000);
-        b
+        crate::blocks::commands(&b)
     }
 
     /// Set-points along the blocks' exact curves (`per_block` per motion block) with their

@@ -34,6 +34,7 @@ pub const MAX_NUMBERED: u32 = 5399;
 
 /// The characters of one line with their 1-based columns: comments and whitespace
 /// removed, letters upper-cased (LinuxCNC's `close_and_downcase`, in upper case).
+#[derive(Default)]
 pub(crate) struct Cursor {
     pub chars: Vec<(char, u32)>,
     pub pos: usize,
@@ -502,7 +503,11 @@ fn number(cur: &mut Cursor) -> Result<f64, Diagnostic> {
     let start = cur.pos;
     // Digits as an integer and the count of those after the point, while exact.
     let (mut mantissa, mut decimals, mut digits, mut points) = (0u64, 0usize, 0usize, 0usize);
-    while let Some(c @ ('0'..='9' | '.')) = cur.peek() {
+    let len = cur.chars[start..]
+        .iter()
+        .take_while(|c| matches!(c.0, '0'..='9' | '.'))
+        .count();
+    for &(c, _) in &cur.chars[start..start + len] {
         match c.to_digit(10) {
             Some(d) => {
                 digits += 1;
@@ -511,8 +516,8 @@ fn number(cur: &mut Cursor) -> Result<f64, Diagnostic> {
             }
             None => points += 1,
         }
-        cur.pos += 1;
     }
+    cur.pos += len;
     // The usual number (`12.345`): an integer below 2^53 over an exact power of ten is
     // one correctly rounded division, the same value `str::parse` gives.
     if digits > 0 && points <= 1 && mantissa < 1 << 53 && decimals < EXACT_POW10.len() {

@@ -203,8 +203,51 @@ impl OKind {
 /// comments taken out, whitespace dropped (LinuxCNC ignores it everywhere outside
 /// comments, even inside numbers and parameter names), letters upper-cased.
 fn significant(text: &str, line: u32, messages: &mut Vec<String>) -> Result<Cursor, Diagnostic> {
-    let mut chars = Vec::with_capacity(text.len());
-    let mut it = text.chars();
+    let mut cur = Cursor::default();
+    cur.fill(text, line, messages)?;
+    Ok(cur)
+}
+
+impl Cursor {
+    /// Makes this cursor [`significant`]'s of `text`, reusing its buffer.
+    fn fill(
+        &mut self,
+        text: &str,
+        line: u32,
+        messages: &mut Vec<String>,
+    ) -> Result<(), Diagnostic> {
+        self.chars.clear();
+        self.chars.reserve(text.len());
+        self.pos = 0;
+        self.line = line;
+        // Most lines are ASCII words without a comment: each byte is a character that is
+        // either dropped (whitespace) or kept, at the column after its index. A comment
+        // or a character beyond ASCII sends the line the long way, from its start.
+        for (i, &b) in text.as_bytes().iter().enumerate() {
+            match b {
+                b'(' | b';' | 0x80.. => {
+                    self.chars.clear();
+                    return significant_chars(text.chars(), line, &mut self.chars, messages);
+                }
+                // `char::is_whitespace` in ASCII
+                b' ' | b'\t'..=b'\r' => {}
+                b'%' if self.chars.is_empty() => {} // tape start/end marker
+                _ => self
+                    .chars
+                    .push((char::from(b.to_ascii_uppercase()), i as u32 + 1)),
+            }
+        }
+        Ok(())
+    }
+}
+
+/// [`significant`] over the characters of a line, into `chars`.
+fn significant_chars(
+    mut it: impl Iterator<Item = char>,
+    line: u32,
+    chars: &mut Vec<(char, u32)>,
+    messages: &mut Vec<String>,
+) -> Result<(), Diagnostic> {
     let mut col = 0u32;
     while let Some(c) = it.next() {
         col += 1;
@@ -251,18 +294,47 @@ fn significant(text: &str, line: u32, messages: &mut Vec<String>) -> Result<Curs
             c => chars.push((c.to_ascii_uppercase(), col)),
         }
     }
-    Ok(Cursor {
-        chars,
-        pos: 0,
-        line,
-    })
+    Ok(())
+}
+
+/// Reads the lines of a program one after the other into the same buffers, so that no
+/// line costs an allocation once they have grown to the longest.
+#[derive(Default)]
+pub struct LineReader {
+    cur: Cursor,
+    out: Line,
+}
+
+impl LineReader {
+    /// [`read_line`], into this reader's buffers.
+    pub fn read(&mut self, text: &str, line: u32, params: &Params) -> Result<&Line, Diagnostic> {
+        read_into(&mut self.cur, &mut self.out, text, line, params)?;
+        Ok(&self.out)
+    }
 }
 
 /// Reads one source line. `params` supplies the values of `#` references; the line's own
 /// assignments are returned, not applied (LinuxCNC applies them after the whole line).
 pub fn read_line(text: &str, line: u32, params: &Params) -> Result<Line, Diagnostic> {
-    let mut out = Line::default();
-    let mut cur = significant(text, line, &mut out.messages)?;
+    let mut reader = LineReader::default();
+    reader.read(text, line, params)?;
+    Ok(reader.out)
+}
+
+/// [`read_line`] with `cur` and `out` as buffers.
+fn read_into(
+    cur: &mut Cursor,
+    out: &mut Line,
+    text: &str,
+    line: u32,
+    params: &Params,
+) -> Result<(), Diagnostic> {
+    out.words.clear();
+    out.assignments.clear();
+    out.messages.clear();
+    out.block_delete = false;
+    out.o_word = None;
+    cur.fill(text, line, &mut out.messages)?;
     if let Some('/') = cur.peek() {
         out.block_delete = true;
         cur.pos += 1;
@@ -279,7 +351,7 @@ pub fn read_line(text: &str, line: u32, params: &Params) -> Result<Line, Diagnos
                         "an O-word must start its line (after N at most)",
                     ));
                 }
-                let mut o = o_head(&mut cur, col)?;
+                let mut o = o_head(cur, col)?;
                 let (least, most) = o.kind.arity();
                 while let Some('[') = cur.peek() {
                     if o.args.len() == most {
@@ -289,7 +361,7 @@ pub fn read_line(text: &str, line: u32, params: &Params) -> Result<Line, Diagnos
                             format!("too many values for O {:?} (at most {most})", o.kind),
                         ));
                     }
-                    o.args.push(real_value(&mut cur, params)?);
+                    o.args.push(real_value(cur, params)?);
                 }
                 if let Some(c) = cur.peek() {
                     return Err(cur.err(
@@ -312,13 +384,13 @@ pub fn read_line(text: &str, line: u32, params: &Params) -> Result<Line, Diagnos
                 // when it spells one; otherwise the word simply lacks its value.
                 let starts_value = match cur.peek() {
                     None => false,
-                    Some('A'..='Z') => at_function(&cur),
+                    Some('A'..='Z') => at_function(cur),
                     Some(_) => true,
                 };
                 if !starts_value {
                     return Err(cur.err("syntax", col, format!("{c} word has no value")));
                 }
-                let value = real_value(&mut cur, params)?;
+                let value = real_value(cur, params)?;
                 out.words.push(Word {
                     letter: c,
                     value,
@@ -326,7 +398,7 @@ pub fn read_line(text: &str, line: u32, params: &Params) -> Result<Line, Diagnos
                 });
             }
             '#' => {
-                let p = param_ref(&mut cur, params)?;
+                let p = param_ref(cur, params)?;
                 match cur.peek() {
                     Some('=') => cur.pos += 1,
                     _ => {
@@ -337,7 +409,7 @@ pub fn read_line(text: &str, line: u32, params: &Params) -> Result<Line, Diagnos
                         ))
                     }
                 }
-                let v = real_value(&mut cur, params)?;
+                let v = real_value(cur, params)?;
                 out.assignments.push((p, v));
             }
             '[' => {
@@ -350,7 +422,7 @@ pub fn read_line(text: &str, line: u32, params: &Params) -> Result<Line, Diagnos
             _ => return Err(cur.err("syntax", col, format!("unexpected `{c}`"))),
         }
     }
-    Ok(out)
+    Ok(())
 }
 
 /// The label and keyword of an O-word whose `O` (at `col`) is consumed.
@@ -413,7 +485,9 @@ fn o_head(cur: &mut Cursor, col: u32) -> Result<OWord, Diagnostic> {
 /// structure before running it), or `None` for a line without one.
 pub fn o_word_of(text: &str, line: u32) -> Result<Option<OWord>, Diagnostic> {
     // Most lines have no `O` at all: no need to read them into a cursor.
-    if !text.bytes().any(|b| b.eq_ignore_ascii_case(&b'o')) {
+    // (`b | 0x20` is `o` for `o` and `O` only; a fold without an early exit runs
+    // over many bytes at once.)
+    if !text.bytes().fold(false, |o, b| o | (b | 0x20 == b'o')) {
         return Ok(None);
     }
     let mut cur = significant(text, line, &mut Vec::new())?;
@@ -607,6 +681,28 @@ mod tests {
     }
 
     #[test]
+    fn lines_with_and_without_comments_read_alike() {
+        // A line without a comment takes a shorter path; a comment at its end sends it
+        // the long way, which must find the same words at the same columns.
+        for text in [
+            "g1 x1\ty2 \x0bz-.5\x0c f100\r",
+            "%G0 X1",
+            "G0 %X1",
+            "n10 g1 x 1 0.5 y-[1+2]",
+            "#<a>=1 #2=[#<a>*2]",
+            "X",
+            "G1 X1 Y$",
+            "",
+            "   ",
+        ] {
+            let p = Params::default();
+            let plain = read_line(text, 1, &p);
+            let commented = read_line(&format!("{text}(c)"), 1, &p);
+            assert_eq!(plain, commented, "{text:?}");
+        }
+    }
+
+    #[test]
     fn parameters_are_read_before_they_are_set() {
         let mut p = Params::default();
         let l = read_line("#10=290", 1, &p).unwrap();
@@ -623,6 +719,12 @@ mod tests {
     fn errors_carry_columns() {
         let e = read_line("G1 X1 Y$", 7, &Params::default()).unwrap_err();
         assert_eq!((e.line, e.col), (7, 8));
+        // Columns count characters, not bytes.
+        let e = read_line("G1 (é) X$", 1, &Params::default()).unwrap_err();
+        assert_eq!(
+            (e.col, e.message.as_str()),
+            (9, "expected a value, found `$`")
+        );
         let e = read_line("G1 (open", 3, &Params::default()).unwrap_err();
         assert_eq!((e.line, e.col), (3, 4));
         let e = read_line("G1 X[1+2 Y1", 1, &Params::default()).unwrap_err();

@@ -1,10 +1,11 @@
 //! The interpreter process: read and check the program, build and plan the blocks, log
 //! and publish them, report.
 
+use crate::blocks::{self, Block};
 use crate::parse::Diagnostic;
+use crate::program;
 use crate::publish::{publish, Finish, Pace};
 use crate::report::InterpreterSummary;
-use crate::{blocks, program};
 use iceoryx2::prelude::Service;
 use shared::cmdlog::CommandLog;
 use shared::protocol::{BlockKind, CommandBlock, FLAG_RAPID};
@@ -35,7 +36,9 @@ impl Source {
                 .map_err(|e| format!("{}: {e}", p.display()))
                 .map(|bytes| Source {
                     name: p.display().to_string(),
-                    text: String::from_utf8_lossy(&bytes).into_owned(),
+                    // Valid UTF-8 (nearly every program) is taken as it is, not copied.
+                    text: String::from_utf8(bytes)
+                        .unwrap_or_else(|e| String::from_utf8_lossy(e.as_bytes()).into_owned()),
                 }),
         }
     }
@@ -66,16 +69,29 @@ pub fn compile_with(
     machine: &Machine,
     period_ns: u64,
 ) -> Result<(program::Program, Vec<CommandBlock>), Vec<Diagnostic>> {
+    check_with(text, opts, machine, period_ns).map(|(prog, b)| (prog, blocks::commands(&b)))
+}
+
+/// What `cnc check` runs: reads, checks, builds and plans, and validates every block as
+/// it will be sent; the blocks as [`blocks::build`] holds them (straight moves compact),
+/// [`blocks::commands`] turns them into those [`compile_with`] gives.
+pub fn check_with(
+    text: &str,
+    opts: &program::Options,
+    machine: &Machine,
+    period_ns: u64,
+) -> Result<(program::Program, Vec<Block>), Vec<Diagnostic>> {
     let prog = program::interpret_with(text, opts)?;
     let mut blocks = blocks::build(&prog.moves, machine);
     blocks::plan(&mut blocks, machine, period_ns);
     // Nothing leaves this process unless a receiver would accept it.
     let bad: Vec<Diagnostic> = blocks
         .iter()
-        .filter_map(|b| {
-            b.validate().err().map(|e| Diagnostic {
+        .enumerate()
+        .filter_map(|(seq, b)| {
+            b.validate(seq as u64).err().map(|e| Diagnostic {
                 file: None,
-                line: b.source_line,
+                line: b.source_line(),
                 col: 1,
                 rule: "internal",
                 message: e.to_string(),

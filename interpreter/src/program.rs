@@ -29,7 +29,7 @@ mod flow;
 mod linuxcnc;
 mod subfile;
 
-use crate::parse::{flow, read_line, Diagnostic, OKind, Params, Word};
+use crate::parse::{flow, Diagnostic, LineReader, OKind, Params, Word};
 pub use dialect::Dialect;
 use dialect::DialectState;
 use flow::Runner;
@@ -325,6 +325,7 @@ pub fn interpret_with(text: &str, opts: &Options) -> Result<Program, Vec<Diagnos
     let mut run = Runner::new(o_words, flow, missing);
     let last_line = own_lines as u32;
     let mut pc = 0;
+    let mut reader = LineReader::default();
     // The program ends at its own last line; the files after it run only when called.
     while pc < lines.len() && pc != own_lines {
         let line = pc as u32 + 1;
@@ -354,7 +355,7 @@ pub fn interpret_with(text: &str, opts: &Options) -> Result<Program, Vec<Diagnos
             pc = run.unreadable(here);
             continue;
         }
-        let parsed = match read_line(lines[here], line, &params) {
+        let parsed = match reader.read(lines[here], line, &params) {
             Ok(l) => l,
             Err(d) => {
                 errors.push(d);
@@ -577,7 +578,8 @@ fn execute(st: &mut State, lw: &LineWords, moves: &mut Vec<Move>) -> Result<(), 
 /// Reads the G-codes of a line: modal groups checked, modal state set, motion returned.
 fn g_codes<'a>(st: &mut State, lw: &'a LineWords) -> Result<LineCodes<'a>, Diagnostic> {
     let mut c = LineCodes::default();
-    let mut groups: Vec<(u8, &Word)> = Vec::new();
+    // The word of each modal group met so far (group 0, the non-modal codes, may repeat).
+    let mut groups: [Option<&Word>; 15] = [None; 15];
     for w in lw.words.iter().filter(|w| w.letter == 'G') {
         let code = gcode(w)
             .ok_or_else(|| lw.err("modal", w.col, format!("G{} is not a G-code", w.value)))?;
@@ -599,7 +601,7 @@ fn g_codes<'a>(st: &mut State, lw: &'a LineWords) -> Result<LineCodes<'a>, Diagn
             960 | 970 => 14,
             _ => return Err(lw.err("modal", w.col, format!("G{} is not supported", w.value))),
         };
-        if let Some((_, other)) = groups.iter().find(|(g, _)| *g == group && group != 0) {
+        if let Some(other) = groups[group].filter(|_| group != 0) {
             return Err(lw.err(
                 "modal",
                 w.col,
@@ -609,7 +611,7 @@ fn g_codes<'a>(st: &mut State, lw: &'a LineWords) -> Result<LineCodes<'a>, Diagn
                 ),
             ));
         }
-        groups.push((group, w));
+        groups[group] = Some(w);
         match code {
             0 => c.motion = Some((w, Motion::Rapid)),
             10 => c.motion = Some((w, Motion::Linear)),

@@ -5,7 +5,7 @@
 //! must stay within the default machine's limits.
 
 use interpolator::engine::{BlockSource, Engine, Limits, TickState};
-use interpreter::blocks::{build, plan};
+use interpreter::blocks::{build, commands, plan};
 use interpreter::program::interpret;
 use proptest::prelude::*;
 use shared::protocol::{BlockKind, CommandBlock};
@@ -33,6 +33,7 @@ fn step(text: &str, machine: &Machine) -> (Vec<CommandBlock>, Vec<Cycle>) {
     let program = interpret(text).unwrap_or_else(|e| panic!("{e:?}\n{text}"));
     let mut blocks = build(&program.moves, machine);
     plan(&mut blocks, machine, PERIOD_NS);
+    let blocks = commands(&blocks);
     let mut engine = Engine::new(Limits::new(machine, PERIOD_NS), [0.0; 3]);
     let mut src = Slice(blocks.clone(), 0);
     let mut out = vec![Cycle {
@@ -264,6 +265,7 @@ impl Butterfly {
         let program = interpret(&text).unwrap();
         let mut blocks = build(&program.moves, &machine);
         plan(&mut blocks, &machine, PERIOD_NS);
+        let blocks = commands(&blocks);
         let est = interpreter::estimate::estimate(&blocks, &machine, PERIOD_NS).unwrap();
         Butterfly {
             text,

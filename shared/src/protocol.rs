@@ -304,36 +304,16 @@ impl CommandBlock {
                 } else {
                     self.validate_curve()?;
                 }
-                let feeds = [
-                    ("feed_mm_per_min", self.feed_mm_per_min),
-                    ("start_feed_mm_per_min", self.start_feed_mm_per_min),
-                    ("end_feed_mm_per_min", self.end_feed_mm_per_min),
-                ];
-                for (field, f) in feeds {
-                    if !f.is_finite() || f < 0.0 || (field == "feed_mm_per_min" && f <= 0.0) {
-                        return Err(ProtocolError::BadField {
-                            seq: self.seq,
-                            field,
-                        });
-                    }
-                }
-                if !self.length_mm.is_finite() || self.length_mm < 0.0 {
-                    return Err(ProtocolError::BadField {
-                        seq: self.seq,
-                        field: "length_mm",
-                    });
-                }
-                for (field, v) in [
-                    ("acc_mm_per_s2", self.acc_mm_per_s2),
-                    ("jerk_mm_per_s3", self.jerk_mm_per_s3),
-                ] {
-                    if !v.is_finite() || v <= 0.0 {
-                        return Err(ProtocolError::BadField {
-                            seq: self.seq,
-                            field,
-                        });
-                    }
-                }
+                validate_plan(
+                    self.seq,
+                    [
+                        self.feed_mm_per_min,
+                        self.start_feed_mm_per_min,
+                        self.end_feed_mm_per_min,
+                    ],
+                    self.length_mm,
+                    [self.acc_mm_per_s2, self.jerk_mm_per_s3],
+                )?;
                 let h = &self.helix;
                 if h.axis != NO_AXIS && self.is_surface() {
                     return Err(ProtocolError::BadField {
@@ -363,6 +343,39 @@ impl CommandBlock {
         }
         Ok(kind)
     }
+}
+
+/// The planned values of motion block `seq` as [`CommandBlock::validate`] checks them
+/// (after its curve): the feed cap, start and end feeds (mm/min), the length, and the
+/// profile's acceleration and jerk. For a holder of blocks in another form that must
+/// refuse what a receiver would.
+pub fn validate_plan(
+    seq: u64,
+    [feed, start_feed, end_feed]: [f64; 3],
+    length_mm: f64,
+    [acc, jerk]: [f64; 2],
+) -> Result<(), ProtocolError> {
+    let bad = |field: &'static str| Err(ProtocolError::BadField { seq, field });
+    // The cap must be positive; the planned speeds may be zero (a stop).
+    if !feed.is_finite() || feed <= 0.0 {
+        return bad("feed_mm_per_min");
+    }
+    if !start_feed.is_finite() || start_feed < 0.0 {
+        return bad("start_feed_mm_per_min");
+    }
+    if !end_feed.is_finite() || end_feed < 0.0 {
+        return bad("end_feed_mm_per_min");
+    }
+    if !length_mm.is_finite() || length_mm < 0.0 {
+        return bad("length_mm");
+    }
+    if !acc.is_finite() || acc <= 0.0 {
+        return bad("acc_mm_per_s2");
+    }
+    if !jerk.is_finite() || jerk <= 0.0 {
+        return bad("jerk_mm_per_s3");
+    }
+    Ok(())
 }
 
 /// `Setpoint::flags`: this is the last set-point of the program (the machine is at rest).

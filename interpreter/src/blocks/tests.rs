@@ -5,7 +5,7 @@ fn planned(text: &str) -> Vec<CommandBlock> {
     let machine = Machine::default();
     let mut b = build(&interpret(text).unwrap().moves, &machine);
     plan(&mut b, &machine, 1_000_000);
-    b
+    commands(&b)
 }
 
 #[test]
@@ -122,4 +122,47 @@ fn exact_stop_mode_and_programmed_stops_end_moves_at_rest() {
     let m0 = planned("G1 X10 F3000\nM0\nX20\nX30\nM2\n");
     assert_eq!(m0[0].end_feed_mm_per_min, 0.0);
     assert!(m0[1].end_feed_mm_per_min > 0.0);
+}
+
+proptest::proptest! {
+    /// A compact straight block validates as the block it stands for, whatever its
+    /// numbers (NaN, infinities, negative or zero feeds, lengths and limits) and flags.
+    #[test]
+    fn straight_validates_as_its_command_block(
+        from in proptest::array::uniform3(number()),
+        to in proptest::array::uniform3(number()),
+        plan in proptest::array::uniform6(number()),
+        flags in 0u32..8,
+        seq in 0u64..1000,
+    ) {
+        let s = Straight {
+            source_line: 7,
+            flags,
+            from,
+            to,
+            feed_mm_per_min: plan[0],
+            start_feed_mm_per_min: plan[1],
+            end_feed_mm_per_min: plan[2],
+            length_mm: plan[3],
+            acc_mm_per_s2: plan[4],
+            jerk_mm_per_s3: plan[5],
+        };
+        proptest::prop_assert_eq!(s.validate(seq), s.command(seq).validate());
+        let b = Block::Straight(s);
+        proptest::prop_assert_eq!(b.validate(seq), b.command(seq).validate());
+    }
+}
+
+/// Numbers a planner might leave in a block, good and bad.
+fn number() -> impl proptest::strategy::Strategy<Value = f64> {
+    use proptest::prelude::*;
+    prop_oneof![
+        Just(f64::NAN),
+        Just(f64::INFINITY),
+        Just(f64::NEG_INFINITY),
+        Just(0.0),
+        Just(-0.0),
+        -1e3..1e3f64,
+        1e-9..1e6f64,
+    ]
 }

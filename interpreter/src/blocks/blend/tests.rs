@@ -1,5 +1,5 @@
 use super::*;
-use crate::blocks::{build, plan};
+use crate::blocks::{build, commands, plan};
 use crate::program::interpret;
 use shared::nurbs::{self, CurvePoint};
 use shared::protocol::BlockKind;
@@ -336,7 +336,7 @@ fn reversals_stop_exactly() {
         let ms = moves(&text);
         assert!(matches!(corners(&ms), Cow::Borrowed(_)), "{turn}°");
         let machine = Machine::default();
-        let mut b = build(&ms, &machine);
+        let mut b = commands(&build(&ms, &machine));
         plan(&mut b, &machine, 1_000_000);
         assert_eq!(b[0].end_feed_mm_per_min, 0.0, "{turn}°: exact stop");
     }
@@ -387,7 +387,7 @@ fn non_planar_corners_in_3d() {
 fn the_planner_passes_a_blended_corner_without_stopping() {
     let machine = Machine::default();
     let planned = |text: &str| {
-        let mut b = build(&moves(text), &machine);
+        let mut b = commands(&build(&moves(text), &machine));
         plan(&mut b, &machine, 1_000_000);
         b
     };

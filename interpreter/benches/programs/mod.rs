@@ -1,0 +1,51 @@
+//! The generated programs of `benches/check.rs`, shared with the test that holds their
+//! blocks to golden values (`tests/check_golden.rs`), so both see the very same text.
+
+use std::fmt::Write as _;
+
+/// `G1` moves along a zig-zag with a wavy Z, as a surface finishing pass: every line
+/// a new X Y Z, the feed on the first. `lines` lines in all.
+pub fn plain_g1(lines: usize) -> String {
+    let mut s = String::from("G21 G90 G17\nG0 X0 Y0 Z5\nG1 Z0 F1200\n");
+    let mut i = 3;
+    while i < lines - 1 {
+        let (row, col) = (i / 200, i % 200);
+        let x = if row % 2 == 0 { col } else { 199 - col } as f64 * 0.5;
+        let y = row as f64 * 0.5;
+        let z = -0.5 - 0.25 * (x * 0.1).sin() * (y * 0.07).cos();
+        let _ = writeln!(s, "G1 X{x:.3} Y{y:.3} Z{z:.4}");
+        i += 1;
+    }
+    s.push_str("M2\n");
+    s
+}
+
+/// Groups of a line, an arc, a `G5.2` NURBS of six lines and a `G6.2` NURBS of nine,
+/// each group starting and ending on the X axis, shifted along it; at most `lines`
+/// lines.
+pub fn mixed(lines: usize) -> String {
+    let mut s = String::from("G21 G90 G17\nG0 X0 Y0 Z0\nF1500\n");
+    let mut n = 3;
+    let mut x0 = 0.0f64;
+    while n + 18 < lines {
+        let _ = writeln!(s, "G1 X{:.3} Y0", x0 + 1.0);
+        let _ = writeln!(s, "G2 X{:.3} Y0 I1 J0", x0 + 3.0);
+        let _ = writeln!(s, "G5.2 X{:.3} Y1 P1 L4", x0 + 4.0);
+        let _ = writeln!(s, "X{:.3} Y-1 P2", x0 + 5.0);
+        let _ = writeln!(s, "X{:.3} Y1 P1", x0 + 6.0);
+        let _ = writeln!(s, "X{:.3} Y0 P1", x0 + 7.0);
+        s.push_str("G5.3\n");
+        let b = x0 + 7.0;
+        let _ = writeln!(s, "G6.2 X{b:.3} Y0 R1 K0 P3 Q1");
+        let _ = writeln!(s, "X{:.3} Y1 R1 K0", b + 1.0);
+        let _ = writeln!(s, "X{:.3} Y-1 R2 K0", b + 2.0);
+        let _ = writeln!(s, "X{:.3} Y0 R1 K1", b + 3.0);
+        s.push_str("G6.2 K2\nG6.2 K2\nG6.2 K2\n");
+        // Back to the start of the next group's line.
+        let _ = writeln!(s, "G1 X{:.3} Y0", b + 4.0);
+        n += 15;
+        x0 = b + 4.0;
+    }
+    s.push_str("M2\n");
+    s
+}

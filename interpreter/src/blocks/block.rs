@@ -1,0 +1,282 @@
+//! The blocks as the interpreter holds them from building to sending.
+//!
+//! A [`CommandBlock`] is the fixed 1.6 kB payload the interpolator receives, with room
+//! for the largest NURBS. A program of plain `G1` lines needs a few numbers a block:
+//! held whole, 100 000 of them are 160 MB the kernel must hand over page by page,
+//! nearly all of it zeros. So a straight move is held as a [`Straight`], anything else
+//! whole, and each becomes its [`CommandBlock`] only when it is sent or validated
+//! ([`Block::command`]), the same block bit for bit as one built whole.
+
+use super::{Geometry, Plannable};
+use shared::profile::Limits as Jerk;
+use shared::protocol::{
+    validate_plan, BlockKind, CommandBlock, Helix, ProtocolError, FLAG_RAPID, FLAG_SURFACE,
+};
+
+/// A straight motion block (a `G0` or `G1` move): as a [`CommandBlock`], the degree-1
+/// NURBS from `from` to `to` with unit weights on the knots `0 0 1 1`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Straight {
+    pub source_line: u32,
+    /// `FLAG_*` bits.
+    pub flags: u32,
+    pub from: [f64; 3],
+    pub to: [f64; 3],
+    /// The fields of the same names in [`CommandBlock`], set by the planner.
+    pub feed_mm_per_min: f64,
+    pub start_feed_mm_per_min: f64,
+    pub end_feed_mm_per_min: f64,
+    pub length_mm: f64,
+    pub acc_mm_per_s2: f64,
+    pub jerk_mm_per_s3: f64,
+}
+
+impl Straight {
+    /// An unplanned straight move at the feed cap `feed_mm_per_min` (a rapid when
+    /// `rapid`).
+    pub fn new(
+        source_line: u32,
+        from: [f64; 3],
+        to: [f64; 3],
+        rapid: bool,
+        feed_mm_per_min: f64,
+    ) -> Self {
+        Straight {
+            source_line,
+            flags: if rapid { FLAG_RAPID } else { 0 },
+            from,
+            to,
+            feed_mm_per_min,
+            start_feed_mm_per_min: 0.0,
+            end_feed_mm_per_min: 0.0,
+            length_mm: 0.0,
+            acc_mm_per_s2: 0.0,
+            jerk_mm_per_s3: 0.0,
+        }
+    }
+
+    /// The chord, `to - from`.
+    fn chord(&self) -> [f64; 3] {
+        [
+            self.to[0] - self.from[0],
+            self.to[1] - self.from[1],
+            self.to[2] - self.from[2],
+        ]
+    }
+
+    /// What [`CommandBlock::validate`] says of [`command(seq)`](Self::command), without
+    /// making the block: a degree-1 curve on the knots `0 0 1 1` with unit weights is
+    /// valid when its end points are finite, and then its planned values are checked.
+    pub fn validate(&self, seq: u64) -> Result<BlockKind, ProtocolError> {
+        if self.flags & FLAG_SURFACE != 0 {
+            // Not a curve at all for a receiver: it says why.
+            return self.command(seq).validate();
+        }
+        if let Some(i) = [self.from, self.to]
+            .iter()
+            .position(|p| p.iter().any(|v| !v.is_finite()))
+        {
+            return Err(ProtocolError::NotFinite {
+                seq,
+                field: "ctrl",
+                index: i as u32,
+            });
+        }
+        validate_plan(
+            seq,
+            [
+                self.feed_mm_per_min,
+                self.start_feed_mm_per_min,
+                self.end_feed_mm_per_min,
+            ],
+            self.length_mm,
+            [self.acc_mm_per_s2, self.jerk_mm_per_s3],
+        )?;
+        Ok(BlockKind::Motion)
+    }
+
+    /// The block as it is sent, numbered `seq`.
+    pub fn command(&self, seq: u64) -> CommandBlock {
+        let mut b = CommandBlock::empty(BlockKind::Motion, seq, self.source_line);
+        b.degree = 1;
+        b.n_ctrl = 2;
+        b.knots[..4].copy_from_slice(&[0.0, 0.0, 1.0, 1.0]);
+        let [x0, y0, z0] = self.from;
+        let [x1, y1, z1] = self.to;
+        b.ctrl[0] = [x0, y0, z0, 1.0];
+        b.ctrl[1] = [x1, y1, z1, 1.0];
+        b.helix = Helix::NONE;
+        b.flags = self.flags;
+        b.feed_mm_per_min = self.feed_mm_per_min;
+        b.start_feed_mm_per_min = self.start_feed_mm_per_min;
+        b.end_feed_mm_per_min = self.end_feed_mm_per_min;
+        b.length_mm = self.length_mm;
+        b.acc_mm_per_s2 = self.acc_mm_per_s2;
+        b.jerk_mm_per_s3 = self.jerk_mm_per_s3;
+        b
+    }
+}
+
+/// A command block before it is sent: a straight move in its few numbers, any other
+/// block (arcs, NURBS, dwells, the program end) whole.
+#[derive(Debug, Clone)]
+pub enum Block {
+    Straight(Straight),
+    Whole(Box<CommandBlock>),
+}
+
+impl From<CommandBlock> for Block {
+    fn from(b: CommandBlock) -> Self {
+        Block::Whole(Box::new(b))
+    }
+}
+
+impl Block {
+    /// The block as it is sent, numbered `seq`.
+    pub fn command(&self, seq: u64) -> CommandBlock {
+        match self {
+            Block::Straight(s) => s.command(seq),
+            Block::Whole(b) => CommandBlock { seq, ..**b },
+        }
+    }
+
+    /// [`CommandBlock::validate`] of [`command(seq)`](Self::command).
+    pub fn validate(&self, seq: u64) -> Result<BlockKind, ProtocolError> {
+        match self {
+            Block::Straight(s) => s.validate(seq),
+            Block::Whole(_) => self.command(seq).validate(),
+        }
+    }
+
+    pub fn source_line(&self) -> u32 {
+        match self {
+            Block::Straight(s) => s.source_line,
+            Block::Whole(b) => b.source_line,
+        }
+    }
+
+    /// The `FLAG_*` bits, to set or clear.
+    pub fn flags_mut(&mut self) -> &mut u32 {
+        match self {
+            Block::Straight(s) => &mut s.flags,
+            Block::Whole(b) => &mut b.flags,
+        }
+    }
+}
+
+/// The blocks as they are sent, numbered from 0.
+pub fn commands(blocks: &[Block]) -> Vec<CommandBlock> {
+    blocks
+        .iter()
+        .enumerate()
+        .map(|(i, b)| b.command(i as u64))
+        .collect()
+}
+
+impl Plannable for CommandBlock {
+    fn is_motion(&self) -> bool {
+        self.kind == BlockKind::Motion as u32
+    }
+    fn flags(&self) -> u32 {
+        self.flags
+    }
+    fn geometry(&self) -> Geometry<'_> {
+        match super::straight(self) {
+            Some(chord) => Geometry::Straight(chord),
+            None => Geometry::Curve(self),
+        }
+    }
+    fn feed_mm_per_min(&self) -> f64 {
+        self.feed_mm_per_min
+    }
+    fn length_mm(&self) -> f64 {
+        self.length_mm
+    }
+    fn limits(&self) -> Jerk {
+        Jerk {
+            acc: self.acc_mm_per_s2,
+            jerk: self.jerk_mm_per_s3,
+        }
+    }
+    fn set_caps(&mut self, length_mm: f64, feed_mm_per_min: f64, limits: Jerk) {
+        self.length_mm = length_mm;
+        self.feed_mm_per_min = feed_mm_per_min;
+        self.acc_mm_per_s2 = limits.acc;
+        self.jerk_mm_per_s3 = limits.jerk;
+    }
+    fn set_feeds(&mut self, start_mm_per_min: f64, end_mm_per_min: f64) {
+        self.start_feed_mm_per_min = start_mm_per_min;
+        self.end_feed_mm_per_min = end_mm_per_min;
+    }
+}
+
+impl Plannable for Straight {
+    fn is_motion(&self) -> bool {
+        true
+    }
+    fn flags(&self) -> u32 {
+        self.flags
+    }
+    fn geometry(&self) -> Geometry<'_> {
+        Geometry::Straight(self.chord())
+    }
+    fn feed_mm_per_min(&self) -> f64 {
+        self.feed_mm_per_min
+    }
+    fn length_mm(&self) -> f64 {
+        self.length_mm
+    }
+    fn limits(&self) -> Jerk {
+        Jerk {
+            acc: self.acc_mm_per_s2,
+            jerk: self.jerk_mm_per_s3,
+        }
+    }
+    fn set_caps(&mut self, length_mm: f64, feed_mm_per_min: f64, limits: Jerk) {
+        self.length_mm = length_mm;
+        self.feed_mm_per_min = feed_mm_per_min;
+        self.acc_mm_per_s2 = limits.acc;
+        self.jerk_mm_per_s3 = limits.jerk;
+    }
+    fn set_feeds(&mut self, start_mm_per_min: f64, end_mm_per_min: f64) {
+        self.start_feed_mm_per_min = start_mm_per_min;
+        self.end_feed_mm_per_min = end_mm_per_min;
+    }
+}
+
+/// Each call handed on to the variant.
+macro_rules! either {
+    ($self:expr, $b:ident => $e:expr) => {
+        match $self {
+            Block::Straight($b) => $e,
+            Block::Whole($b) => $e,
+        }
+    };
+}
+
+impl Plannable for Block {
+    fn is_motion(&self) -> bool {
+        either!(self, b => b.is_motion())
+    }
+    fn flags(&self) -> u32 {
+        either!(self, b => b.flags)
+    }
+    fn geometry(&self) -> Geometry<'_> {
+        either!(self, b => b.geometry())
+    }
+    fn feed_mm_per_min(&self) -> f64 {
+        either!(self, b => b.feed_mm_per_min)
+    }
+    fn length_mm(&self) -> f64 {
+        either!(self, b => b.length_mm)
+    }
+    fn limits(&self) -> Jerk {
+        either!(self, b => b.limits())
+    }
+    fn set_caps(&mut self, length_mm: f64, feed_mm_per_min: f64, limits: Jerk) {
+        either!(self, b => b.set_caps(length_mm, feed_mm_per_min, limits))
+    }
+    fn set_feeds(&mut self, start_mm_per_min: f64, end_mm_per_min: f64) {
+        either!(self, b => b.set_feeds(start_mm_per_min, end_mm_per_min))
+    }
+}

@@ -1,0 +1,304 @@
+//! `cnc check` and `cnc run` must give the same blocks, plans and diagnostics however
+//! fast they get: this holds them, bit for bit, to fingerprints taken with the
+//! straightforward code that came before the speed work of issue #5 (every block built
+//! whole, planned in a list of whole blocks, every number read through a `String`).
+//!
+//! * Blocks: for the bench's generated programs (`benches/programs`, the plain `G1`
+//!   one at full size, the mixed one cut short), the built-in demo, the programs of
+//!   `tests/ngc` and `tests/peers/linuxcnc`, and a program using every kind of move and
+//!   mode, [`process::compile_with`]'s blocks, every field of every block, hashed.
+//! * Diagnostics: small programs mutated at every byte (replaced, deleted, doubled),
+//!   their diagnostics (line, column, rule, message) hashed.
+//!
+//! `GOLDEN_PRINT=1 cargo test -p interpreter --test check_golden -- --nocapture` prints
+//! the fingerprints of the code as it is (to renew them after a change that is meant to
+//! change results).
+
+use interpreter::parse::Diagnostic;
+use interpreter::process;
+use interpreter::program::{self, Options};
+use shared::protocol::CommandBlock;
+use shared::Machine;
+use std::path::Path;
+
+#[path = "../benches/programs/mod.rs"]
+mod programs;
+
+const PERIOD_NS: u64 = 1_000_000;
+
+/// FNV-1a, 64 bit, fed field by field.
+struct Hash(u64);
+
+impl Hash {
+    fn new() -> Self {
+        Hash(0xcbf2_9ce4_8422_2325)
+    }
+    fn bytes(&mut self, data: &[u8]) {
+        for &b in data {
+            self.0 = (self.0 ^ b as u64).wrapping_mul(0x0100_0000_01b3);
+        }
+    }
+    fn u64(&mut self, v: u64) {
+        self.bytes(&v.to_le_bytes());
+    }
+    fn f64(&mut self, v: f64) {
+        self.u64(v.to_bits());
+    }
+    fn str(&mut self, s: &str) {
+        self.u64(s.len() as u64);
+        self.bytes(s.as_bytes());
+    }
+    fn block(&mut self, b: &CommandBlock) {
+        for v in [
+            b.protocol,
+            b.kind,
+            b.source_line,
+            b.flags,
+            b.degree,
+            b.n_ctrl,
+        ] {
+            self.u64(v.into());
+        }
+        self.u64(b.seq);
+        self.u64(b.dwell_ns);
+        for v in [
+            b.feed_mm_per_min,
+            b.start_feed_mm_per_min,
+            b.end_feed_mm_per_min,
+            b.length_mm,
+            b.acc_mm_per_s2,
+            b.jerk_mm_per_s3,
+        ] {
+            self.f64(v);
+        }
+        let h = &b.helix;
+        self.u64(h.axis.into());
+        self.u64(h.dir as u64);
+        for v in h
+            .center_mm
+            .iter()
+            .chain(&[h.start_mm, h.mm_per_rad, h.seg_rad])
+        {
+            self.f64(*v);
+        }
+        for v in b.knots.iter().chain(b.ctrl.iter().flatten()) {
+            self.f64(*v);
+        }
+        let s = &b.surface;
+        self.u64(s.degree_v.into());
+        self.u64(s.normal_sign as u64);
+        for v in s.uv_start.iter().chain(&s.uv_end) {
+            self.f64(*v);
+        }
+        self.f64(s.tool_radius_mm);
+        self.f64(s.tool_length_mm);
+    }
+    fn diagnostic(&mut self, d: &Diagnostic) {
+        self.str(d.file.as_deref().unwrap_or(""));
+        self.u64(d.line.into());
+        self.u64(d.col.into());
+        self.str(d.rule);
+        self.str(&d.message);
+    }
+}
+
+/// Blocks (or diagnostics), messages and dialect of a whole check, as `cnc run` gets them.
+fn compile_hash(text: &str) -> (usize, u64) {
+    let mut h = Hash::new();
+    let machine = Machine::default();
+    match process::compile_with(text, &Options::default(), &machine, PERIOD_NS) {
+        Ok((prog, blocks)) => {
+            h.str(prog.dialect.name());
+            for (line, m) in &prog.messages {
+                h.u64((*line).into());
+                h.str(m);
+            }
+            blocks.iter().for_each(|b| h.block(b));
+            (blocks.len(), h.0)
+        }
+        Err(diags) => {
+            diags.iter().for_each(|d| h.diagnostic(d));
+            (diags.len(), h.0)
+        }
+    }
+}
+
+/// Every kind of move and mode in one program.
+const EVERY_KIND: &str = "\
+(MSG, every kind)
+G21 G90 G17 G94
+G0 X1 Y2 Z5
+M3 S1200
+G1 Z0 F800
+G1 X10 Y2 Z0
+G2 X20 Y2 I5 J0
+G3 X10 Y2 Z-1 I-5 J0
+G18 G2 X20 Z-1 I5 K0
+G19 G3 Y12 Z-1 J5 K0 P2
+G17 G4 P0.5
+G61.1
+G1 X12 Y14
+X14 Y16 Z-0.5
+G64 P0.01
+G91 G1 X1 Y1
+X-2 Y0.5 Z0.1
+G90 G5 X30 Y30 I5 J0 P-5 Q0
+G5.1 X40 Y20 I5 J-5
+M0
+G1 X30 Y10
+M1
+G93 G1 X20 Y5 F30
+G2 X15 Y0 R5 F20
+G94 G20 G1 X1 Y1 F40
+G21 G0 X0 Y0 Z5
+M5
+G5.2 X0 Y0 P1 L3
+X10 Y0 P1
+X10 Y10 P2
+X0 Y10 P1
+G5.3
+G1 X0 Y0 F300
+M2
+";
+
+/// Fingerprints: (program, blocks or diagnostics, hash), taken before the speed work
+/// (renewed only where a change of behaviour is meant, and said so beside it).
+const GOLDEN_BLOCKS: &[(&str, usize, u64)] = &[
+    ("plain_g1", 99999, 0x92c4aaeea44e5c3e),
+    ("mixed", 694, 0xd7508b1d3ac1fe05),
+    ("demo", 23, 0x5918ca34eb8a826f),
+    // Renewed when `G64 P` blending landed: the corner after `G64 P0.01` is one blend
+    // block more (24 blocks, 0xb28e5eea28050213, before).
+    ("every_kind", 25, 0x17b99ae031179fcd),
+    ("fanuc_ellipse.ngc", 7, 0xd77a5059bc819ea7),
+    ("g5_splines.ngc", 4, 0xa9b8a27e4abff5e9),
+    ("o_words.ngc", 14, 0x59e4cf706ba80b56),
+    ("seed004_fixed.ngc", 10, 0x7c22146d176a9d13),
+    ("seed004_table1.ngc", 1, 0x547761ab9c6006f2),
+    ("g5_butterfly-xy.ngc", 69, 0xe65b041c1e170c54),
+    ("g5_butterfly-yz.ngc", 69, 0x6727ee149e953ba4),
+    ("g5_butterfly-zx.ngc", 69, 0x9e2c709615499ef5),
+    ("g5_curva_chitarra.ngc", 33, 0x3ef2229891276e84),
+    ("g5_curva_delfino.ngc", 71, 0xcb7bb1ec069f6bb8),
+    ("g5_curva_mazatrol.ngc", 26, 0x306d5ed8fae9e528),
+    ("g5_curva_stella.ngc", 2, 0x4cb2c1dad9f8b7a5),
+    ("g5_leto-xy.ngc", 16, 0x11d737dc1195881a),
+    ("g5_nurbs-xy.ngc", 8, 0x540b1471d6823f3c),
+    ("g5_nurbs-yz.ngc", 8, 0x32ee0b73bdba2f9c),
+    ("g5_nurbs-zx.ngc", 8, 0x9e01be504f0aeaac),
+    ("g6_curva_chitarra_q1.ngc", 30, 0xfaacce10168da06f),
+    ("g6_curva_chitarra_q2.ngc", 30, 0x9de231bf43be4043),
+    ("g6_curva_chitarra_q3.ngc", 30, 0xaafe0c628bd01904),
+    ("g6_curva_delfino_q1.ngc", 36, 0x198928aa624d004e),
+    ("g6_curva_delfino_q2.ngc", 36, 0x198928aa624d004e),
+    ("g6_curva_delfino_q3.ngc", 36, 0x1ef5e9dabbe3321c),
+    ("g6_curva_mazatrol_q1_xy.ngc", 15, 0xf644ae69112b2753),
+    ("g6_curva_mazatrol_q1_yz.ngc", 14, 0xe43b41bfd3358ecd),
+    ("g6_curva_mazatrol_q1_zx.ngc", 14, 0x305ecb96deebc6c4),
+    ("g6_homer16_q1_xy.ngc", 11, 0x3a73e8b4d145d47a),
+    ("g6_homer16_q1_yz.ngc", 11, 0x44e3f828c1621803),
+    ("g6_homer16_q1_zx.ngc", 11, 0xfeecd8b3aa7fabec),
+    ("g6_ruota_dentata_q1.ngc", 591, 0x27ccedad71bc3673),
+    ("g6_ruota_dentata_q2.ngc", 591, 0xac26078b5db851b3),
+    ("g6_ruota_dentata_q3.ngc", 591, 0xac26078b5db851b3),
+    ("g6_unipa_q1.ngc", 49, 0x35d00431bfc20a59),
+    ("g6_unipa_q2.ngc", 49, 0x5cd9527e9416b12b),
+    ("g6_unipa_q3.ngc", 49, 0x4ca8e899b96a5ae8),
+];
+
+fn block_cases() -> Vec<(String, String)> {
+    let mut cases = vec![
+        ("plain_g1".to_string(), programs::plain_g1(100_000)),
+        ("mixed".to_string(), programs::mixed(1_500)),
+        ("demo".to_string(), process::DEMO.to_string()),
+        ("every_kind".to_string(), EVERY_KIND.to_string()),
+    ];
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    for dir in [root.join("tests/ngc"), root.join("../tests/peers/linuxcnc")] {
+        let mut files: Vec<_> = std::fs::read_dir(&dir)
+            .unwrap_or_else(|e| panic!("{dir:?}: {e}"))
+            .filter_map(|e| e.ok().map(|e| e.path()))
+            .filter(|p| p.extension().is_some_and(|x| x == "ngc"))
+            .collect();
+        files.sort();
+        for p in files {
+            let text = std::fs::read_to_string(&p).unwrap_or_else(|e| panic!("{p:?}: {e}"));
+            let name = p.file_name().map(|n| n.to_string_lossy().into_owned());
+            cases.push((name.unwrap_or_default(), text));
+        }
+    }
+    cases
+}
+
+fn printing() -> bool {
+    std::env::var_os("GOLDEN_PRINT").is_some()
+}
+
+#[test]
+fn blocks_and_plans_are_as_they_were() {
+    let mut wrong = Vec::new();
+    for (name, text) in block_cases() {
+        let (n, hash) = compile_hash(&text);
+        if printing() {
+            println!("    (\"{name}\", {n}, {hash:#018x}),");
+            continue;
+        }
+        match GOLDEN_BLOCKS.iter().find(|g| g.0 == name) {
+            Some(&(_, want_n, want)) if (want_n, want) == (n, hash) => {}
+            Some(&(_, want_n, want)) => wrong.push(format!(
+                "{name}: {n} {hash:#018x}, was {want_n} {want:#018x}"
+            )),
+            None => wrong.push(format!("{name}: no golden value")),
+        }
+    }
+    assert!(wrong.is_empty(), "changed:\n{}", wrong.join("\n"));
+}
+
+/// The programs whose every byte is mutated.
+fn mutated_sources() -> Vec<String> {
+    vec![
+        programs::plain_g1(8),
+        programs::mixed(40),
+        EVERY_KIND.to_string(),
+        "#1=2.5\n#<x> = [#1 * 2 + SIN[30]]\nG1 X#<x> Y[#1 ** 2 MOD 3] F[100/4]\nX-.5e Y1.\nM2\n"
+            .to_string(),
+    ]
+}
+
+/// What replaces a byte (or is put after it).
+const EDITS: &[u8] = b" 0.9-+#[]()XGFPe;/\tO";
+
+#[test]
+fn diagnostics_are_as_they_were() {
+    let mut h = Hash::new();
+    let mut cases = 0u64;
+    for text in mutated_sources() {
+        let src = text.as_bytes();
+        for i in 0..src.len() {
+            let mut variants: Vec<Vec<u8>> = Vec::new();
+            variants.push([&src[..i], &src[i + 1..]].concat());
+            for &e in EDITS {
+                variants.push([&src[..i], &[e], &src[i + 1..]].concat());
+                variants.push([&src[..=i], &[e], &src[i + 1..]].concat());
+            }
+            for v in variants {
+                let text = String::from_utf8_lossy(&v);
+                cases += 1;
+                match program::interpret(&text) {
+                    Ok(p) => h.str(&format!("{:?} {:?}", p.moves, p.messages)),
+                    Err(diags) => diags.iter().for_each(|d| h.diagnostic(d)),
+                }
+            }
+        }
+    }
+    const GOLDEN: (u64, u64) = (46863, 0xc4c837aeab815075);
+    if printing() {
+        println!("diagnostics: ({cases}, {:#018x})", h.0);
+        return;
+    }
+    assert_eq!(
+        (cases, h.0),
+        GOLDEN,
+        "diagnostics of mutated programs changed"
+    );
+}
