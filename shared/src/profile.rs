@@ -192,11 +192,24 @@ impl Limits {
         if ap <= acc {
             return [(-j, (m.a + ap) / j), (j, ap / j), (0.0, 0.0)];
         }
-        // The deceleration saturates at `acc`: hold it in between.
-        let dv1 = (m.a * m.a - acc * acc) / (2.0 * j);
+        // The deceleration saturates at `acc`: hold it in between. A machine braking
+        // harder than `acc` (a block before allowed more) first eases off to it, with
+        // `+J`: the phase's speed change is then `(acc² − a²)/2J`, the opposite sign of
+        // the ramp down's formula, and its duration `|a + acc|/J` is never negative (a
+        // negative one is skipped by `follow` but run backwards by `brake_distance`, so
+        // the two would disagree).
+        let (j1, dv1) = if m.a < -acc {
+            (j, (acc * acc - m.a * m.a) / (2.0 * j))
+        } else {
+            (-j, (m.a * m.a - acc * acc) / (2.0 * j))
+        };
         let dv3 = -acc * acc / (2.0 * j);
         let hold = ((m.v - v_end) + dv1 + dv3) / acc;
-        [(-j, (m.a + acc) / j), (0.0, hold.max(0.0)), (j, acc / j)]
+        [
+            (j1, (m.a + acc).abs() / j),
+            (0.0, hold.max(0.0)),
+            (j, acc / j),
+        ]
     }
 
     /// Distance the quickest braking from `m` to `v_end` covers (zero when none is
@@ -342,6 +355,44 @@ mod tests {
             let d = LIM.brake_distance(m, v_end);
             assert!(LIM.can_reach(v, a, v_end, d * (1.0 + 1e-9) + 1e-12));
             assert!(!LIM.can_reach(v, a, v_end, d * (1.0 - 1e-6)));
+        }
+    }
+
+    #[test]
+    fn braking_harder_than_the_limit_eases_off_to_it_first() {
+        // A block before allowed more deceleration than this limit: the braking eases
+        // off to `-acc` with `+J`, holds it, and lands on the target speed at rest in
+        // acceleration; `follow` (which skips negative durations) covers exactly the
+        // distance `brake_distance` says.
+        for (v, a, v_end) in [
+            (100.0, -2500.0, 10.0),
+            (41.2, -226.4, 4.5),
+            (200.0, -3000.0, 0.0),
+        ] {
+            let lim = if a < -1000.0 {
+                LIM
+            } else {
+                Limits {
+                    acc: 118.1,
+                    jerk: 13_362.0,
+                }
+            };
+            let m = Motion { v, a, s: 0.0 };
+            let ph = lim.brake(m, v_end);
+            for &(j, d) in &ph {
+                assert!(j.abs() <= lim.jerk && d >= 0.0, "{ph:?}");
+            }
+            let end = ph.iter().fold(m, |m, &(j, d)| m.after(j, d));
+            assert!((end.v - v_end).abs() < 1e-9, "{v} {a}: {end:?}");
+            assert!(end.a.abs() < 1e-9, "{end:?}");
+            let total: f64 = ph.iter().map(|p| p.1).sum();
+            let followed = follow(m, &ph, total);
+            let d = lim.brake_distance(m, v_end);
+            assert!(
+                (followed.s - d).abs() < 1e-12 * d.max(1.0),
+                "{} vs {d}",
+                followed.s
+            );
         }
     }
 
