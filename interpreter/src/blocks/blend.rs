@@ -80,7 +80,9 @@
 //! (a feed hold inside the blend stops "in" that line, as the reports should say). Its
 //! feed is the lower of the two lines' feeds.
 
+use super::{dot, sub};
 use crate::program::{Move, PathControl};
+use shared::path::norm;
 use std::borrow::Cow;
 
 /// Turns below this (radians) are left as they are: a kink of 1e-4 rad costs the
@@ -338,16 +340,8 @@ fn control_points(c: &Corner, start: [f64; 3], end: [f64; 3]) -> Vec<[f64; 4]> {
         .collect()
 }
 
-fn sub(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
-    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
-}
-
 fn add(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
     [a[0] + b[0], a[1] + b[1], a[2] + b[2]]
-}
-
-fn dot(a: [f64; 3], b: [f64; 3]) -> f64 {
-    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
 }
 
 fn cross(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
@@ -356,10 +350,6 @@ fn cross(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
         a[2] * b[0] - a[0] * b[2],
         a[0] * b[1] - a[1] * b[0],
     ]
-}
-
-fn norm(a: [f64; 3]) -> f64 {
-    dot(a, a).sqrt()
 }
 
 #[cfg(test)]

@@ -173,6 +173,35 @@ pub fn commands(blocks: &[Block]) -> Vec<CommandBlock> {
         .collect()
 }
 
+/// The [`Plannable`] methods that read and write the planned fields, which
+/// [`Straight`] names as [`CommandBlock`] does.
+macro_rules! planned_fields {
+    () => {
+        fn feed_mm_per_min(&self) -> f64 {
+            self.feed_mm_per_min
+        }
+        fn length_mm(&self) -> f64 {
+            self.length_mm
+        }
+        fn limits(&self) -> Jerk {
+            Jerk {
+                acc: self.acc_mm_per_s2,
+                jerk: self.jerk_mm_per_s3,
+            }
+        }
+        fn set_caps(&mut self, length_mm: f64, feed_mm_per_min: f64, limits: Jerk) {
+            self.length_mm = length_mm;
+            self.feed_mm_per_min = feed_mm_per_min;
+            self.acc_mm_per_s2 = limits.acc;
+            self.jerk_mm_per_s3 = limits.jerk;
+        }
+        fn set_feeds(&mut self, start_mm_per_min: f64, end_mm_per_min: f64) {
+            self.start_feed_mm_per_min = start_mm_per_min;
+            self.end_feed_mm_per_min = end_mm_per_min;
+        }
+    };
+}
+
 impl Plannable for CommandBlock {
     fn is_motion(&self) -> bool {
         self.kind == BlockKind::Motion as u32
@@ -186,28 +215,7 @@ impl Plannable for CommandBlock {
             None => Geometry::Curve(self),
         }
     }
-    fn feed_mm_per_min(&self) -> f64 {
-        self.feed_mm_per_min
-    }
-    fn length_mm(&self) -> f64 {
-        self.length_mm
-    }
-    fn limits(&self) -> Jerk {
-        Jerk {
-            acc: self.acc_mm_per_s2,
-            jerk: self.jerk_mm_per_s3,
-        }
-    }
-    fn set_caps(&mut self, length_mm: f64, feed_mm_per_min: f64, limits: Jerk) {
-        self.length_mm = length_mm;
-        self.feed_mm_per_min = feed_mm_per_min;
-        self.acc_mm_per_s2 = limits.acc;
-        self.jerk_mm_per_s3 = limits.jerk;
-    }
-    fn set_feeds(&mut self, start_mm_per_min: f64, end_mm_per_min: f64) {
-        self.start_feed_mm_per_min = start_mm_per_min;
-        self.end_feed_mm_per_min = end_mm_per_min;
-    }
+    planned_fields!();
 }
 
 impl Plannable for Straight {
@@ -220,28 +228,7 @@ impl Plannable for Straight {
     fn geometry(&self) -> Geometry<'_> {
         Geometry::Straight(self.chord())
     }
-    fn feed_mm_per_min(&self) -> f64 {
-        self.feed_mm_per_min
-    }
-    fn length_mm(&self) -> f64 {
-        self.length_mm
-    }
-    fn limits(&self) -> Jerk {
-        Jerk {
-            acc: self.acc_mm_per_s2,
-            jerk: self.jerk_mm_per_s3,
-        }
-    }
-    fn set_caps(&mut self, length_mm: f64, feed_mm_per_min: f64, limits: Jerk) {
-        self.length_mm = length_mm;
-        self.feed_mm_per_min = feed_mm_per_min;
-        self.acc_mm_per_s2 = limits.acc;
-        self.jerk_mm_per_s3 = limits.jerk;
-    }
-    fn set_feeds(&mut self, start_mm_per_min: f64, end_mm_per_min: f64) {
-        self.start_feed_mm_per_min = start_mm_per_min;
-        self.end_feed_mm_per_min = end_mm_per_min;
-    }
+    planned_fields!();
 }
 
 /// Each call handed on to the variant.
