@@ -827,22 +827,29 @@ impl Engine {
             }
         }
         let cap = m.feed_mm_per_s;
-        // Past the end of this block (a step that crosses it), the next block's feed and
-        // limits cap the speed for the rest of the cycle.
+        // Past the end of this block (a step that crosses it), the feed and limits of the
+        // block the motion is in cap the speed for the rest of the cycle: the next one,
+        // or one further on when the step crosses short blocks (a blend's entry speed
+        // kept on passing into it is no bound on the speed rising later in it).
         let end_here = ahead
             .get(..n)
             .and_then(|a| a.first())
             .map_or(f64::INFINITY, |l| l.d);
-        let (cap_next, own_next) = match self.window.get(0) {
-            Some(b) if is_motion(b) => (b.feed_mm_per_min / 60.0, block_jerk(b)),
-            _ => (0.0, own),
-        };
         let cap_at = |x: &profile::Motion| {
-            if x.s > end_here {
-                (cap_next, own_next)
-            } else {
-                (cap, own)
+            if x.s <= end_here {
+                return (cap, own);
             }
+            let mut d = end_here;
+            let mut i = 0;
+            while let Some(b) = self.window.get(i).filter(|b| is_motion(b)) {
+                d += b.length_mm;
+                let last = !self.window.get(i + 1).is_some_and(is_motion);
+                if x.s <= d || last {
+                    return (b.feed_mm_per_min / 60.0, block_jerk(b));
+                }
+                i += 1;
+            }
+            (0.0, own)
         };
         let preferred: profile::Phases = if self.stopping {
             own.brake(x0, 0.0)
@@ -896,6 +903,32 @@ impl Engine {
             };
         let eps = 1e-12;
         let tol = t * SWITCH_RESOLUTION;
+        // The feed cap over a piece of the cycle's motion that ends at `end`: each block's
+        // is judged where the motion leaves it, the last one's at the end. (Judged only at
+        // the end, a step into a faster block would let the speed rise over the feed of
+        // the block it leaves, and come back down before its end.) Returns the moment
+        // judged and the room there. Along an accelerating piece the room only shrinks,
+        // along a braking one it only grows, so those moments are where it is least.
+        let cap_left = |at: &dyn Fn(f64) -> profile::Motion, t0: f64, end: profile::Motion| {
+            let from = at(t0).s;
+            let mut d = end_here;
+            let mut i = 0;
+            while end.s > d {
+                if d >= from {
+                    let tc = latest_ok(t0, t, tol, |tau| d - at(tau).s);
+                    let r = room(0, at(tc));
+                    if r < -eps {
+                        return (tc, r);
+                    }
+                }
+                match self.window.get(i) {
+                    Some(b) if is_motion(b) => d += b.length_mm,
+                    _ => break,
+                }
+                i += 1;
+            }
+            (t, room(0, end))
+        };
         // The cycle's motion is pieced together: the preferred motion, and from the first
         // moment a limit would be lost, the quickest braking for it; along that braking
         // another limit may bind later in the cycle, and so on.
@@ -906,6 +939,11 @@ impl Engine {
             let end = at(t);
             let mut first: Option<(usize, f64, f64)> = None;
             for c in 0..=n {
+                if braking_for == Some(c) {
+                    // Followed already, as hard as it goes: it is kept along this braking
+                    // if it can be kept at all.
+                    continue;
+                }
                 // A limit the motion passes in this cycle is judged where it is passed:
                 // there the speed, and the peak its acceleration still adds, must be
                 // within it. (After it, the next block's own limits apply.)
@@ -921,12 +959,27 @@ impl Engine {
                     });
                 let (t_end, room_end) = match passed {
                     Some((tp, r)) => (tp, r),
+                    None if c == 0 => cap_left(&at, t0, end),
                     None => (t, room(c, end)),
                 };
                 if room_end >= -eps {
                     continue;
                 }
                 let tau = if room(c, at(t0)) < -eps {
+                    // Lost already where this piece of the motion begins: nothing can
+                    // keep it, and braking for it helps only if that brakes harder than
+                    // the braking followed now. Otherwise it is left to that braking,
+                    // and the search goes on for limits lost later in the cycle, which
+                    // can still be kept. (Before, a lost far limit won over them: a line
+                    // ran 0.8 % over its feed while braking, under a blend's gentler
+                    // jerk, for that blend's lost end speed.)
+                    if braking_for.is_some() {
+                        let x = at(t0);
+                        let s_c = profile::follow(x, &brake_for(c, x), t - t0).s;
+                        if s_c >= at(t).s {
+                            continue;
+                        }
+                    }
                     t0
                 } else {
                     // A limit still kept at the earliest moment found so far for another
@@ -954,10 +1007,6 @@ impl Engine {
             let Some((c, tau, _)) = first else {
                 break;
             };
-            if braking_for == Some(c) && tau <= t0 {
-                // Braking for it already, as hard as it goes.
-                break;
-            }
             let x = at(tau);
             t0 = tau;
             x_start = x;

@@ -459,17 +459,11 @@ fn blended_corners_keep_every_limit_and_the_tolerance() {
 }
 
 proptest! {
-    // A fixed seed, so CI runs the same 32 chains every time. Acceleration, jerk (also
-    // through the blended corners, which are smooth) and the tolerance hold as in the
-    // other tests. NOT MET YET: the speed to 1e-6. Accelerating along a line towards a
-    // blend (a block with a lower jerk budget than the line), the engine follows the
-    // gentler braking for the blend and brings its acceleration down too late for the
-    // line's own feed: up to 3.6 % over it in these 32 chains (3024 mm/min at F3000 on
-    // the 3.7 mm line of `G64 P0.005 G1 F3000 X0.1943 Z-0.0473 / X0.3458 Z-0.1778 /
-    // X2.1958 Y1.3697 Z-3.2939 / X2.2826 Y1.434 Z-3.4622`, the same with the engine of
-    // before this change), so the speed bound here is 5e-2. (The engine's easing-off
-    // test also ignored the next block's lower jerk and entered a blend 3.6 % too fast:
-    // fixed in `interpolator/src/engine.rs`.)
+    // A fixed seed, so CI runs the same 32 chains every time. Speed, acceleration, jerk
+    // (also through the blended corners, which are smooth) and the tolerance hold as in
+    // the other tests. (These chains once found the engine up to 3.6 % over a line's
+    // feed: see `blended_chains_once_over_their_feed`. 900 unseeded cases found no
+    // excess over 1e-6 since.)
     #![proptest_config(ProptestConfig {
         cases: 32,
         rng_seed: proptest::test_runner::RngSeed::Fixed(0x5eed_0064),
@@ -505,10 +499,44 @@ proptest! {
         let text = polyline_program(&format!("G64 P{tol}"), feed, &pts);
         let (blocks, cycles) = step(&text, &machine);
         let w = check(&blocks, &cycles, &machine);
-        prop_assert!(w.speed <= 1.0 + 5e-2, "speed {w:?}\n{text}");
+        prop_assert!(w.speed <= 1.0 + 1e-6, "speed {w:?}\n{text}");
         prop_assert!(w.acc <= 1.0 + 1e-3, "acceleration {w:?}\n{text}");
         prop_assert!(w.jerk <= 1.0 + 1e-2, "jerk {w:?}\n{text}");
         let off = cycles.iter().map(|c| dist_to_polyline(c.p, &pts)).fold(0.0, f64::max);
         prop_assert!(off <= tol + machine.chord_tolerance_mm, "{off} mm off\n{text}");
+    }
+}
+
+/// Blended chains the random search found over their feed, each through a fault of the
+/// engine's switch search, now kept to it:
+/// * accelerating on a line towards a blend whose end speed could no longer be kept under
+///   the blend's gentler jerk, the engine braked for that lost limit and never for the
+///   line's own feed, which a limit lost later in the cycle would have kept (0.8 % over
+///   at F3000 on the 3.7 mm line);
+/// * a step leaving a blend for a faster line judged the feed only where it ended, in the
+///   line: the speed rose over the blend's feed inside it and came back by its end
+///   (0.02 % over);
+/// * a step crossing a short line into the next blend took the line's feed, not the
+///   blend's, for the rest of the cycle (0.01 % over).
+#[test]
+fn blended_chains_once_over_their_feed() {
+    let machine = Machine::default();
+    for text in [
+        "G21 G64 P0.005\nG1 F3000\nX0.1943 Z-0.0473\nX0.3458 Z-0.1778\n\
+         X2.1958 Y1.3697 Z-3.2939\nX2.2826 Y1.434 Z-3.4622\nM2\n",
+        "G21 G64 P0.005\nG1 F3000\nX0.1881 Y0.0000 Z0.0681\nX0.3662 Y0.0000 Z0.1591\n\
+         X0.5378 Y0.0000 Z0.2619\nX0.7098 Y0.0000 Z0.3640\nX0.7818 Y0.1577 Z0.4637\n\
+         X0.8607 Y0.3306 Z0.5260\nX-0.8750 Y0.9277 Z1.9542\nX-2.4328 Y2.5787 Z2.5101\n\
+         X-2.5674 Y2.4847 Z2.6244\nM2\n",
+        "G21 G64 P0.05\nG1 F6000\nX1.8410 Y0.0000 Z-0.4254\nX0.4834 Y-3.1265 Z-2.8258\n\
+         X-0.9333 Y-6.3892 Z-4.3006\nX-1.0692 Y-6.7022 Z-4.4421\nX-1.9933 Y-6.3385 Z-5.5279\n\
+         X-4.1296 Y-4.7946 Z-9.0868\nX-3.5938 Y-3.1439 Z-11.4301\nX-3.0318 Y-2.4684 Z-11.9471\n\
+         X-2.2109 Y0.5552 Z-12.2872\nM2\n",
+    ] {
+        let (blocks, cycles) = step(text, &machine);
+        let w = check(&blocks, &cycles, &machine);
+        assert!(w.speed <= 1.0 + 1e-6, "speed {w:?}\n{text}");
+        assert!(w.acc <= 1.0 + 1e-3, "acceleration {w:?}\n{text}");
+        assert!(w.jerk <= 1.0 + 1e-2, "jerk {w:?}\n{text}");
     }
 }
