@@ -966,20 +966,6 @@ impl Engine {
                     continue;
                 }
                 let tau = if room(c, at(t0)) < -eps {
-                    // Lost already where this piece of the motion begins: nothing can
-                    // keep it, and braking for it helps only if that brakes harder than
-                    // the braking followed now. Otherwise it is left to that braking,
-                    // and the search goes on for limits lost later in the cycle, which
-                    // can still be kept. (Before, a lost far limit won over them: a line
-                    // ran 0.8 % over its feed while braking, under a blend's gentler
-                    // jerk, for that blend's lost end speed.)
-                    if braking_for.is_some() {
-                        let x = at(t0);
-                        let s_c = profile::follow(x, &brake_for(c, x), t - t0).s;
-                        if s_c >= at(t).s {
-                            continue;
-                        }
-                    }
                     t0
                 } else {
                     // A limit still kept at the earliest moment found so far for another
@@ -993,6 +979,23 @@ impl Engine {
                     }
                     latest_ok(t0, hi, tol, |tau| room(c, at(tau)) + eps)
                 };
+                // Braking for another limit already, and this one lost where (or just
+                // after) that braking began: the two cannot both be kept from here, and
+                // braking for this one helps only if it brakes harder. Otherwise it is
+                // left to the braking followed, and the search goes on for limits lost
+                // later in the cycle, which can still be kept. (Before, a lost far limit
+                // won over them: a line ran 0.8 % over its feed while braking, under a
+                // blend's gentler jerk, for the blend's lost end speed. And two limits
+                // lost at one moment took turns until the rounds ran out: the softer
+                // braking, for a junction speed, could be left in force and lose an
+                // exact stop 0.6 mm further on, reached at 2.5 mm/s.)
+                if braking_for.is_some() && tau <= t0 + tol {
+                    let x = at(tau);
+                    let s_c = profile::follow(x, &brake_for(c, x), t - tau).s;
+                    if s_c >= at(t).s {
+                        continue;
+                    }
+                }
                 // Ties (limits already lost together) go to the harder braking.
                 let x = at(tau);
                 let s_end = profile::follow(x, &brake_for(c, x), t - tau).s;
