@@ -635,10 +635,13 @@ fn surface_samples(b: &CommandBlock) -> Samples {
 /// change in one period stays within the acceleration (`2·v·sin(θ/2) <= A·T`); where the
 /// curvature jumps by `Δk`, the speed whose acceleration step `v²·Δk` in one period stays
 /// within the jerk. Zero (exact stop) for corners sharper than the machine's corner angle.
-fn junction_speed(a: &Shape, b: &Shape, machine: &Machine, period_s: f64) -> f64 {
+///
+/// Also returns the kink, if any, for [`close_kinks`]: its turn and the acceleration
+/// (times the period) its direction change may take.
+fn junction_speed(a: &Shape, b: &Shape, machine: &Machine, period_s: f64) -> (f64, Option<Kink>) {
     let cos = dot(a.t_end, b.t_start).clamp(-1.0, 1.0);
     if cos < machine.corner_angle_deg.to_radians().cos() {
-        return 0.0;
+        return (0.0, None);
     }
     // Between surface blocks the tangents and curvatures are the tool point's, which
     // moves up to `ratio` times the contact speed the caps are in. Its kinks (where the
@@ -659,14 +662,72 @@ fn junction_speed(a: &Shape, b: &Shape, machine: &Machine, period_s: f64) -> f64
     };
     let mut v = a.v_cap.min(b.v_cap);
     let half_sin = (0.5 * (1.0 - cos)).max(0.0).sqrt();
+    let mut kink = None;
     if half_sin > 1e-7 {
-        v = v.min(acc * period_s / (2.0 * half_sin) / r);
+        let acc_t = acc * period_s / r;
+        v = v.min(acc_t / (2.0 * half_sin));
+        kink = Some(Kink {
+            j: 0,
+            s: 0.0,
+            chain: 0,
+            turn: 2.0 * half_sin.min(1.0).asin(),
+            acc_t,
+        });
     }
     let dk = path::norm(sub(a.k_end, b.k_start));
     if dk > 1e-9 {
         v = v.min((jerk * period_s / dk).sqrt() / r);
     }
-    v
+    (v, kink)
+}
+
+/// A kink at the end of block `j`, `s` mm along the path, in the `chain`-th stretch of
+/// the path between stops.
+#[derive(Debug, Clone, Copy)]
+struct Kink {
+    j: usize,
+    s: f64,
+    chain: u32,
+    /// The tangent's turn (rad).
+    turn: f64,
+    /// The acceleration the direction change may take, times the period (mm/s).
+    acc_t: f64,
+}
+
+/// Kinks closer together than two steps: one step's direction can then change by the
+/// turns of several, where each junction speed allows for its own alone. The set-points'
+/// acceleration over two steps is `v·2·sin(Θ/2)/T` with `Θ` at most the sum of the
+/// turns within the `2·v·T` of path the two steps cover; so every run of kinks that
+/// close (at the speeds planned at them) takes the speed whose direction change over
+/// all their turns stays within the acceleration. Conservative: the runs are measured
+/// at the speeds before this lowers them. Lowers `end` in place.
+fn close_kinks(kinks: &[Kink], end: &mut [f64], period_s: f64) {
+    for (l, first) in kinks.iter().enumerate() {
+        let mut turn = 0.0;
+        let mut acc_t = f64::INFINITY;
+        let mut v_max = 0.0f64;
+        let mut r = l;
+        for (k, next) in kinks.iter().enumerate().skip(l) {
+            if next.chain != first.chain {
+                break;
+            }
+            let v = v_max.max(end[next.j]);
+            if k > l && next.s - first.s >= 2.0 * v * period_s {
+                break;
+            }
+            v_max = v;
+            turn += next.turn;
+            acc_t = acc_t.min(next.acc_t);
+            r = k;
+        }
+        if r == l {
+            continue;
+        }
+        let v = acc_t / (2.0 * (0.5 * turn.min(std::f64::consts::PI)).sin());
+        for k in &kinks[l..=r] {
+            end[k.j] = end[k.j].min(v);
+        }
+    }
 }
 
 /// A motion block's path as the planner sees it.
@@ -714,6 +775,8 @@ pub fn plan<B: Plannable>(blocks: &mut [B], machine: &Machine, period_ns: u64) {
     // block after it has its shape (a junction needs only its two blocks').
     let mut end = vec![0.0f64; n];
     let mut before: Option<Shape> = None;
+    let mut kinks: Vec<Kink> = Vec::new();
+    let (mut s, mut chain) = (0.0f64, 0u32);
     for i in 0..n {
         let b = &mut blocks[i];
         let shp = b.is_motion().then(|| {
@@ -731,20 +794,36 @@ pub fn plan<B: Plannable>(blocks: &mut [B], machine: &Machine, period_ns: u64) {
                 jerk: shp.jerk,
             };
             b.set_caps(length, feed.min(shp.v_cap * 60.0), limits);
+            s += length;
             shp
         });
-        if let (Some(sa), Some(sb), Some(j)) = (&before, &shp, i.checked_sub(1)) {
-            let (b, nb) = (&blocks[j], &blocks[i]);
-            let rapid_change = (b.flags() ^ nb.flags()) & FLAG_RAPID != 0;
-            let stop = b.flags() & FLAG_STOP_AT_END != 0;
-            if !(rapid_change || stop) {
-                end[j] = junction_speed(sa, sb, machine, period_s)
-                    .min(b.feed_mm_per_min() / 60.0)
-                    .min(nb.feed_mm_per_min() / 60.0);
+        if let Some(j) = i.checked_sub(1) {
+            if let (Some(sa), Some(sb)) = (&before, &shp) {
+                let (b, nb) = (&blocks[j], &blocks[i]);
+                let rapid_change = (b.flags() ^ nb.flags()) & FLAG_RAPID != 0;
+                let stop = b.flags() & FLAG_STOP_AT_END != 0;
+                if !(rapid_change || stop) {
+                    let (v, kink) = junction_speed(sa, sb, machine, period_s);
+                    end[j] = v
+                        .min(b.feed_mm_per_min() / 60.0)
+                        .min(nb.feed_mm_per_min() / 60.0);
+                    if let Some(k) = kink.filter(|_| end[j] > 0.0) {
+                        kinks.push(Kink {
+                            j,
+                            s: s - blocks[i].length_mm(),
+                            chain,
+                            ..k
+                        });
+                    }
+                }
+            }
+            if end[j] <= 0.0 {
+                chain += 1;
             }
         }
         before = shp;
     }
+    close_kinks(&kinks, &mut end, period_s);
     // Backward pass: every block must be able to slow to its end speed. A block's end
     // speed is final once the block after it has been passed, so its feeds are set here.
     for i in (0..n).rev() {

@@ -522,7 +522,9 @@ proptest! {
 /// And a line chain: a kink's junction speed and an exact stop 0.6 mm after it were both
 /// lost at one moment of a cycle, and the switch search took turns between their brakings
 /// until its rounds ran out, leaving the softer one: the stop was reached at 2.5 mm/s
-/// (1.2 times the acceleration limit in one cycle, and a jump in speed).
+/// (1.2 times the acceleration limit in one cycle, and a jump in speed). And kinks closer
+/// together than two steps, each planned for its own turn alone (see
+/// `blocks::close_kinks`).
 #[test]
 fn chains_that_once_broke_a_limit() {
     let machine = Machine::default();
