@@ -207,12 +207,12 @@ proptest! {
 }
 
 proptest! {
-    // A fixed seed, so CI runs the same 32 chains every time. Other seeds have found a
-    // case that is NOT MET YET: two kinks closer together than one step (a 0.01 mm leg
-    // between 16° and 3° turns at F3000) reach 1.11 times the acceleration limit (1.32 in
-    // another 0.01 mm case), since
-    // the junction speed of each kink assumes one kink per step. Lines and the LinuxCNC
-    // programs otherwise keep every limit.
+    // A fixed seed, so CI runs the same 32 chains every time. Kinks closer together than
+    // two steps once reached up to 2.5 times the acceleration limit (fixed: see
+    // `chains_that_once_broke_a_limit`). NOT MET YET, found once in 1800 unseeded cases:
+    // a kink passed while the profile accelerates at the full limit along the path adds
+    // its direction change to it (1.03 times the limit at a 0.7° kink at F6000): each
+    // junction speed gives the kink the whole acceleration, as if the profile took none.
     #![proptest_config(ProptestConfig {
         cases: 32,
         rng_seed: proptest::test_runner::RngSeed::Fixed(0x5eed_0006),
