@@ -486,11 +486,50 @@ fn straight(b: &CommandBlock) -> Option<[f64; 3]> {
 type Frame = ([f64; 3], [f64; 3]);
 
 /// Unit tangents with curvature vectors, curvature derivatives, curvature jumps.
+/// One sample: the frame and dk/ds.
+type Sample = (Frame, [f64; 3]);
 type Samples = (Vec<Frame>, Vec<[f64; 3]>, Vec<f64>);
 
 /// Samples of a curved block for [`shape`]: unit tangent and curvature vector at each,
 /// the curvature's derivative along the path at each, and the curvature jumps at its
 /// interior knots.
+/// Local maxima of the curvature and of its rate searched between samples, of each.
+const PEAKS_REFINED: usize = 3;
+
+/// The largest `m(f(u))` on `[lo, hi]`, by golden-section search (for one peak there),
+/// with what `f` gave there.
+fn golden_max<T>(
+    lo: f64,
+    hi: f64,
+    f: impl Fn(f64) -> Option<T>,
+    m: impl Fn(&T) -> f64,
+) -> Option<T> {
+    const R: f64 = 0.618_033_988_749_895;
+    let (mut a, mut b) = (lo, hi);
+    let mut c = b - R * (b - a);
+    let mut d = a + R * (b - a);
+    let (mut fc, mut fd) = (f(c)?, f(d)?);
+    for _ in 0..40 {
+        if b - a <= 1e-9 * (hi - lo) {
+            break;
+        }
+        if m(&fc) >= m(&fd) {
+            b = d;
+            d = c;
+            fd = fc;
+            c = b - R * (b - a);
+            fc = f(c)?;
+        } else {
+            a = c;
+            c = d;
+            fc = fd;
+            d = a + R * (b - a);
+            fd = f(d)?;
+        }
+    }
+    Some(if m(&fc) >= m(&fd) { fc } else { fd })
+}
+
 fn samples(b: &CommandBlock) -> Samples {
     let (u0, u1) = path::domain(b);
     let samples = (16 * b.n_ctrl.max(2) as usize).max(32);
@@ -505,14 +544,9 @@ fn samples(b: &CommandBlock) -> Samples {
             .clamp(1, spans.len().max(2) - 1);
         (spans[i - 1], spans[i.min(spans.len() - 1)])
     };
-    let mut pts: Vec<([f64; 3], [f64; 3])> = Vec::with_capacity(samples + 1);
-    let mut dk: Vec<[f64; 3]> = Vec::with_capacity(samples + 1);
-    for i in 0..=samples {
-        let u = u0 + (u1 - u0) * i as f64 / samples as f64;
-        let Some((t, k)) = frame(b, u) else {
-            continue;
-        };
-        pts.push((t, k));
+    // The frame and dk/ds at `u` (dk/ds by a central difference inside u's span).
+    let at = |u: f64| -> Option<Sample> {
+        let (t, k) = frame(b, u)?;
         let (lo, hi) = span_of(u);
         let h = 1e-4 * (hi - lo);
         let (ua, ub) = ((u - h).max(lo), (u + h).min(hi));
@@ -527,7 +561,42 @@ fn samples(b: &CommandBlock) -> Samples {
             }
             _ => [0.0; 3],
         };
-        dk.push(d);
+        Some(((t, k), d))
+    };
+    let mut us: Vec<f64> = Vec::with_capacity(samples + 1);
+    let mut pts: Vec<Frame> = Vec::with_capacity(samples + 1);
+    let mut dk: Vec<[f64; 3]> = Vec::with_capacity(samples + 1);
+    for i in 0..=samples {
+        let u = u0 + (u1 - u0) * i as f64 / samples as f64;
+        if let Some((f, d)) = at(u) {
+            us.push(u);
+            pts.push(f);
+            dk.push(d);
+        }
+    }
+    // A peak of the curvature or of its rate narrower than the sampling (a control
+    // polygon folding back on itself turns in a few µm) is found between its samples:
+    // the largest local maxima of each are searched (golden section) between their
+    // neighbours, and what is found joins the samples (before the last, which gives
+    // the end's tangent).
+    let mut extra: Vec<Sample> = Vec::new();
+    let measures: [fn(&Sample) -> f64; 2] = [|x| path::norm(x.0 .1), |x| path::norm(x.1)];
+    for m in measures {
+        let value = |i: usize| m(&(pts[i], dk[i]));
+        let mut peaks: Vec<usize> = (1..pts.len().saturating_sub(1))
+            .filter(|&i| value(i) >= value(i - 1) && value(i) >= value(i + 1) && value(i) > 0.0)
+            .collect();
+        peaks.sort_by(|a, b| value(*b).total_cmp(&value(*a)));
+        for &i in peaks.iter().take(PEAKS_REFINED) {
+            if let Some(found) = golden_max(us[i - 1], us[i + 1], at, m) {
+                extra.push(found);
+            }
+        }
+    }
+    if !extra.is_empty() {
+        let n = pts.len() - 1;
+        pts.splice(n..n, extra.iter().map(|x| x.0));
+        dk.splice(n..n, extra.iter().map(|x| x.1));
     }
     // Curvature jumps at interior knots where the curve is only C¹ (or less).
     let mut jumps: Vec<f64> = Vec::new();
