@@ -474,6 +474,92 @@ fn shape(g: Geometry, machine: &Machine, period_s: f64, feed_mm_s: f64) -> Shape
     }
 }
 
+/// What [`shape`] takes from the machine for a straight block, worked out once a plan.
+/// `None` unless every limit is a positive number below 1e100: then the terms a zero
+/// curvature leaves in [`shape`] are exact zeros (no product of them overflows into
+/// infinity and NaN), and [`shape_straight`] can leave them out and give the same bits.
+#[derive(Debug, Clone, Copy)]
+struct StraightLimits {
+    /// Each axis's velocity limit in mm/s (`max_vel_mm_per_min / 60.0`, as `shape`).
+    vel_mm_s: [f64; 3],
+    acc: [f64; 3],
+    jerk: [f64; 3],
+    /// `shape`'s tangential acceleration before the axes: what a zero normal
+    /// acceleration leaves of the path's, `a.min(sqrt(a² - 0²))`.
+    a_tangential: f64,
+    j_path: f64,
+    /// `shape`'s floors of the acceleration and jerk.
+    acc_floor: f64,
+    jerk_floor: f64,
+}
+
+impl StraightLimits {
+    fn new(machine: &Machine) -> Option<Self> {
+        let axes = machine.axes.as_array();
+        let a_path = machine.path_acc_mm_per_s2;
+        let j_path = machine.path_jerk_mm_per_s3;
+        let usable = |x: f64| x > 0.0 && x < 1e100;
+        let mut all = [a_path, j_path].into_iter().chain(
+            axes.iter()
+                .flat_map(|a| [a.max_vel_mm_per_min, a.max_acc_mm_per_s2, a.max_jerk_mm_per_s3]),
+        );
+        // The normal acceleration `v²·κ` of a line: `+0` for any such `v`.
+        let an = 0.0f64;
+        all.all(usable).then(|| StraightLimits {
+            vel_mm_s: axes.map(|a| a.max_vel_mm_per_min / 60.0),
+            acc: axes.map(|a| a.max_acc_mm_per_s2),
+            jerk: axes.map(|a| a.max_jerk_mm_per_s3),
+            a_tangential: a_path.min((a_path * a_path - an * an).max(0.0).sqrt()),
+            j_path,
+            acc_floor: 0.05 * a_path,
+            jerk_floor: 0.05 * j_path,
+        })
+    }
+}
+
+/// [`shape`] of a straight block of chord `d`, bit for bit, without the terms its zero
+/// curvature makes zero; `None` where those terms might not be exact zeros (a feed
+/// that is not a finite number below 1e100, a chord without a length), which `shape`
+/// then handles. Lines are most blocks of most programs: this is the planner's hot path.
+fn shape_straight(d: [f64; 3], lim: &StraightLimits, feed_mm_s: f64) -> Option<Shape> {
+    let len = path::norm(d);
+    if !(len > 0.0 && feed_mm_s.is_finite() && feed_mm_s.abs() < 1e100) {
+        return None;
+    }
+    let t = d.map(|x| x / len);
+    // As in `shape`, axis by axis, in its order: the cap speed (only the velocity
+    // limits bind a line), then the tangential acceleration (`max_acc - v²·0`), then
+    // the jerk (`j - 3·v·a·0 - v³·0` is `j`).
+    let mut v = feed_mm_s;
+    for i in 0..3 {
+        if t[i].abs() > 1e-12 {
+            v = v.min(lim.vel_mm_s[i] / t[i].abs());
+        }
+    }
+    let mut acc = lim.a_tangential;
+    for i in 0..3 {
+        if t[i].abs() > 1e-12 {
+            acc = acc.min(lim.acc[i] / t[i].abs());
+        }
+    }
+    let mut jerk = lim.j_path;
+    for i in 0..3 {
+        if t[i].abs() > 1e-12 {
+            jerk = jerk.min(lim.jerk[i] / t[i].abs());
+        }
+    }
+    Some(Shape {
+        v_cap: v,
+        acc: acc.max(lim.acc_floor),
+        jerk: jerk.max(lim.jerk_floor),
+        t_start: t,
+        t_end: t,
+        k_start: [0.0; 3],
+        k_end: [0.0; 3],
+        surface_ratio: None,
+    })
+}
+
 /// The chord of a block that is a straight segment (degree 1, two control points, no
 /// helix; whatever the weights, such a curve runs straight from one to the other).
 fn straight(b: &CommandBlock) -> Option<[f64; 3]> {
@@ -714,6 +800,7 @@ pub fn plan<B: Plannable>(blocks: &mut [B], machine: &Machine, period_ns: u64) {
     // block after it has its shape (a junction needs only its two blocks').
     let mut end = vec![0.0f64; n];
     let mut before: Option<Shape> = None;
+    let straight_limits = StraightLimits::new(machine);
     for i in 0..n {
         let b = &mut blocks[i];
         let shp = b.is_motion().then(|| {
@@ -724,7 +811,12 @@ pub fn plan<B: Plannable>(blocks: &mut [B], machine: &Machine, period_ns: u64) {
                     Geometry::Straight(d) => path::norm(d),
                     Geometry::Curve(c) => path::length(c),
                 };
-                (length, shape(g, machine, period_s, feed / 60.0))
+                let fast = match (g, &straight_limits) {
+                    (Geometry::Straight(d), Some(lim)) => shape_straight(d, lim, feed / 60.0),
+                    _ => None,
+                };
+                let shp = fast.unwrap_or_else(|| shape(g, machine, period_s, feed / 60.0));
+                (length, shp)
             };
             let limits = Jerk {
                 acc: shp.acc,
@@ -757,7 +849,15 @@ pub fn plan<B: Plannable>(blocks: &mut [B], machine: &Machine, period_ns: u64) {
         } else {
             0.0
         };
-        let start = entry.min(blocks[i].limits().reachable_speed(end[i], len));
+        // The speed reachable within the block is never below its end speed: an entry
+        // below that (most blocks, between junctions at the feed) is the start speed,
+        // bit for bit, without working it out. Zeros (whose sign `min` may pick either
+        // way) and NaN go the long way.
+        let start = if entry < end[i] || (entry == end[i] && entry != 0.0) {
+            entry
+        } else {
+            entry.min(blocks[i].limits().reachable_speed(end[i], len))
+        };
         blocks[i].set_feeds(start * 60.0, end[i] * 60.0);
         if i > 0 {
             end[i - 1] = start;
