@@ -313,6 +313,9 @@ pub fn interpret_with(text: &str, opts: &Options) -> Result<Program, Vec<Diagnos
     // Subroutine files join the program after its own lines.
     let (files, missing) = subfile::load(&o_words, &opts.subroutine_dirs);
     let own_lines = lines.len();
+    // About a move a line in the programs that are long (CAM output): one allocation,
+    // not a list copied each time it doubles; what is not used is never touched.
+    prog.moves.reserve(own_lines);
     let mut units = subfile::Units::default();
     for f in &files {
         let start = lines.len();
