@@ -576,7 +576,7 @@ pub struct Flow {
 
 /// Matches the O-words of a whole program (one per line, `None` for other lines) into
 /// blocks, as LinuxCNC requires: labels match, blocks nest, a label opens one block only.
-pub fn flow(o_words: &[Option<OWord>]) -> (Flow, Vec<Diagnostic>) {
+pub fn flow(o_words: &[Option<Box<OWord>>]) -> (Flow, Vec<Diagnostic>) {
     struct Open<'a> {
         kind: OKind,
         label: &'a str,
@@ -841,7 +841,10 @@ mod tests {
             "o2 do",
             "o2 while [1]",
         ];
-        let words: Vec<_> = lines.iter().map(|t| o_word_of(t, 1).unwrap()).collect();
+        let words: Vec<_> = lines
+            .iter()
+            .map(|t| o_word_of(t, 1).unwrap().map(Box::new))
+            .collect();
         let (f, errors) = flow(&words);
         assert!(errors.is_empty(), "{errors:?}");
         assert_eq!(&f.link[..4], &[Some(1), Some(2), Some(3), None]);
@@ -849,7 +852,7 @@ mod tests {
             (f.link[4], f.link[5], f.closes_do[5]),
             (Some(5), Some(4), true)
         );
-        let words = [o_word_of("o3 else", 1).unwrap()];
+        let words = [o_word_of("o3 else", 1).unwrap().map(Box::new)];
         assert_eq!(flow(&words).1.len(), 1);
     }
 

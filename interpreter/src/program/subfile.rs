@@ -24,12 +24,13 @@ pub(super) struct SubFile {
 }
 
 /// The O-words of lines, `None` for a line without one (or one that cannot be read:
-/// running the line reports that).
-pub(super) fn o_words_of(lines: &[&str], first_line: u32) -> Vec<Option<OWord>> {
+/// running the line reports that). Boxed: a list of a word a line would be 56 bytes a
+/// line, nearly all of them `None`, for the kernel to hand over page by page.
+pub(super) fn o_words_of(lines: &[&str], first_line: u32) -> Vec<Option<Box<OWord>>> {
     lines
         .iter()
         .enumerate()
-        .map(|(i, raw)| o_word_of(raw, first_line + i as u32).unwrap_or(None))
+        .map(|(i, raw)| o_word_of(raw, first_line + i as u32).unwrap_or(None).map(Box::new))
         .collect()
 }
 
@@ -38,10 +39,10 @@ pub(super) type Missing = HashMap<String, String>;
 
 /// Every subroutine file the program calls, directly or from other subroutine files,
 /// and for each called label that none supplied, why.
-pub(super) fn load(main: &[Option<OWord>], dirs: &[PathBuf]) -> (Vec<SubFile>, Missing) {
+pub(super) fn load(main: &[Option<Box<OWord>>], dirs: &[PathBuf]) -> (Vec<SubFile>, Missing) {
     let mut files = Vec::new();
     let mut missing = Missing::new();
-    let defined = |o_words: &[Option<OWord>], label: &str| {
+    let defined = |o_words: &[Option<Box<OWord>>], label: &str| {
         o_words
             .iter()
             .flatten()
@@ -135,7 +136,7 @@ pub(super) fn load(main: &[Option<OWord>], dirs: &[PathBuf]) -> (Vec<SubFile>, M
     (files, missing)
 }
 
-fn calls(o_words: &[Option<OWord>]) -> Vec<String> {
+fn calls(o_words: &[Option<Box<OWord>>]) -> Vec<String> {
     o_words
         .iter()
         .flatten()
@@ -158,7 +159,7 @@ impl Units {
         &mut self,
         path: &str,
         start: usize,
-        o_words: &[Option<OWord>],
+        o_words: &[Option<Box<OWord>>],
         joined: &mut Flow,
         errors: &mut Vec<Diagnostic>,
     ) {
