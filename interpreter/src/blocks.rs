@@ -216,6 +216,7 @@ pub fn build(moves: &[Move], machine: &Machine) -> Vec<Block> {
     let moves: &[Move] = &blended;
     // Most moves make one block.
     let mut out: Vec<Block> = Vec::with_capacity(moves.len());
+    crate::pages::prefer_huge_pages(&out);
     // `G61.1` exact stop mode: every move ends at rest.
     let mut exact_stop = false;
     let stop_after_last = |out: &mut Vec<Block>| {

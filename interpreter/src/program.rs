@@ -316,6 +316,7 @@ pub fn interpret_with(text: &str, opts: &Options) -> Result<Program, Vec<Diagnos
     // About a move a line in the programs that are long (CAM output): one allocation,
     // not a list copied each time it doubles; what is not used is never touched.
     prog.moves.reserve(own_lines);
+    crate::pages::prefer_huge_pages(&prog.moves);
     let mut units = subfile::Units::default();
     for f in &files {
         let start = lines.len();
