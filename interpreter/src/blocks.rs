@@ -500,10 +500,15 @@ impl StraightLimits {
         let a_path = machine.path_acc_mm_per_s2;
         let j_path = machine.path_jerk_mm_per_s3;
         let usable = |x: f64| x > 0.0 && x < 1e100;
-        let mut all = [a_path, j_path].into_iter().chain(
-            axes.iter()
-                .flat_map(|a| [a.max_vel_mm_per_min, a.max_acc_mm_per_s2, a.max_jerk_mm_per_s3]),
-        );
+        let mut all = [a_path, j_path]
+            .into_iter()
+            .chain(axes.iter().flat_map(|a| {
+                [
+                    a.max_vel_mm_per_min,
+                    a.max_acc_mm_per_s2,
+                    a.max_jerk_mm_per_s3,
+                ]
+            }));
         // The normal acceleration `v²·κ` of a line: `+0` for any such `v`.
         let an = 0.0f64;
         all.all(usable).then(|| StraightLimits {
@@ -531,24 +536,18 @@ fn shape_straight(d: [f64; 3], lim: &StraightLimits, feed_mm_s: f64) -> Option<S
     // As in `shape`, axis by axis, in its order: the cap speed (only the velocity
     // limits bind a line), then the tangential acceleration (`max_acc - v²·0`), then
     // the jerk (`j - 3·v·a·0 - v³·0` is `j`).
-    let mut v = feed_mm_s;
-    for i in 0..3 {
-        if t[i].abs() > 1e-12 {
-            v = v.min(lim.vel_mm_s[i] / t[i].abs());
-        }
-    }
-    let mut acc = lim.a_tangential;
-    for i in 0..3 {
-        if t[i].abs() > 1e-12 {
-            acc = acc.min(lim.acc[i] / t[i].abs());
-        }
-    }
-    let mut jerk = lim.j_path;
-    for i in 0..3 {
-        if t[i].abs() > 1e-12 {
-            jerk = jerk.min(lim.jerk[i] / t[i].abs());
-        }
-    }
+    let axis_by_axis = |start: f64, per_axis: &[f64; 3]| {
+        t.iter().zip(per_axis).fold(start, |x, (ti, limit)| {
+            if ti.abs() > 1e-12 {
+                x.min(limit / ti.abs())
+            } else {
+                x
+            }
+        })
+    };
+    let v = axis_by_axis(feed_mm_s, &lim.vel_mm_s);
+    let acc = axis_by_axis(lim.a_tangential, &lim.acc);
+    let jerk = axis_by_axis(lim.j_path, &lim.jerk);
     Some(Shape {
         v_cap: v,
         acc: acc.max(lim.acc_floor),

@@ -517,7 +517,9 @@ pub(crate) fn plain_number(bytes: &[u8]) -> Option<(f64, usize)> {
             b'0'..=b'9' => {
                 digits += 1;
                 decimals += usize::from(points > 0);
-                mantissa = mantissa.saturating_mul(10).saturating_add(u64::from(b - b'0'));
+                mantissa = mantissa
+                    .saturating_mul(10)
+                    .saturating_add(u64::from(b - b'0'));
             }
             b'.' => points += 1,
             _ => break,
@@ -647,15 +649,33 @@ mod tests {
             assert_eq!(cur.pos, digits.len());
         }
         for text in [
-            "0", "1.", ".5", "12.345", "007.250", "9007199254740991", "1.2.3", ".", "",
-            "123456789.123456789", "0.00000000000000000000001", "12x", "3.5 ",
+            "0",
+            "1.",
+            ".5",
+            "12.345",
+            "007.250",
+            "9007199254740991",
+            "1.2.3",
+            ".",
+            "",
+            "123456789.123456789",
+            "0.00000000000000000000001",
+            "12x",
+            "3.5 ",
         ] {
-            let run = text.bytes().take_while(|b| b.is_ascii_digit() || *b == b'.').count();
+            let run = text
+                .bytes()
+                .take_while(|b| b.is_ascii_digit() || *b == b'.')
+                .count();
             let mut cur = cursor(&text[..run]);
             match plain_number(text.as_bytes()) {
                 Some((v, len)) => {
                     assert_eq!(len, run, "{text}");
-                    assert_eq!(number(&mut cur).map(f64::to_bits), Ok(v.to_bits()), "{text}");
+                    assert_eq!(
+                        number(&mut cur).map(f64::to_bits),
+                        Ok(v.to_bits()),
+                        "{text}"
+                    );
                 }
                 // Left to `number`: the slow way or an error.
                 None => assert!(

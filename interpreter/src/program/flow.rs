@@ -277,7 +277,11 @@ impl Runner {
 }
 
 /// The `endif` of the `if` block whose branch line is `at`.
-fn endif_of(o_words: &[Option<Box<OWord>>], link: &[Option<usize>], mut at: usize) -> Option<usize> {
+fn endif_of(
+    o_words: &[Option<Box<OWord>>],
+    link: &[Option<usize>],
+    mut at: usize,
+) -> Option<usize> {
     // Branch links only go forward, so this ends.
     loop {
         let next = link.get(at).copied().flatten()?;

@@ -30,7 +30,11 @@ pub(super) fn o_words_of(lines: &[&str], first_line: u32) -> Vec<Option<Box<OWor
     lines
         .iter()
         .enumerate()
-        .map(|(i, raw)| o_word_of(raw, first_line + i as u32).unwrap_or(None).map(Box::new))
+        .map(|(i, raw)| {
+            o_word_of(raw, first_line + i as u32)
+                .unwrap_or(None)
+                .map(Box::new)
+        })
         .collect()
 }
 
