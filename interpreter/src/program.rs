@@ -307,7 +307,7 @@ pub fn interpret_with(text: &str, opts: &Options) -> Result<Program, Vec<Diagnos
     let mut prog = Program::default();
     let mut errors = Vec::new();
     let mut lines: Vec<&str> = text.lines().collect();
-    let mut o_words = subfile::o_words_of(&lines, 1);
+    let mut o_words = subfile::o_words_of(text, &lines, 1);
     let (mut flow, flow_errors) = flow(&o_words);
     errors.extend(flow_errors);
     // Subroutine files join the program after its own lines.
@@ -321,7 +321,7 @@ pub fn interpret_with(text: &str, opts: &Options) -> Result<Program, Vec<Diagnos
     for f in &files {
         let start = lines.len();
         let file_lines: Vec<&str> = f.text.lines().collect();
-        let file_o_words = subfile::o_words_of(&file_lines, 1);
+        let file_o_words = subfile::o_words_of(&f.text, &file_lines, 1);
         units.append(&f.path, start, &file_o_words, &mut flow, &mut errors);
         lines.extend(file_lines);
         o_words.extend(file_o_words);

@@ -23,10 +23,17 @@ pub(super) struct SubFile {
     pub text: String,
 }
 
-/// The O-words of lines, `None` for a line without one (or one that cannot be read:
-/// running the line reports that). Boxed: a list of a word a line would be 56 bytes a
-/// line, nearly all of them `None`, for the kernel to hand over page by page.
-pub(super) fn o_words_of(lines: &[&str], first_line: u32) -> Vec<Option<Box<OWord>>> {
+/// The O-words of `lines`, the lines of `text`: `None` for a line without one (or one
+/// that cannot be read: running the line reports that). Boxed: a list of a word a line
+/// would be 56 bytes a line, nearly all of them `None`, for the kernel to hand over
+/// page by page.
+pub(super) fn o_words_of(text: &str, lines: &[&str], first_line: u32) -> Vec<Option<Box<OWord>>> {
+    // A text without an `o` anywhere (most CAM output) has none: one pass over its
+    // bytes (a fold without an early exit, which the compiler vectorises) instead of a
+    // look at each line, and a list of zeros the allocator gets zeroed.
+    if !text.bytes().fold(false, |o, b| o | (b | 0x20 == b'o')) {
+        return vec![None; lines.len()];
+    }
     lines
         .iter()
         .enumerate()
@@ -116,7 +123,7 @@ pub(super) fn load(main: &[Option<Box<OWord>>], dirs: &[PathBuf]) -> (Vec<SubFil
             }
         };
         let lines: Vec<&str> = text.lines().collect();
-        let o_words = o_words_of(&lines, 1);
+        let o_words = o_words_of(&text, &lines, 1);
         if !defined(&o_words, &label) {
             missing.insert(
                 label,
