@@ -7,7 +7,10 @@
 //! fault instead, where the kernel allows them (`/sys/kernel/mm/transparent_hugepage`
 //! set to `madvise` or `always`); elsewhere the advice is ignored and nothing changes.
 //! Only whole 2 MiB pages inside the list's allocation are advised, so a small list, or
-//! the ends of a large one, stay as they are.
+//! the ends of a large one, stay as they are. Where the kernel's `defrag` setting is
+//! `madvise` (as on the development VM), such a fault may compact memory to find a huge
+//! page, or fall back to small ones: a possible pause of the interpreter, never of the
+//! interpolator's cycle, which is another process and holds none of these lists.
 
 /// The size of a transparent huge page on x86-64 and most arm64 kernels.
 const HUGE_PAGE: usize = 2 << 20;
