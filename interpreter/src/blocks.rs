@@ -216,6 +216,7 @@ pub fn build(moves: &[Move], machine: &Machine) -> Vec<Block> {
     let moves: &[Move] = &blended;
     // Most moves make one block.
     let mut out: Vec<Block> = Vec::with_capacity(moves.len());
+    crate::pages::prefer_huge_pages(&out);
     // `G61.1` exact stop mode: every move ends at rest.
     let mut exact_stop = false;
     let stop_after_last = |out: &mut Vec<Block>| {
@@ -472,6 +473,91 @@ fn shape(g: Geometry, machine: &Machine, period_s: f64, feed_mm_s: f64) -> Shape
         k_end: last.1,
         surface_ratio: surface.then_some(ratio),
     }
+}
+
+/// What [`shape`] takes from the machine for a straight block, worked out once a plan.
+/// `None` unless every limit is a positive number below 1e100: then the terms a zero
+/// curvature leaves in [`shape`] are exact zeros (no product of them overflows into
+/// infinity and NaN), and [`shape_straight`] can leave them out and give the same bits.
+#[derive(Debug, Clone, Copy)]
+struct StraightLimits {
+    /// Each axis's velocity limit in mm/s (`max_vel_mm_per_min / 60.0`, as `shape`).
+    vel_mm_s: [f64; 3],
+    acc: [f64; 3],
+    jerk: [f64; 3],
+    /// `shape`'s tangential acceleration before the axes: what a zero normal
+    /// acceleration leaves of the path's, `a.min(sqrt(a² - 0²))`.
+    a_tangential: f64,
+    j_path: f64,
+    /// `shape`'s floors of the acceleration and jerk.
+    acc_floor: f64,
+    jerk_floor: f64,
+}
+
+impl StraightLimits {
+    fn new(machine: &Machine) -> Option<Self> {
+        let axes = machine.axes.as_array();
+        let a_path = machine.path_acc_mm_per_s2;
+        let j_path = machine.path_jerk_mm_per_s3;
+        let usable = |x: f64| x > 0.0 && x < 1e100;
+        let mut all = [a_path, j_path]
+            .into_iter()
+            .chain(axes.iter().flat_map(|a| {
+                [
+                    a.max_vel_mm_per_min,
+                    a.max_acc_mm_per_s2,
+                    a.max_jerk_mm_per_s3,
+                ]
+            }));
+        // The normal acceleration `v²·κ` of a line: `+0` for any such `v`.
+        let an = 0.0f64;
+        all.all(usable).then(|| StraightLimits {
+            vel_mm_s: axes.map(|a| a.max_vel_mm_per_min / 60.0),
+            acc: axes.map(|a| a.max_acc_mm_per_s2),
+            jerk: axes.map(|a| a.max_jerk_mm_per_s3),
+            a_tangential: a_path.min((a_path * a_path - an * an).max(0.0).sqrt()),
+            j_path,
+            acc_floor: 0.05 * a_path,
+            jerk_floor: 0.05 * j_path,
+        })
+    }
+}
+
+/// [`shape`] of a straight block of chord `d`, bit for bit, without the terms its zero
+/// curvature makes zero; `None` where those terms might not be exact zeros (a feed
+/// that is not a finite number below 1e100, a chord without a length), which `shape`
+/// then handles. Lines are most blocks of most programs: this is the planner's hot path.
+fn shape_straight(d: [f64; 3], lim: &StraightLimits, feed_mm_s: f64) -> Option<Shape> {
+    let len = path::norm(d);
+    if !(len > 0.0 && feed_mm_s.is_finite() && feed_mm_s.abs() < 1e100) {
+        return None;
+    }
+    let t = d.map(|x| x / len);
+    // As in `shape`, axis by axis, in its order: the cap speed (only the velocity
+    // limits bind a line), then the tangential acceleration (`max_acc - v²·0`), then
+    // the jerk (`j - 3·v·a·0 - v³·0` is `j`).
+    let axis_by_axis = |start: f64, per_axis: &[f64; 3]| {
+        t.iter().zip(per_axis).fold(start, |x, (ti, limit)| {
+            if ti.abs() > 1e-12 {
+                x.min(limit / ti.abs())
+            } else {
+                x
+            }
+        })
+    };
+    let v = axis_by_axis(feed_mm_s, &lim.vel_mm_s);
+    let acc = axis_by_axis(lim.a_tangential, &lim.acc);
+    let jerk = axis_by_axis(lim.j_path, &lim.jerk);
+    Some(Shape {
+        v_cap: v,
+        acc: acc.max(lim.acc_floor),
+        jerk: jerk.max(lim.jerk_floor),
+        t_start: t,
+        t_end: t,
+        k_start: [0.0; 3],
+        k_end: [0.0; 3],
+        surface_ratio: None,
+    })
 }
 
 /// The chord of a block that is a straight segment (degree 1, two control points, no
@@ -846,6 +932,7 @@ pub fn plan<B: Plannable>(blocks: &mut [B], machine: &Machine, period_ns: u64) {
     let mut before: Option<Shape> = None;
     let mut kinks: Vec<Kink> = Vec::new();
     let (mut s, mut chain) = (0.0f64, 0u32);
+    let straight_limits = StraightLimits::new(machine);
     for i in 0..n {
         let b = &mut blocks[i];
         let shp = b.is_motion().then(|| {
@@ -856,7 +943,12 @@ pub fn plan<B: Plannable>(blocks: &mut [B], machine: &Machine, period_ns: u64) {
                     Geometry::Straight(d) => path::norm(d),
                     Geometry::Curve(c) => path::length(c),
                 };
-                (length, shape(g, machine, period_s, feed / 60.0))
+                let fast = match (g, &straight_limits) {
+                    (Geometry::Straight(d), Some(lim)) => shape_straight(d, lim, feed / 60.0),
+                    _ => None,
+                };
+                let shp = fast.unwrap_or_else(|| shape(g, machine, period_s, feed / 60.0));
+                (length, shp)
             };
             let limits = Jerk {
                 acc: shp.acc,
@@ -905,7 +997,15 @@ pub fn plan<B: Plannable>(blocks: &mut [B], machine: &Machine, period_ns: u64) {
         } else {
             0.0
         };
-        let start = entry.min(blocks[i].limits().reachable_speed(end[i], len));
+        // The speed reachable within the block is never below its end speed: an entry
+        // below that (most blocks, between junctions at the feed) is the start speed,
+        // bit for bit, without working it out. Zeros (whose sign `min` may pick either
+        // way) and NaN go the long way.
+        let start = if entry < end[i] || (entry == end[i] && entry != 0.0) {
+            entry
+        } else {
+            entry.min(blocks[i].limits().reachable_speed(end[i], len))
+        };
         blocks[i].set_feeds(start * 60.0, end[i] * 60.0);
         if i > 0 {
             end[i - 1] = start;

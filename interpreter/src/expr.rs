@@ -498,6 +498,37 @@ const EXACT_POW10: [f64; 23] = [
     1e17, 1e18, 1e19, 1e20, 1e21, 1e22,
 ];
 
+/// The usual number (`12.345`) from what [`number`] gathers of its digits: an integer
+/// below 2^53 over an exact power of ten is one correctly rounded division, the same
+/// value `str::parse` gives; `None` for any other (then `str::parse` reads the text).
+fn exact_decimal(mantissa: u64, decimals: usize, digits: usize, points: usize) -> Option<f64> {
+    (digits > 0 && points <= 1 && mantissa < 1 << 53 && decimals < EXACT_POW10.len())
+        .then(|| mantissa as f64 / EXACT_POW10[decimals])
+}
+
+/// A number at the start of `bytes` (digits and points, no sign), read as [`number`]
+/// reads the same characters, with how many bytes it takes; `None` where [`number`]
+/// would need `str::parse` or report an error.
+pub(crate) fn plain_number(bytes: &[u8]) -> Option<(f64, usize)> {
+    let (mut mantissa, mut decimals, mut digits, mut points) = (0u64, 0usize, 0usize, 0usize);
+    let mut len = 0;
+    for &b in bytes {
+        match b {
+            b'0'..=b'9' => {
+                digits += 1;
+                decimals += usize::from(points > 0);
+                mantissa = mantissa
+                    .saturating_mul(10)
+                    .saturating_add(u64::from(b - b'0'));
+            }
+            b'.' => points += 1,
+            _ => break,
+        }
+        len += 1;
+    }
+    exact_decimal(mantissa, decimals, digits, points).map(|v| (v, len))
+}
+
 fn number(cur: &mut Cursor) -> Result<f64, Diagnostic> {
     let col = cur.col();
     let start = cur.pos;
@@ -518,10 +549,8 @@ fn number(cur: &mut Cursor) -> Result<f64, Diagnostic> {
         }
     }
     cur.pos += len;
-    // The usual number (`12.345`): an integer below 2^53 over an exact power of ten is
-    // one correctly rounded division, the same value `str::parse` gives.
-    if digits > 0 && points <= 1 && mantissa < 1 << 53 && decimals < EXACT_POW10.len() {
-        return Ok(mantissa as f64 / EXACT_POW10[decimals]);
+    if let Some(v) = exact_decimal(mantissa, decimals, digits, points) {
+        return Ok(v);
     }
     let text: String = cur.chars[start..cur.pos].iter().map(|c| c.0).collect();
     if digits == 0 {
@@ -618,6 +647,42 @@ mod tests {
             let mut cur = cursor(digits);
             assert_eq!(number(&mut cur).ok(), digits.parse::<f64>().ok(), "{text}");
             assert_eq!(cur.pos, digits.len());
+        }
+        for text in [
+            "0",
+            "1.",
+            ".5",
+            "12.345",
+            "007.250",
+            "9007199254740991",
+            "1.2.3",
+            ".",
+            "",
+            "123456789.123456789",
+            "0.00000000000000000000001",
+            "12x",
+            "3.5 ",
+        ] {
+            let run = text
+                .bytes()
+                .take_while(|b| b.is_ascii_digit() || *b == b'.')
+                .count();
+            let mut cur = cursor(&text[..run]);
+            match plain_number(text.as_bytes()) {
+                Some((v, len)) => {
+                    assert_eq!(len, run, "{text}");
+                    assert_eq!(
+                        number(&mut cur).map(f64::to_bits),
+                        Ok(v.to_bits()),
+                        "{text}"
+                    );
+                }
+                // Left to `number`: the slow way or an error.
+                None => assert!(
+                    run == 0 || number(&mut cur).map_or(true, |v| text[..run].parse() == Ok(v)),
+                    "{text}"
+                ),
+            }
         }
         for bad in [".", "1.2.3", ".."] {
             let e = number(&mut cursor(bad)).unwrap_err();

@@ -22,6 +22,7 @@ pub mod estimate;
 pub mod expr;
 pub mod html;
 pub mod launch;
+mod pages;
 pub mod parse;
 pub mod process;
 pub mod program;

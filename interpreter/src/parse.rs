@@ -6,7 +6,7 @@
 
 use std::collections::HashMap;
 
-use crate::expr::{at_function, param_ref, real_value, Cursor, MAX_NUMBERED};
+use crate::expr::{at_function, param_ref, plain_number, real_value, Cursor, MAX_NUMBERED};
 
 /// One problem in a program, at `line:col` (both 1-based), shown as
 /// `line:col: rule: message` (after the file name in `cnc check`).
@@ -334,6 +334,10 @@ fn read_into(
     out.messages.clear();
     out.block_delete = false;
     out.o_word = None;
+    if plain_words(text, &mut out.words) {
+        return Ok(());
+    }
+    out.words.clear();
     cur.fill(text, line, &mut out.messages)?;
     if let Some('/') = cur.peek() {
         out.block_delete = true;
@@ -423,6 +427,54 @@ fn read_into(
         }
     }
     Ok(())
+}
+
+/// The words of a line that is nothing but words of a letter and a plain number
+/// (`G1 X12.5 Y-3 Z.25 F800`, as CAM output is), read straight from its bytes into
+/// `words`, as [`read_into`] reads them; `false` (with `words` partly filled) for any
+/// other line, which [`read_into`] then reads the general way from its start: a
+/// comment, a parameter, an expression, an O-word, a block delete, a blank inside a
+/// word, a number `str::parse` must read, anything beyond ASCII, any error.
+fn plain_words(text: &str, words: &mut Vec<Word>) -> bool {
+    let b = text.as_bytes();
+    // `char::is_whitespace` in ASCII, as `Cursor::fill` drops them.
+    let blank = |c: u8| matches!(c, b' ' | b'\t'..=b'\r');
+    let mut i = 0;
+    loop {
+        while i < b.len() && blank(b[i]) {
+            i += 1;
+        }
+        let Some(&first) = b.get(i) else {
+            return true;
+        };
+        let letter = first.to_ascii_uppercase();
+        if !letter.is_ascii_uppercase() || letter == b'O' {
+            return false;
+        }
+        // Every byte so far is ASCII: the column is the byte's.
+        let col = i as u32 + 1;
+        i += 1;
+        let negative = b.get(i) == Some(&b'-');
+        if matches!(b.get(i), Some(b'-' | b'+')) {
+            i += 1;
+        }
+        let Some((value, len)) = plain_number(&b[i..]) else {
+            return false;
+        };
+        i += len;
+        // What follows (past blanks, which the general reader drops) must start the
+        // next word or end the line: a digit or point there would belong to this
+        // number, anything else is not a plain word.
+        let next = b[i..].iter().find(|c| !blank(**c));
+        if next.is_some_and(|c| !c.is_ascii_alphabetic()) {
+            return false;
+        }
+        words.push(Word {
+            letter: char::from(letter),
+            value: if negative { -value } else { value },
+            col,
+        });
+    }
 }
 
 /// The label and keyword of an O-word whose `O` (at `col`) is consumed.
@@ -524,7 +576,7 @@ pub struct Flow {
 
 /// Matches the O-words of a whole program (one per line, `None` for other lines) into
 /// blocks, as LinuxCNC requires: labels match, blocks nest, a label opens one block only.
-pub fn flow(o_words: &[Option<OWord>]) -> (Flow, Vec<Diagnostic>) {
+pub fn flow(o_words: &[Option<Box<OWord>>]) -> (Flow, Vec<Diagnostic>) {
     struct Open<'a> {
         kind: OKind,
         label: &'a str,
@@ -680,6 +732,21 @@ mod tests {
         );
     }
 
+    proptest::proptest! {
+        /// Lines of words with plain numbers take a shorter path still
+        /// ([`plain_words`]); any line, plain or nearly, reads as the general reader
+        /// (a comment at its end sends it that way) reads it, errors included.
+        #[test]
+        fn plain_lines_read_as_the_general_reader_reads_them(
+            text in "[GXYZOFNgxo0-9.+\\- \t#\\[\\]eE/]{0,24}"
+        ) {
+            let p = Params::default();
+            let fast = read_line(&text, 1, &p);
+            let general = read_line(&format!("{text}(c)"), 1, &p);
+            proptest::prop_assert_eq!(fast, general);
+        }
+    }
+
     #[test]
     fn lines_with_and_without_comments_read_alike() {
         // A line without a comment takes a shorter path; a comment at its end sends it
@@ -694,6 +761,20 @@ mod tests {
             "G1 X1 Y$",
             "",
             "   ",
+            "G1 X12.5 Y-3 Z.25 F800",
+            "g1x1y2z3",
+            "X1 2",
+            "X1 .5",
+            "X-.5E3",
+            "X+7. Y--1",
+            "X1.2.3",
+            "X123456789012345678901",
+            "o100 sub",
+            "X1 o2",
+            "/G1 X1",
+            "N10 G1 X1 Y2 #1=3",
+            "X-",
+            "G1 X1 é",
         ] {
             let p = Params::default();
             let plain = read_line(text, 1, &p);
@@ -760,7 +841,10 @@ mod tests {
             "o2 do",
             "o2 while [1]",
         ];
-        let words: Vec<_> = lines.iter().map(|t| o_word_of(t, 1).unwrap()).collect();
+        let words: Vec<_> = lines
+            .iter()
+            .map(|t| o_word_of(t, 1).unwrap().map(Box::new))
+            .collect();
         let (f, errors) = flow(&words);
         assert!(errors.is_empty(), "{errors:?}");
         assert_eq!(&f.link[..4], &[Some(1), Some(2), Some(3), None]);
@@ -768,7 +852,7 @@ mod tests {
             (f.link[4], f.link[5], f.closes_do[5]),
             (Some(5), Some(4), true)
         );
-        let words = [o_word_of("o3 else", 1).unwrap()];
+        let words = [o_word_of("o3 else", 1).unwrap().map(Box::new)];
         assert_eq!(flow(&words).1.len(), 1);
     }
 

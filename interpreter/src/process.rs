@@ -32,7 +32,7 @@ impl Source {
                 name: DEMO_NAME.into(),
                 text: DEMO.into(),
             }),
-            Some(p) => std::fs::read(p)
+            Some(p) => read_file(p)
                 .map_err(|e| format!("{}: {e}", p.display()))
                 .map(|bytes| Source {
                     name: p.display().to_string(),
@@ -42,6 +42,18 @@ impl Source {
                 }),
         }
     }
+}
+
+/// The bytes of the file at `path`, as `std::fs::read` gives them, into a buffer that
+/// asks for huge pages (a long program is megabytes: see [`crate::pages`]).
+fn read_file(path: &Path) -> std::io::Result<Vec<u8>> {
+    use std::io::Read;
+    let mut file = std::fs::File::open(path)?;
+    let len = file.metadata().map_or(0, |m| m.len());
+    let mut bytes = Vec::with_capacity(usize::try_from(len).unwrap_or(0).saturating_add(1));
+    crate::pages::prefer_huge_pages(&bytes);
+    file.read_to_end(&mut bytes)?;
+    Ok(bytes)
 }
 
 /// Every problem of a program as `NAME:LINE:COL: RULE: message` lines; `NAME` is the

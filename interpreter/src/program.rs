@@ -307,17 +307,21 @@ pub fn interpret_with(text: &str, opts: &Options) -> Result<Program, Vec<Diagnos
     let mut prog = Program::default();
     let mut errors = Vec::new();
     let mut lines: Vec<&str> = text.lines().collect();
-    let mut o_words = subfile::o_words_of(&lines, 1);
+    let mut o_words = subfile::o_words_of(text, &lines, 1);
     let (mut flow, flow_errors) = flow(&o_words);
     errors.extend(flow_errors);
     // Subroutine files join the program after its own lines.
     let (files, missing) = subfile::load(&o_words, &opts.subroutine_dirs);
     let own_lines = lines.len();
+    // About a move a line in the programs that are long (CAM output): one allocation,
+    // not a list copied each time it doubles; what is not used is never touched.
+    prog.moves.reserve(own_lines);
+    crate::pages::prefer_huge_pages(&prog.moves);
     let mut units = subfile::Units::default();
     for f in &files {
         let start = lines.len();
         let file_lines: Vec<&str> = f.text.lines().collect();
-        let file_o_words = subfile::o_words_of(&file_lines, 1);
+        let file_o_words = subfile::o_words_of(&f.text, &file_lines, 1);
         units.append(&f.path, start, &file_o_words, &mut flow, &mut errors);
         lines.extend(file_lines);
         o_words.extend(file_o_words);

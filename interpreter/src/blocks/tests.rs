@@ -166,3 +166,65 @@ fn number() -> impl proptest::strategy::Strategy<Value = f64> {
         1e-9..1e6f64,
     ]
 }
+
+/// A shape's numbers as bits, to compare two shapes exactly.
+fn shape_bits(s: &Shape) -> Vec<u64> {
+    [s.v_cap, s.acc, s.jerk]
+        .iter()
+        .chain(&s.t_start)
+        .chain(&s.t_end)
+        .chain(&s.k_start)
+        .chain(&s.k_end)
+        .chain(&s.surface_ratio.into_iter().collect::<Vec<_>>())
+        .map(|x| x.to_bits())
+        .collect()
+}
+
+/// Chord components: axis-aligned, tiny, huge and ordinary.
+fn component() -> impl proptest::strategy::Strategy<Value = f64> {
+    use proptest::prelude::*;
+    prop_oneof![
+        Just(0.0),
+        Just(-0.0),
+        Just(1e-13),
+        Just(-3e-14),
+        -1e3..1e3f64,
+        -1e-6..1e-6f64,
+        1e6..1e9f64,
+    ]
+}
+
+proptest::proptest! {
+    #![proptest_config(proptest::prelude::ProptestConfig::with_cases(2000))]
+    /// The planner's shortcut for lines gives `shape`'s very bits, on the default machine
+    /// and on one whose axes differ, for any chord and feed it takes.
+    #[test]
+    fn straight_shape_is_the_general_shape(
+        d in proptest::array::uniform3(component()),
+        feed in proptest::prop_oneof![0.0..20_000.0f64, 1e-9..1e-3f64, number()],
+        odd in proptest::bool::ANY,
+    ) {
+        let mut machine = Machine::default();
+        if odd {
+            machine.axes.x.max_vel_mm_per_min = 1234.5;
+            machine.axes.y.max_acc_mm_per_s2 = 77.7;
+            machine.axes.z.max_jerk_mm_per_s3 = 3.0e6;
+        }
+        let lim = StraightLimits::new(&machine).expect("usable limits");
+        let general = shape(Geometry::Straight(d), &machine, 1e-3, feed);
+        if let Some(fast) = shape_straight(d, &lim, feed) {
+            proptest::prop_assert_eq!(shape_bits(&fast), shape_bits(&general), "{:?} {}", d, feed);
+        }
+    }
+}
+
+#[test]
+fn straight_limits_refuse_a_machine_they_cannot_shortcut() {
+    let mut machine = Machine::default();
+    assert!(StraightLimits::new(&machine).is_some());
+    machine.axes.y.max_jerk_mm_per_s3 = f64::INFINITY;
+    assert!(StraightLimits::new(&machine).is_none());
+    machine = Machine::default();
+    machine.path_acc_mm_per_s2 = 0.0;
+    assert!(StraightLimits::new(&machine).is_none());
+}

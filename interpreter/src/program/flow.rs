@@ -31,7 +31,7 @@ const MAX_LINES_AGAIN: usize = 5_000_000;
 /// The O-word flow of a running program: how its blocks connect (see [`Flow`]), and the
 /// calls and repeat loops in progress.
 pub(super) struct Runner {
-    o_words: Vec<Option<OWord>>,
+    o_words: Vec<Option<Box<OWord>>>,
     flow: Flow,
     calls: Vec<Call>,
     /// (repeat line, turns left) of the repeat loops being run.
@@ -46,7 +46,7 @@ pub(super) struct Runner {
 }
 
 impl Runner {
-    pub(super) fn new(o_words: Vec<Option<OWord>>, flow: Flow, missing: Missing) -> Self {
+    pub(super) fn new(o_words: Vec<Option<Box<OWord>>>, flow: Flow, missing: Missing) -> Self {
         Runner {
             o_words,
             flow,
@@ -277,7 +277,11 @@ impl Runner {
 }
 
 /// The `endif` of the `if` block whose branch line is `at`.
-fn endif_of(o_words: &[Option<OWord>], link: &[Option<usize>], mut at: usize) -> Option<usize> {
+fn endif_of(
+    o_words: &[Option<Box<OWord>>],
+    link: &[Option<usize>],
+    mut at: usize,
+) -> Option<usize> {
     // Branch links only go forward, so this ends.
     loop {
         let next = link.get(at).copied().flatten()?;

@@ -23,13 +23,25 @@ pub(super) struct SubFile {
     pub text: String,
 }
 
-/// The O-words of lines, `None` for a line without one (or one that cannot be read:
-/// running the line reports that).
-pub(super) fn o_words_of(lines: &[&str], first_line: u32) -> Vec<Option<OWord>> {
+/// The O-words of `lines`, the lines of `text`: `None` for a line without one (or one
+/// that cannot be read: running the line reports that). Boxed: a list of a word a line
+/// would be 56 bytes a line, nearly all of them `None`, for the kernel to hand over
+/// page by page.
+pub(super) fn o_words_of(text: &str, lines: &[&str], first_line: u32) -> Vec<Option<Box<OWord>>> {
+    // A text without an `o` anywhere (most CAM output) has none: one pass over its
+    // bytes (a fold without an early exit, which the compiler vectorises) instead of a
+    // look at each line, and a list of zeros the allocator gets zeroed.
+    if !text.bytes().fold(false, |o, b| o | (b | 0x20 == b'o')) {
+        return vec![None; lines.len()];
+    }
     lines
         .iter()
         .enumerate()
-        .map(|(i, raw)| o_word_of(raw, first_line + i as u32).unwrap_or(None))
+        .map(|(i, raw)| {
+            o_word_of(raw, first_line + i as u32)
+                .unwrap_or(None)
+                .map(Box::new)
+        })
         .collect()
 }
 
@@ -38,10 +50,10 @@ pub(super) type Missing = HashMap<String, String>;
 
 /// Every subroutine file the program calls, directly or from other subroutine files,
 /// and for each called label that none supplied, why.
-pub(super) fn load(main: &[Option<OWord>], dirs: &[PathBuf]) -> (Vec<SubFile>, Missing) {
+pub(super) fn load(main: &[Option<Box<OWord>>], dirs: &[PathBuf]) -> (Vec<SubFile>, Missing) {
     let mut files = Vec::new();
     let mut missing = Missing::new();
-    let defined = |o_words: &[Option<OWord>], label: &str| {
+    let defined = |o_words: &[Option<Box<OWord>>], label: &str| {
         o_words
             .iter()
             .flatten()
@@ -111,7 +123,7 @@ pub(super) fn load(main: &[Option<OWord>], dirs: &[PathBuf]) -> (Vec<SubFile>, M
             }
         };
         let lines: Vec<&str> = text.lines().collect();
-        let o_words = o_words_of(&lines, 1);
+        let o_words = o_words_of(&text, &lines, 1);
         if !defined(&o_words, &label) {
             missing.insert(
                 label,
@@ -135,7 +147,7 @@ pub(super) fn load(main: &[Option<OWord>], dirs: &[PathBuf]) -> (Vec<SubFile>, M
     (files, missing)
 }
 
-fn calls(o_words: &[Option<OWord>]) -> Vec<String> {
+fn calls(o_words: &[Option<Box<OWord>>]) -> Vec<String> {
     o_words
         .iter()
         .flatten()
@@ -158,7 +170,7 @@ impl Units {
         &mut self,
         path: &str,
         start: usize,
-        o_words: &[Option<OWord>],
+        o_words: &[Option<Box<OWord>>],
         joined: &mut Flow,
         errors: &mut Vec<Diagnostic>,
     ) {
