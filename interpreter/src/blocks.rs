@@ -921,8 +921,10 @@ pub fn plan_alone(b: &mut CommandBlock, machine: &Machine, feed: f64) {
 
 /// Fills in lengths, feed caps, profile limits and start/end speeds of every motion
 /// block: a look-ahead over the whole program (the interpreter reads all of it before
-/// any motion). A backward then a forward pass, with the jerk-limited distances of
-/// [`shared::profile`], make every block's start and end speed reachable.
+/// any motion). Junction speeds (lowered where kinks are closer than two steps, see
+/// [`close_kinks`]), then a backward pass with the jerk-limited distances of
+/// [`shared::profile`], make every block able to slow to its end speed; the
+/// interpolator accelerates as its limits allow by itself (no forward pass).
 pub fn plan<B: Plannable>(blocks: &mut [B], machine: &Machine, period_ns: u64) {
     let period_s = period_ns as f64 * 1e-9;
     let n = blocks.len();
