@@ -595,7 +595,7 @@ fn surface_speed_ratio(b: &CommandBlock) -> f64 {
         let h = SURFACE_DT;
         let tc = t.clamp(h, 1.0 - h);
         let m = sub(path::eval(b, tc + h).p, path::eval(b, tc - h).p);
-        let c = path::norm(path::contact(b, &path::surface_at(b, tc)).d1);
+        let c = path::norm(path::contact(b, tc, &path::surface_at(b, tc)).d1);
         if c > 1e-12 {
             ratio = ratio.max(path::norm(m) / (2.0 * h * c));
         }

@@ -31,3 +31,4 @@ pub mod report;
 pub mod step;
 pub mod surface_blocks;
 pub mod surface_path;
+pub mod surface_plane;

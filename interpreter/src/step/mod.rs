@@ -216,6 +216,70 @@ pub struct UvStrategy {
     pub chordal_mm: f64,
 }
 
+/// `PLANE_CC_STRATEGY`: the cutter-contact points of each pass lie in one of a family of
+/// parallel planes (the passes are the surface's intersections with them).
+#[derive(Debug, Clone, PartialEq)]
+pub struct PlaneCcStrategy {
+    pub id: u64,
+    /// The `DIRECTION` instance of `its_plane_normal` and its line (for errors).
+    pub normal_id: u64,
+    pub normal_line: u32,
+    pub mode: PathMode,
+    /// Unit normal of the planes in machine coordinates (the placements applied).
+    pub normal: [f64; 3],
+    /// Upper bound of the pass spacing on the surface.
+    pub stepover_mm: Option<f64>,
+    pub scallop_mm: f64,
+    pub chordal_mm: f64,
+}
+
+/// How a free-form surface is covered with passes.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Strategy {
+    Uv(UvStrategy),
+    PlaneCc(PlaneCcStrategy),
+}
+
+impl Strategy {
+    pub fn id(&self) -> u64 {
+        match self {
+            Strategy::Uv(s) => s.id,
+            Strategy::PlaneCc(s) => s.id,
+        }
+    }
+    pub fn mode(&self) -> PathMode {
+        match self {
+            Strategy::Uv(s) => s.mode,
+            Strategy::PlaneCc(s) => s.mode,
+        }
+    }
+    pub fn scallop_mm(&self) -> f64 {
+        match self {
+            Strategy::Uv(s) => s.scallop_mm,
+            Strategy::PlaneCc(s) => s.scallop_mm,
+        }
+    }
+    pub fn stepover_mm(&self) -> Option<f64> {
+        match self {
+            Strategy::Uv(s) => s.stepover_mm,
+            Strategy::PlaneCc(s) => s.stepover_mm,
+        }
+    }
+    pub fn chordal_mm(&self) -> f64 {
+        match self {
+            Strategy::Uv(s) => s.chordal_mm,
+            Strategy::PlaneCc(s) => s.chordal_mm,
+        }
+    }
+    /// The UV strategy, if it is one.
+    pub fn uv(&self) -> Option<&UvStrategy> {
+        match self {
+            Strategy::Uv(s) => Some(s),
+            Strategy::PlaneCc(_) => None,
+        }
+    }
+}
+
 /// A free-form finishing workingstep, ready for the planner.
 #[derive(Debug, Clone, PartialEq)]
 pub struct FreeformStep {
@@ -225,7 +289,7 @@ pub struct FreeformStep {
     pub surface: StepSurface,
     pub tool: BallEndmill,
     pub technology: Technology,
-    pub strategy: UvStrategy,
+    pub strategy: Strategy,
 }
 
 /// Reads a STEP-NC file: its free-form workingsteps, or every error.

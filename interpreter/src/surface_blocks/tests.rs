@@ -188,7 +188,7 @@ fn example_blocks_validate_and_join_up() {
         let surf = surface_count(&cmds);
         let rapids = cmds.len() - surf;
         // At least one block per pass (and per link in zig-zag).
-        match step.strategy.mode {
+        match step.strategy.mode() {
             PathMode::Zigzag => {
                 assert!(surf >= 2 * path.passes.len() - 1);
                 // Up and across from the start, down, and up at the end.
@@ -207,7 +207,9 @@ fn a_large_surface_is_cut_per_patch() {
     let mut step = read_part(SEED).unwrap().remove(0);
     let b = big();
     step.surface.geometry = b;
-    step.strategy.scallop_mm = 0.1;
+    if let crate::step::Strategy::Uv(st) = &mut step.strategy {
+        st.scallop_mm = 0.1;
+    }
     let cmds = check_blocks(&step);
     let path = plan(&step).unwrap();
     let surf = surface_count(&cmds);
