@@ -1,7 +1,8 @@
-//! A planned surface workingstep as wire blocks (protocol 3, seed 000): surface blocks
-//! (`FLAG_SURFACE`, one rational Bézier patch and a straight pass in its `(u, v)`)
-//! along the passes and, in zig-zag, along the links between them; rapid line blocks in
-//! tool-point space for the lifts; a program end.
+//! A planned surface workingstep as wire blocks (protocol 4, seed 000): surface blocks
+//! (`FLAG_SURFACE`, one rational Bézier patch and a straight pass in its `(u, v)`, or a
+//! cubic one with `FLAG_UV_CUBIC` for the plane passes of [`plane_commands`]) along the
+//! passes and, in zig-zag, along the links between them; rapid line blocks in tool-point
+//! space for the lifts; a program end.
 //!
 //! The surface is decomposed exactly into its Bézier patches by knot insertion to full
 //! multiplicity ([`bezier_patches`]): every column is split as a curve in `u` at every
@@ -532,7 +533,7 @@ impl Fit<'_> {
         for _ in 0..50 {
             let (f, g) = self.f_grad(p);
             let g2 = g[0] * g[0] + g[1] * g[1];
-            if !(g2 > 0.0) || (f - level).abs() < 1e-13 {
+            if g2.is_nan() || g2 <= 0.0 || (f - level).abs() < 1e-13 {
                 break;
             }
             let k = (f - level) / g2;

@@ -291,15 +291,21 @@ fn refine(s: &SurfaceData<'_>, grid: &Grid, normal: [f64; 3], level: f64, e: GEd
     uv(x)
 }
 
+/// A grid cell `(i, j)`: from node `(i, j)` to `(i+1, j+1)`.
+type Cell = (usize, usize);
+
+/// A traced piece: its grid edges in order, the cells between them, whether it closes.
+type Traced = (Vec<GEdge>, Vec<Cell>, bool);
+
 /// The cells' segments of the zero set of `f − level`, chained: each piece as its grid
 /// edges in order, and whether it closes.
-fn trace(grid: &Grid, level: f64) -> Vec<(Vec<GEdge>, Vec<(usize, usize)>, bool)> {
+fn trace(grid: &Grid, level: f64) -> Vec<Traced> {
     use std::collections::BTreeMap;
     let (nu, nv) = (grid.gu.len(), grid.gv.len());
     let pos = |i: usize, j: usize| grid.f[grid.at(i, j)] - level >= 0.0;
     // Per grid edge with a crossing: the (cell, other edge) pairs it joins.
-    let mut links: BTreeMap<GEdge, Vec<(GEdge, (usize, usize))>> = BTreeMap::new();
-    let mut add = |a: GEdge, b: GEdge, cell: (usize, usize)| {
+    let mut links: BTreeMap<GEdge, Vec<(GEdge, Cell)>> = BTreeMap::new();
+    let mut add = |a: GEdge, b: GEdge, cell: Cell| {
         links.entry(a).or_default().push((b, cell));
         links.entry(b).or_default().push((a, cell));
     };
@@ -354,7 +360,7 @@ fn trace(grid: &Grid, level: f64) -> Vec<(Vec<GEdge>, Vec<(usize, usize)>, bool)
         let mut edges = vec![start];
         let mut cells = Vec::new();
         used.insert(start);
-        let mut prev_cell: Option<(usize, usize)> = None;
+        let mut prev_cell: Option<Cell> = None;
         let mut cur = start;
         loop {
             let next = links.get(&cur).and_then(|l| {

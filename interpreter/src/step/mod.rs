@@ -35,7 +35,14 @@
 //!   `v` (a third ratio, if given, must be 0), the sign says which way; `stepover`, when
 //!   set, caps the pass spacing (mm on the surface). `TOLERANCES(chordal_tolerance,
 //!   scallop_height)` gives the scallop-height tolerance the planner keeps.
-//!   `PLANE_CC_STRATEGY` is recognised and refused (not implemented yet).
+//! * `PLANE_CC_STRATEGY(pathmode, cutmode, its_milling_tolerances, stepover,
+//!   its_plane_normal)` (ISO 14649-11: a `FREEFORM_STRATEGY` whose cutter-contact paths
+//!   are the surface's intersections with parallel planes): the first four as for
+//!   `UV_STRATEGY`; `its_plane_normal` is a `DIRECTION` in the feature's coordinates
+//!   (like the surface's points; turned into machine coordinates by the same placements,
+//!   a missing third ratio read as 0). The chordal tolerance bounds how far a contact
+//!   point may leave its plane ([`crate::surface_plane`]); a zero normal is refused here,
+//!   one the surface comes near parallel to by the planner.
 //! * The tool: `CUTTING_TOOL(its_id, its_tool_body, its_cutting_edge,
 //!   overall_assembly_length)` whose body is `BALL_ENDMILL(dimension, …)` with
 //!   `MILLING_TOOL_DIMENSION(diameter, …)`; the overall assembly length is the tool
