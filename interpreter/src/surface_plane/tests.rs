@@ -427,3 +427,23 @@ fn a_plane_that_misses_the_surface_gives_no_pass_and_one_that_cuts_twice_gives_t
         }
     }
 }
+
+#[test]
+fn the_stepover_caps_the_spacing() {
+    let free = plan(&step_of(PLANECC)).unwrap();
+    let mut step = step_of(PLANECC);
+    if let Strategy::PlaneCc(st) = &mut step.strategy {
+        st.stepover_mm = Some(0.3);
+    }
+    let capped = plan(&step).unwrap();
+    // The planes are vertical and the surface nearly level across them: a plane step is
+    // at most the spacing on the surface.
+    assert!(capped.max_step_mm <= 0.3 + 1e-12, "{}", capped.max_step_mm);
+    assert!(
+        capped.planes > 2 * free.planes - 10,
+        "{} vs {}",
+        capped.planes,
+        free.planes
+    );
+    assert!(capped.predicted_scallop_mm < free.predicted_scallop_mm);
+}
