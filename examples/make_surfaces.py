@@ -6,6 +6,9 @@
 * torus-patch.stp: an exact rational piece of a torus (major radius 40, minor 15 mm):
   toroidal angle 0..90 deg, poloidal angle 45..135 deg (the crown), rotated and placed.
 * cubic-wave.stp: p = q = 3, 8 x 8 control points, passes along v.
+* seed-surface-planecc.stp: the seed surface finished with a PLANE_CC_STRATEGY instead:
+  zig-zag passes in vertical planes at 30 degrees to the x axis (normal (cos 30, sin 30, 0)
+  turned by -90 degrees: the planes run at 30 degrees), chordal tolerance 1 um.
 """
 import math
 import os
@@ -95,12 +98,19 @@ def write(name, title, surf, tool, tech, strategy, placements):
     feed, rpm = tech
     tech_i = w.add(f"MILLING_TECHNOLOGY({fmt(feed / 60)},.TCP.,$,{fmt(rpm / 60)},$,.F.,.F.,.F.,$)")
     mf = w.add("MILLING_MACHINE_FUNCTIONS(.T.,$,$,.F.,$,(),.T.,$,$,())")
-    mode, fwd, side, stepover, scallop = strategy
-    tol = w.add(f"TOLERANCES(0.001,{fmt(scallop)})")
-    fd = w.direction(fwd)
-    sd = w.direction(side)
-    so = fmt(stepover) if stepover else "$"
-    strat = w.add(f"UV_STRATEGY(.{mode}.,.CLIMB.,#{tol},{so},#{fd},#{sd})")
+    if strategy[0] == "PLANE_CC":
+        _, mode, normal, stepover, scallop = strategy
+        tol = w.add(f"TOLERANCES(0.001,{fmt(scallop)})")
+        nd = w.direction(normal)
+        so = fmt(stepover) if stepover else "$"
+        strat = w.add(f"PLANE_CC_STRATEGY(.{mode}.,.CLIMB.,#{tol},{so},#{nd})")
+    else:
+        mode, fwd, side, stepover, scallop = strategy
+        tol = w.add(f"TOLERANCES(0.001,{fmt(scallop)})")
+        fd = w.direction(fwd)
+        sd = w.direction(side)
+        so = fmt(stepover) if stepover else "$"
+        strat = w.add(f"UV_STRATEGY(.{mode}.,.CLIMB.,#{tol},{so},#{fd},#{sd})")
     op = w.add(
         f"FREEFORM_OPERATION($,$,'finish {title}',20.,$,#{tool_i},#{tech_i},#{mf},$,$,$,#{strat})"
     )
@@ -125,7 +135,7 @@ def write(name, title, surf, tool, tech, strategy, placements):
         f.write(text)
 
 
-def seed_surface():
+def seed_surface(name="seed-surface.stp", strategy=("ZIGZAG", [1, 0], [0, 1], None, 0.02)):
     n = 10
     pts = []
     for i in range(n):
@@ -142,12 +152,12 @@ def seed_surface():
         pts.append(row)
     k = [0.0, 0.0, 0.0] + [i / 8 for i in range(1, 8)] + [1.0, 1.0, 1.0]
     write(
-        "seed-surface.stp",
+        name,
         "seed 000 surface",
         (2, 2, pts, None, k, k),
         (6.0, 100.0),
         (2400.0, 4485.0),
-        ("ZIGZAG", [1, 0], [0, 1], None, 0.02),
+        strategy,
         ([[0, 0, 0]], [[0, 0, 0]], [[0, 0, 0]]),
     )
 
@@ -207,3 +217,8 @@ if __name__ == "__main__":
     seed_surface()
     torus_patch()
     cubic_wave()
+    a = math.radians(30.0)
+    seed_surface(
+        "seed-surface-planecc.stp",
+        ("PLANE_CC", "ZIGZAG", [-math.sin(a), math.cos(a), 0.0], None, 0.02),
+    )

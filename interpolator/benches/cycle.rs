@@ -10,6 +10,9 @@
 //! * `cycle/surface_p3q3`: the same over a rational bicubic Bézier patch (surface blocks:
 //!   contact path stepped, tool point `M = C + R·n + (H − R)·z` published), passes back
 //!   and forth.
+//! * `cycle/surface_cubic`: the same with the passes bent into cubic `(u, v)` curves
+//!   (`FLAG_UV_CUBIC`, as `PLANE_CC_STRATEGY` blocks are): the uv rate changes along the
+//!   pass.
 //! * `cycle/profile_worst`: the same on a chain of 0.01 mm lines whose planned end speeds
 //!   fall to a stop every 2 mm, look-ahead window 256: every cycle has many speed limits
 //!   ahead, the most expensive path of the engine's profile step.
@@ -438,6 +441,32 @@ fn surface_case() -> (Survey, Case<Repeat>) {
     (s, case)
 }
 
+/// [`patch_pass`] bent into the cubic `(u, v)` curve with inner points `p1`, `p2`.
+fn cubic_pass(from: [f64; 2], p1: [f64; 2], p2: [f64; 2], to: [f64; 2]) -> CommandBlock {
+    let mut b = patch_pass(from, to);
+    b.flags |= shared::protocol::FLAG_UV_CUBIC;
+    b.surface.uv_inner = [p1, p2];
+    b.length_mm = path::length(&b);
+    b
+}
+
+fn surface_cubic_case() -> (Survey, Case<Repeat>) {
+    let (a, p1, p2, b) = ([0.1, 0.2], [0.7, 0.1], [0.3, 0.9], [0.9, 0.8]);
+    let there = cubic_pass(a, p1, p2, b);
+    let back = cubic_pass(b, p2, p1, a);
+    let src = Repeat {
+        blocks: vec![there, back],
+        seq: 0,
+    };
+    let mut case = Case::new("surfc", lim(PERIOD_NS, 16), path::eval(&there, 0.0).p, src);
+    let s = case.survey(SURVEY_CYCLES);
+    assert!(
+        s.top_mm_per_s > 39.9 && s.blocks >= 4 && s.stops >= 4,
+        "{s:?}"
+    );
+    (s, case)
+}
+
 fn worst_case() -> (Survey, Case<Tiny>) {
     let mut case = Case::new("worst", lim(PERIOD_NS, 256), [0.0; 3], Tiny::new());
     // Back to rest at the end of every stretch. (The planned top speed of a stretch is
@@ -466,6 +495,10 @@ fn criterion_benches(c: &mut Criterion) {
     });
     g.bench_function("surface_p3q3", |bch| {
         let (_, mut case) = surface_case();
+        bch.iter_custom(|iters| case.timed(iters))
+    });
+    g.bench_function("surface_cubic", |bch| {
+        let (_, mut case) = surface_cubic_case();
         bch.iter_custom(|iters| case.timed(iters))
     });
     g.bench_function("profile_worst", |bch| {
@@ -604,6 +637,10 @@ fn percentiles() {
     if wanted("cycle/surface_p3q3") {
         let s = measure("cycle/surface_p3q3", surface_case, n, repeats);
         surveys.push(("cycle/surface_p3q3", s));
+    }
+    if wanted("cycle/surface_cubic") {
+        let s = measure("cycle/surface_cubic", surface_cubic_case, n, repeats);
+        surveys.push(("cycle/surface_cubic", s));
     }
     if wanted("cycle/profile_worst") {
         let s = measure("cycle/profile_worst", worst_case, n, repeats);

@@ -387,8 +387,8 @@ impl Geometry {
     fn eval(&mut self, block: &CommandBlock, u: f64) -> CurvePoint {
         match &mut self.surf {
             Some(s) if block.is_surface() => {
-                let (uv, _) = path::pass_uv(block, u);
-                path::contact(block, &s.eval(uv[0], uv[1]))
+                let (uv, rate) = path::pass_uv(block, u);
+                path::contact_at_rate(rate, &s.eval(uv[0], uv[1]))
             }
             _ => {
                 let mut e = self.curve.eval(u);

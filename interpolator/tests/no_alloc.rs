@@ -227,8 +227,25 @@ fn cylinder_pass() -> CommandBlock {
     b
 }
 
+/// The same pass bent into a cubic `(u, v)` curve (a `PLANE_CC_STRATEGY` block).
+fn cubic_cylinder_pass() -> CommandBlock {
+    let mut b = cylinder_pass();
+    b.flags |= shared::protocol::FLAG_UV_CUBIC;
+    b.surface.uv_start = [0.2, 0.0];
+    b.surface.uv_inner = [[0.8, 0.3], [0.1, 0.6]];
+    b.surface.uv_end = [0.7, 1.0];
+    b.length_mm = shared::path::length(&b);
+    b
+}
+
 #[test]
 fn surface_cycles_do_not_allocate() {
+    for block in [cylinder_pass(), cubic_cylinder_pass()] {
+        surface_cycles_of(block);
+    }
+}
+
+fn surface_cycles_of(block: CommandBlock) {
     let lim = Limits {
         period_ns: 1_000_000,
         path_acc_mm_per_s2: 2000.0,
@@ -236,7 +253,6 @@ fn surface_cycles_do_not_allocate() {
         lookahead_blocks: 16,
         max_following_error_mm: 1.0,
     };
-    let block = cylinder_pass();
     block.validate().unwrap();
     let mut engine = Engine::new(lim, shared::path::eval(&block, 0.0).p);
     let mut src = Loop {

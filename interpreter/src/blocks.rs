@@ -343,6 +343,11 @@ struct Shape {
     /// Surface blocks: the largest ratio of the tool point's speed to the contact
     /// point's (the speeds above are the contact's); `None` for curves.
     surface_ratio: Option<f64>,
+    /// Surface blocks: the tool point's velocity per unit of contact speed at the start
+    /// and at the end, `M'/|C'|` (where the surface is only C¹ it jumps between blocks,
+    /// in length as well as in direction); `None` for curves.
+    m_start: Option<[f64; 3]>,
+    m_end: Option<[f64; 3]>,
 }
 
 /// Share of the path (and each axis's) acceleration the curvature may take at the cap
@@ -472,6 +477,27 @@ fn shape(g: Geometry, machine: &Machine, period_s: f64, feed_mm_s: f64) -> Shape
         k_start: first.1,
         k_end: last.1,
         surface_ratio: surface.then_some(ratio),
+        m_start: match g {
+            Geometry::Curve(b) if surface => Some(tool_rate(b, 0.0)),
+            _ => None,
+        },
+        m_end: match g {
+            Geometry::Curve(b) if surface => Some(tool_rate(b, 1.0)),
+            _ => None,
+        },
+    }
+}
+
+/// `M'/|C'|` of a surface block at an end (`t` 0 or 1): the tool point's velocity per
+/// unit of contact speed, by a one-sided difference into the block.
+fn tool_rate(b: &CommandBlock, t: f64) -> [f64; 3] {
+    let h = if t < 0.5 { 1e-7 } else { -1e-7 };
+    let c = path::norm(path::contact(b, t, &path::surface_at(b, t)).d1);
+    let dm = sub(path::eval(b, t + h).p, path::eval(b, t).p);
+    if c > 1e-12 {
+        dm.map(|x| x / (h * c))
+    } else {
+        [0.0; 3]
     }
 }
 
@@ -557,6 +583,8 @@ fn shape_straight(d: [f64; 3], lim: &StraightLimits, feed_mm_s: f64) -> Option<S
         k_start: [0.0; 3],
         k_end: [0.0; 3],
         surface_ratio: None,
+        m_start: None,
+        m_end: None,
     })
 }
 
@@ -750,7 +778,7 @@ fn surface_speed_ratio(b: &CommandBlock) -> f64 {
         let h = SURFACE_DT;
         let tc = t.clamp(h, 1.0 - h);
         let m = sub(path::eval(b, tc + h).p, path::eval(b, tc - h).p);
-        let c = path::norm(path::contact(b, &path::surface_at(b, tc)).d1);
+        let c = path::norm(path::contact(b, tc, &path::surface_at(b, tc)).d1);
         if c > 1e-12 {
             ratio = ratio.max(path::norm(m) / (2.0 * h * c));
         }
@@ -828,6 +856,14 @@ fn junction_speed(a: &Shape, b: &Shape, machine: &Machine, period_s: f64) -> (f6
             turn: 2.0 * half_sin.min(1.0).asin(),
             acc_t,
         });
+    }
+    // The tool point's velocity step across the junction, in length and direction:
+    // `v·|m_b − m_a|` within one period's share of the acceleration.
+    if let (Some(ma), Some(mb)) = (a.m_end, b.m_start) {
+        let dm = path::norm(sub(mb, ma));
+        if dm > 1e-9 {
+            v = v.min(acc * period_s / dm);
+        }
     }
     let dk = path::norm(sub(a.k_end, b.k_start));
     if dk > 1e-9 {

@@ -10,7 +10,9 @@
 //! * [`estimate`] steps the planned blocks through the interpolator's engine in-process
 //!   for a machining-time estimate (`cnc check --estimate`);
 //! * [`step`] reads STEP-NC (ISO 10303-21 files with the ISO 14649 free-form subset)
-//!   and [`surface_path`] plans the ball-nose passes over their surfaces;
+//!   and [`surface_path`] (iso-parametric passes, `UV_STRATEGY`) or [`surface_plane`]
+//!   (passes in parallel planes, `PLANE_CC_STRATEGY`) plans the ball-nose passes over
+//!   their surfaces, which [`surface_blocks`] turns into surface blocks;
 //! * [`process`] is the interpreter process; [`launch`] starts all three processes for
 //!   `cnc run` and folds their summaries into the run's [`report`]; [`replay`] runs a
 //!   command log again (`cnc replay`) and prints one (`cnc log show`).
@@ -32,3 +34,4 @@ pub mod report;
 pub mod step;
 pub mod surface_blocks;
 pub mod surface_path;
+pub mod surface_plane;

@@ -1,7 +1,8 @@
-//! A planned surface workingstep as wire blocks (protocol 3, seed 000): surface blocks
-//! (`FLAG_SURFACE`, one rational Bézier patch and a straight pass in its `(u, v)`)
-//! along the passes and, in zig-zag, along the links between them; rapid line blocks in
-//! tool-point space for the lifts; a program end.
+//! A planned surface workingstep as wire blocks (protocol 4, seed 000): surface blocks
+//! (`FLAG_SURFACE`, one rational Bézier patch and a straight pass in its `(u, v)`, or a
+//! cubic one with `FLAG_UV_CUBIC` for the plane passes of [`plane_commands`]) along the
+//! passes and, in zig-zag, along the links between them; rapid line blocks in tool-point
+//! space for the lifts; a program end.
 //!
 //! The surface is decomposed exactly into its Bézier patches by knot insertion to full
 //! multiplicity ([`bezier_patches`]): every column is split as a curve in `u` at every
@@ -18,13 +19,17 @@
 //! [`part_blocks`] joins every workingstep of a part from the machine's start (the
 //! origin) and plans the feeds with the look-ahead of [`crate::blocks::plan`].
 
+use crate::step::check::PlannedPath;
 use crate::step::{FreeformStep, PathMode, StepError};
 use crate::surface_path::SurfacePath;
+use crate::surface_plane::{PlanePass, PlanePath};
 use shared::nurbs::reference::piegl_tiller_surface;
 use shared::nurbs::surface::SurfaceData;
 use shared::nurbs::{split_to_capacity, SplitCurve, MAX_CTRL};
 use shared::path;
-use shared::protocol::{BlockKind, CommandBlock, FLAG_RAPID, FLAG_STOP_AT_END, FLAG_SURFACE};
+use shared::protocol::{
+    BlockKind, CommandBlock, FLAG_RAPID, FLAG_STOP_AT_END, FLAG_SURFACE, FLAG_UV_CUBIC,
+};
 use shared::Machine;
 
 /// Clearance of the lifts above the highest tool reference point.
@@ -237,6 +242,36 @@ struct Emit<'a> {
 }
 
 impl Emit<'_> {
+    /// The surface blocks of straight `(u, v)` segments of the whole surface, cut at the
+    /// patches (blocks of no length left out).
+    fn segments(&self, run: &[Segment]) -> Vec<CommandBlock> {
+        let mut blocks = Vec::new();
+        for seg in run {
+            for (patch, local) in cut_at_patches(*seg, self.patches) {
+                let b = self.block(patch, local);
+                if b.length_mm > 1e-9 {
+                    blocks.push(b);
+                }
+            }
+        }
+        blocks
+    }
+
+    /// The surface block of a cubic `(u, v)` pass on `patch` (patch-local control points).
+    fn cubic_block(&self, patch: &OwnedSurface, uv: [[f64; 2]; 4]) -> CommandBlock {
+        let mut b = self.block(
+            patch,
+            Segment {
+                from: (uv[0][0], uv[0][1]),
+                to: (uv[3][0], uv[3][1]),
+            },
+        );
+        b.flags |= FLAG_UV_CUBIC;
+        b.surface.uv_inner = [uv[1], uv[2]];
+        b.length_mm = path::length(&b);
+        b
+    }
+
     /// The surface block of the piece `local` (patch-local `(u, v)`) of a pass on `patch`.
     fn block(&self, patch: &OwnedSurface, local: Segment) -> CommandBlock {
         let mut b = CommandBlock::empty(BlockKind::Motion, 0, self.line);
@@ -260,15 +295,8 @@ impl Emit<'_> {
     }
 }
 
-/// The blocks of a planned workingstep, unplanned (feed caps are the programmed feed):
-/// from `start` (the tool point before it) to the safe height above its last pass.
-/// Returns the blocks and where they leave the tool.
-pub fn surface_commands(
-    step: &FreeformStep,
-    path: &SurfacePath,
-    machine: &Machine,
-    start: [f64; 3],
-) -> Result<(Vec<CommandBlock>, [f64; 3]), StepError> {
+/// The patches of a step's surface, or why a block cannot hold one.
+fn patches_of(step: &FreeformStep) -> Result<Vec<OwnedSurface>, StepError> {
     let fail = |message: String| StepError {
         line: step.line,
         id: Some(step.id),
@@ -283,8 +311,61 @@ pub fn surface_commands(
             (p + 1) * (q + 1)
         )));
     }
-    let patches = bezier_patches(&whole)
-        .ok_or_else(|| fail("the surface could not be split into Bézier patches".into()))?;
+    bezier_patches(&whole)
+        .ok_or_else(|| fail("the surface could not be split into Bézier patches".into()))
+}
+
+/// Safe height: above every tool reference point of the surface.
+fn safe_height(step: &FreeformStep, emit: &Emit<'_>) -> f64 {
+    let whole = step.surface.data();
+    let (u0, u1, v0, v1) = OwnedSurface::from_data(&whole).domain();
+    let sign = f64::from(emit.normal_sign);
+    let mut top = f64::NEG_INFINITY;
+    for i in 0..=64 {
+        for j in 0..=64 {
+            let u = u0 + (u1 - u0) * i as f64 / 64.0;
+            let v = v0 + (v1 - v0) * j as f64 / 64.0;
+            top = top.max(tool_point(&whole, emit.radius_mm, emit.length_mm, sign, u, v)[2]);
+        }
+    }
+    top + LIFT_CLEARANCE_MM
+}
+
+/// Joins runs of surface blocks with lifts: from `start` to each run, and from the last
+/// up to the safe height. Returns the blocks and where they leave the tool.
+fn join_runs(
+    runs: Vec<Vec<CommandBlock>>,
+    line: u32,
+    start: [f64; 3],
+    safe_z: f64,
+    machine: &Machine,
+) -> (Vec<CommandBlock>, [f64; 3]) {
+    let mut out = Vec::new();
+    let mut pos = start;
+    for blocks in runs {
+        let (Some(first), Some(last)) = (blocks.first(), blocks.last()) else {
+            continue;
+        };
+        let (m0, m1) = (path::eval(first, 0.0).p, path::eval(last, 1.0).p);
+        travel(&mut out, line, pos, m0, safe_z, machine);
+        out.extend(blocks);
+        pos = m1;
+    }
+    let top = [pos[0], pos[1], safe_z.max(pos[2])];
+    travel(&mut out, line, pos, top, safe_z, machine);
+    (out, top)
+}
+
+/// The blocks of a planned workingstep, unplanned (feed caps are the programmed feed):
+/// from `start` (the tool point before it) to the safe height above its last pass.
+/// Returns the blocks and where they leave the tool.
+pub fn surface_commands(
+    step: &FreeformStep,
+    path: &SurfacePath,
+    machine: &Machine,
+    start: [f64; 3],
+) -> Result<(Vec<CommandBlock>, [f64; 3]), StepError> {
+    let patches = patches_of(step)?;
     let emit = Emit {
         patches: &patches,
         radius_mm: step.tool.radius_mm(),
@@ -313,41 +394,290 @@ pub fn surface_commands(
             _ => runs.push(vec![seg]),
         }
     }
-    // Safe height: above every tool reference point of the surface.
-    let (u0, u1, v0, v1) = OwnedSurface::from_data(&whole).domain();
-    let sign = f64::from(emit.normal_sign);
-    let mut top = f64::NEG_INFINITY;
-    for i in 0..=64 {
-        for j in 0..=64 {
-            let u = u0 + (u1 - u0) * i as f64 / 64.0;
-            let v = v0 + (v1 - v0) * j as f64 / 64.0;
-            top = top.max(tool_point(&whole, emit.radius_mm, emit.length_mm, sign, u, v)[2]);
-        }
-    }
-    let safe_z = top + LIFT_CLEARANCE_MM;
-    let mut out = Vec::new();
-    let mut pos = start;
-    for run in &runs {
+    let safe_z = safe_height(step, &emit);
+    let runs = runs
+        .iter()
+        .map(|run| emit.segments(run))
+        .collect::<Vec<_>>();
+    Ok(join_runs(runs, step.line, start, safe_z, machine))
+}
+
+/// The blocks of a planned plane-parallel workingstep ([`crate::surface_plane`]),
+/// unplanned, as [`surface_commands`] gives them for a UV path: each pass cut at the
+/// patches, each piece one block whose `(u, v)` pass is a cubic Bézier curve fitted to
+/// the plane's intersection ([`fit_piece`]: every contact point within the chordal
+/// tolerance of its plane, checked densely, the piece split where it is not). In
+/// zig-zag, a pass that ends on the same edge of the domain as the next one (of the next
+/// plane) starts is joined to it along that edge; everything else is joined by lifts.
+pub fn plane_commands(
+    step: &FreeformStep,
+    path: &PlanePath,
+    machine: &Machine,
+    start: [f64; 3],
+) -> Result<(Vec<CommandBlock>, [f64; 3]), StepError> {
+    let patches = patches_of(step)?;
+    let emit = Emit {
+        patches: &patches,
+        radius_mm: step.tool.radius_mm(),
+        length_mm: step.tool.length_mm,
+        normal_sign: if path.normal_sign < 0.0 { -1 } else { 1 },
+        feed_mm_per_min: step.technology.feed_mm_per_min,
+        line: step.line,
+        machine,
+    };
+    let whole = step.surface.data();
+    let mut distinct_v: Vec<f64> = whole.knots_v.to_vec();
+    distinct_v.dedup();
+    // Patches are ordered along u first, then v (see [`bezier_patches`]).
+    let n_spans_v = distinct_v.len() - 1;
+    let fit = Fit {
+        step,
+        emit: &emit,
+        whole: &whole,
+        normal: path.normal,
+        tol_mm: path.chordal_mm,
+    };
+    let mut runs: Vec<Vec<CommandBlock>> = Vec::new();
+    let mut prev: Option<&PlanePass> = None;
+    for pass in &path.passes {
         let mut blocks = Vec::new();
-        for seg in run {
-            for (patch, local) in cut_at_patches(*seg, emit.patches) {
-                let b = emit.block(patch, local);
-                if b.length_mm > 1e-9 {
-                    blocks.push(b);
-                }
+        // The pass piece by piece, one piece per patch.
+        let mut k0 = 0;
+        while k0 < pass.spans.len() {
+            let mut k1 = k0;
+            while k1 + 1 < pass.spans.len() && pass.spans[k1 + 1] == pass.spans[k0] {
+                k1 += 1;
             }
+            let (su, sv) = pass.spans[k0];
+            let patch = patches.get(su * n_spans_v + sv).ok_or_else(|| StepError {
+                line: step.line,
+                id: Some(step.id),
+                rule: "internal",
+                message: format!("no patch for the knot spans ({su}, {sv})"),
+            })?;
+            fit.piece(patch, &pass.uv[k0..=k1 + 1], pass.level_mm, 0, &mut blocks)?;
+            k0 = k1 + 1;
         }
-        let (Some(first), Some(last)) = (blocks.first(), blocks.last()) else {
-            continue;
+        let link = match (path.mode, prev) {
+            (PathMode::Zigzag, Some(p)) => {
+                p.plane != pass.plane
+                    && !p.closed
+                    && !pass.closed
+                    && p.end_edge.is_some()
+                    && p.end_edge == pass.start_edge
+            }
+            _ => false,
         };
-        let (m0, m1) = (path::eval(first, 0.0).p, path::eval(last, 1.0).p);
-        travel(&mut out, step.line, pos, m0, safe_z, machine);
-        out.extend(blocks);
-        pos = m1;
+        match (link, runs.last_mut(), prev) {
+            (true, Some(run), Some(p)) => {
+                let (a, b) = (p.uv[p.uv.len() - 1], pass.uv[0]);
+                run.extend(emit.segments(&[Segment { from: a, to: b }]));
+                run.extend(blocks);
+            }
+            _ => runs.push(blocks),
+        }
+        prev = Some(pass);
     }
-    let top = [pos[0], pos[1], safe_z.max(pos[2])];
-    travel(&mut out, step.line, pos, top, safe_z, machine);
-    Ok((out, top))
+    let safe_z = safe_height(step, &emit);
+    Ok(join_runs(runs, step.line, start, safe_z, machine))
+}
+
+/// The blocks of a planned workingstep, whichever its strategy ([`surface_commands`],
+/// [`plane_commands`]).
+pub fn step_commands(
+    step: &FreeformStep,
+    path: &PlannedPath,
+    machine: &Machine,
+    start: [f64; 3],
+) -> Result<(Vec<CommandBlock>, [f64; 3]), StepError> {
+    match path {
+        PlannedPath::Uv(p) => surface_commands(step, p, machine, start),
+        PlannedPath::Plane(p) => plane_commands(step, p, machine, start),
+    }
+}
+
+/// Fits the blocks of plane passes.
+struct Fit<'a> {
+    step: &'a FreeformStep,
+    emit: &'a Emit<'a>,
+    whole: &'a SurfaceData<'a>,
+    normal: [f64; 3],
+    tol_mm: f64,
+}
+
+/// Samples per block where the fitted pass is checked against its plane.
+pub const FIT_SAMPLES: usize = 256;
+/// How often a piece may be halved before the fit gives up.
+const MAX_FIT_DEPTH: u32 = 24;
+
+impl Fit<'_> {
+    fn fail(&self, message: String) -> StepError {
+        StepError {
+            line: self.step.line,
+            id: Some(self.step.id),
+            rule: "blocks",
+            message,
+        }
+    }
+
+    /// `n·S` and its gradient in `(u, v)` of the whole surface.
+    fn f_grad(&self, p: (f64, f64)) -> (f64, [f64; 2]) {
+        let d = crate::surface_path::eval2(self.whole, p.0, p.1);
+        let n = self.normal;
+        let dot = |a: [f64; 3]| n[0] * a[0] + n[1] * a[1] + n[2] * a[2];
+        (dot(d.p), [dot(d.su), dot(d.sv)])
+    }
+
+    /// A point near the plane's curve moved onto it along the gradient.
+    fn project(&self, mut p: (f64, f64), level: f64, dom: (f64, f64, f64, f64)) -> (f64, f64) {
+        for _ in 0..50 {
+            let (f, g) = self.f_grad(p);
+            let g2 = g[0] * g[0] + g[1] * g[1];
+            if g2.is_nan() || g2 <= 0.0 || (f - level).abs() < 1e-13 {
+                break;
+            }
+            let k = (f - level) / g2;
+            p = (
+                (p.0 - k * g[0]).clamp(dom.0, dom.1),
+                (p.1 - k * g[1]).clamp(dom.2, dom.3),
+            );
+        }
+        p
+    }
+
+    /// The blocks of one piece of a pass on `patch`: points `pts` (whole-surface
+    /// `(u, v)`, on the plane `level`), fitted by one cubic if it keeps within the
+    /// tolerance, else halved.
+    fn piece(
+        &self,
+        patch: &OwnedSurface,
+        pts: &[(f64, f64)],
+        level: f64,
+        depth: u32,
+        out: &mut Vec<CommandBlock>,
+    ) -> Result<(), StepError> {
+        let dom = patch.domain();
+        let to_local = |p: (f64, f64)| {
+            [
+                ((p.0 - dom.0) / (dom.1 - dom.0)).clamp(0.0, 1.0),
+                ((p.1 - dom.2) / (dom.3 - dom.2)).clamp(0.0, 1.0),
+            ]
+        };
+        let local: Vec<[f64; 2]> = pts.iter().map(|p| to_local(*p)).collect();
+        let m = local.len() - 1;
+        // Unit tangents of the level curve at both ends, in local coordinates, pointing
+        // along the piece.
+        let tangent = |p: (f64, f64), along: [f64; 2]| {
+            let (_, g) = self.f_grad(p);
+            let t = [-g[1] / (dom.1 - dom.0), g[0] / (dom.3 - dom.2)];
+            let l = t[0].hypot(t[1]);
+            let s = if t[0] * along[0] + t[1] * along[1] < 0.0 {
+                -1.0
+            } else {
+                1.0
+            };
+            if l > 0.0 {
+                [s * t[0] / l, s * t[1] / l]
+            } else {
+                let al = along[0].hypot(along[1]).max(f64::MIN_POSITIVE);
+                [along[0] / al, along[1] / al]
+            }
+        };
+        let sub = |a: [f64; 2], b: [f64; 2]| [a[0] - b[0], a[1] - b[1]];
+        let t0 = tangent(pts[0], sub(local[1], local[0]));
+        let t1 = tangent(pts[m], sub(local[m], local[m - 1]));
+        let inner = hermite_fit(&local, t0, t1);
+        let b = self
+            .emit
+            .cubic_block(patch, [local[0], inner[0], inner[1], local[m]]);
+        let worst = (0..=FIT_SAMPLES)
+            .map(|k| {
+                let c = path::surface_at(&b, k as f64 / FIT_SAMPLES as f64).p;
+                let n = self.normal;
+                (n[0] * c[0] + n[1] * c[1] + n[2] * c[2] - level).abs()
+            })
+            .fold(0.0f64, f64::max);
+        if worst <= self.tol_mm {
+            if b.length_mm > 1e-9 {
+                out.push(b);
+            }
+            return Ok(());
+        }
+        if depth >= MAX_FIT_DEPTH {
+            return Err(self.fail(format!(
+                "the pass in the plane {level:.6} mm along the normal could not be fitted \
+                 within {} mm near (u, v) = ({:.6}, {:.6}) (still {worst:.3e} mm off after \
+                 {MAX_FIT_DEPTH} halvings; {} points {:?})",
+                self.tol_mm,
+                pts[0].0,
+                pts[0].1,
+                pts.len(),
+                pts
+            )));
+        }
+        if m >= 2 {
+            let h = m / 2;
+            self.piece(patch, &pts[..=h], level, depth + 1, out)?;
+            return self.piece(patch, &pts[h..], level, depth + 1, out);
+        }
+        // Two points only: a third on the curve between them.
+        let mid = self.project(
+            (0.5 * (pts[0].0 + pts[1].0), 0.5 * (pts[0].1 + pts[1].1)),
+            level,
+            dom,
+        );
+        self.piece(patch, &[pts[0], mid, pts[1]], level, depth + 1, out)
+    }
+}
+
+/// The inner control points of the cubic Bézier from `pts[0]` to `pts[m]` with end
+/// tangents along `t0` and `t1` whose lengths fit the points best (least squares at their
+/// chord-length parameters); the chord's length when there is nothing to fit. Kept in
+/// `[0, 1]²`.
+fn hermite_fit(pts: &[[f64; 2]], t0: [f64; 2], t1: [f64; 2]) -> [[f64; 2]; 2] {
+    let m = pts.len() - 1;
+    let (a, b) = (pts[0], pts[m]);
+    let dist = |p: [f64; 2], q: [f64; 2]| (p[0] - q[0]).hypot(p[1] - q[1]);
+    let mut acc = vec![0.0];
+    for w in pts.windows(2) {
+        acc.push(acc[acc.len() - 1] + dist(w[0], w[1]));
+    }
+    let total = acc[m];
+    let chord = dist(a, b).max(1e-12);
+    let dot = |p: [f64; 2], q: [f64; 2]| p[0] * q[0] + p[1] * q[1];
+    let (mut s11, mut s12, mut s22, mut r1, mut r2) = (0.0, 0.0, 0.0, 0.0, 0.0);
+    for k in 1..m {
+        let t = acc[k] / total;
+        let (h00, h10, h01, h11) = (
+            2.0 * t * t * t - 3.0 * t * t + 1.0,
+            t * t * t - 2.0 * t * t + t,
+            -2.0 * t * t * t + 3.0 * t * t,
+            t * t * t - t * t,
+        );
+        let r = [
+            pts[k][0] - h00 * a[0] - h01 * b[0],
+            pts[k][1] - h00 * a[1] - h01 * b[1],
+        ];
+        s11 += h10 * h10 * dot(t0, t0);
+        s12 += h10 * h11 * dot(t0, t1);
+        s22 += h11 * h11 * dot(t1, t1);
+        r1 += h10 * dot(t0, r);
+        r2 += h11 * dot(t1, r);
+    }
+    let det = s11 * s22 - s12 * s12;
+    let (mut al, mut be) = (chord, chord);
+    if m >= 2 && det.abs() > 1e-14 * (s11 * s22).max(f64::MIN_POSITIVE) {
+        let x = (r1 * s22 - r2 * s12) / det;
+        let y = (s11 * r2 - s12 * r1) / det;
+        if x > 0.1 * chord && y > 0.1 * chord && x < 3.0 * total && y < 3.0 * total {
+            (al, be) = (x, y);
+        }
+    }
+    let c = |x: f64| x.clamp(0.0, 1.0);
+    [
+        [c(a[0] + al * t0[0] / 3.0), c(a[1] + al * t0[1] / 3.0)],
+        [c(b[0] - be * t1[0] / 3.0), c(b[1] - be * t1[1] / 3.0)],
+    ]
 }
 
 /// The blocks of a whole part, planned and numbered, ending with a program end, and the
@@ -364,10 +694,10 @@ pub fn part_blocks(
     let mut scallop: f64 = 0.0;
     let mut last_line = 0;
     for (step, sp) in &planned {
-        let (b, end) = surface_commands(step, sp, machine, pos).map_err(|e| vec![e])?;
+        let (b, end) = step_commands(step, sp, machine, pos).map_err(|e| vec![e])?;
         blocks.extend(b);
         pos = end;
-        scallop = scallop.max(sp.predicted_scallop_mm);
+        scallop = scallop.max(sp.predicted_scallop_mm());
         last_line = step.line;
     }
     blocks.push(CommandBlock::empty(BlockKind::ProgramEnd, 0, last_line));

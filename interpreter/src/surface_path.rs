@@ -31,7 +31,7 @@
 //! homogeneous surface), in the interpreter only; the cycle uses
 //! [`shared::nurbs::surface::FastSurface`].
 
-use crate::step::{FreeformStep, PathMode, StepError};
+use crate::step::{FreeformStep, PathMode, StepError, Strategy};
 use shared::nurbs::find_span;
 use shared::nurbs::reference::ders_basis_funs;
 use shared::nurbs::surface::{Passes, SurfaceData};
@@ -271,13 +271,18 @@ fn samples(breaks: &[f64]) -> Vec<f64> {
 /// Plans the passes of a workingstep.
 pub fn plan(step: &FreeformStep) -> Result<SurfacePath, StepError> {
     let s = step.surface.data();
-    let st = &step.strategy;
     let r = step.tool.radius_mm();
     let fail = |rule: &'static str, message: String| StepError {
         line: step.line,
         id: Some(step.id),
         rule,
         message,
+    };
+    let Strategy::Uv(st) = &step.strategy else {
+        return Err(fail(
+            "internal",
+            "the UV planner was called for another strategy".into(),
+        ));
     };
     let (ku, kv) = (distinct(s.knots_u), distinct(s.knots_v));
     let (a_breaks, b_breaks) = match st.passes {

@@ -344,7 +344,7 @@ mod tests {
         assert_eq!(fields, BLOCK_SIZE);
         assert_eq!(
             core::mem::size_of::<crate::protocol::SurfacePass>(),
-            4 + 4 + 16 + 16 + 8 + 8
+            4 + 4 + 16 + 16 + 8 + 8 + 32
         );
         assert_eq!(core::mem::size_of::<Helix>(), 4 + 4 + 24 + 8 * 3);
     }

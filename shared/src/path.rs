@@ -12,7 +12,7 @@ use crate::nurbs::surface::{
     FastSurface, Passes, SurfaceData, SurfaceError, SurfacePoint, MAX_SURF_DEGREE,
 };
 use crate::nurbs::{self, CurvePoint};
-use crate::protocol::{CommandBlock, Helix, NO_AXIS};
+use crate::protocol::{CommandBlock, Helix, FLAG_UV_CUBIC, NO_AXIS};
 
 /// `[0; k]` then `[1; k]`: the knots of a Bézier patch of degree `k - 1` are a slice.
 const BEZIER: [f64; 2 * (MAX_SURF_DEGREE + 1)] = {
@@ -45,12 +45,21 @@ pub fn patch(block: &CommandBlock) -> SurfaceData<'_> {
     }
 }
 
+/// Is the block's pass the cubic `(u, v)` curve of [`FLAG_UV_CUBIC`] (else a line)?
+#[inline]
+pub fn is_cubic_pass(block: &CommandBlock) -> bool {
+    block.flags & FLAG_UV_CUBIC != 0
+}
+
 /// The evaluator for a surface block's pass ([`FastSurface`]): iso-parametric passes keep
-/// their partial sums and polynomials through the whole pass.
+/// their partial sums and polynomials through the whole pass; a cubic pass holds neither
+/// parameter.
 pub fn pass_evaluator(block: &CommandBlock) -> Result<FastSurface, SurfaceError> {
     let (a, b) = (block.surface.uv_start, block.surface.uv_end);
     let patch = patch(block);
-    if a[1] == b[1] {
+    if is_cubic_pass(block) {
+        FastSurface::for_any_path(&patch)
+    } else if a[1] == b[1] {
         FastSurface::with_passes(&patch, Passes::AlongU)
     } else if a[0] == b[0] {
         FastSurface::with_passes(&patch, Passes::AlongV)
@@ -59,20 +68,38 @@ pub fn pass_evaluator(block: &CommandBlock) -> Result<FastSurface, SurfaceError>
     }
 }
 
-/// `(u, v)` of a surface block's pass at `t` in `[0, 1]`, and its rate `d(u, v)/dt`.
+/// `(u, v)` of a surface block's pass at `t` in `[0, 1]`, and its rate `d(u, v)/dt`:
+/// constant on a straight pass, the cubic's derivative on a [`FLAG_UV_CUBIC`] one (exact
+/// at both ends: `t = 0` gives `uv_start`, `t = 1` gives `uv_end`, bit for bit).
 #[inline]
 pub fn pass_uv(block: &CommandBlock, t: f64) -> ([f64; 2], [f64; 2]) {
-    let (a, b) = (block.surface.uv_start, block.surface.uv_end);
-    let d = [b[0] - a[0], b[1] - a[1]];
-    ([a[0] + t * d[0], a[1] + t * d[1]], d)
+    let sp = &block.surface;
+    let (a, b) = (sp.uv_start, sp.uv_end);
+    if !is_cubic_pass(block) {
+        let d = [b[0] - a[0], b[1] - a[1]];
+        return ([a[0] + t * d[0], a[1] + t * d[1]], d);
+    }
+    let [p1, p2] = sp.uv_inner;
+    let s = 1.0 - t;
+    let (b0, b1, b2, b3) = (s * s * s, 3.0 * s * s * t, 3.0 * s * t * t, t * t * t);
+    let (d0, d1, d2) = (3.0 * s * s, 6.0 * s * t, 3.0 * t * t);
+    let at = |i: usize| b0 * a[i] + b1 * p1[i] + b2 * p2[i] + b3 * b[i];
+    let rate = |i: usize| d0 * (p1[i] - a[i]) + d1 * (p2[i] - p1[i]) + d2 * (b[i] - p2[i]);
+    ([at(0), at(1)], [rate(0), rate(1)])
 }
 
-/// The contact path of a surface block from the surface at its pass point: the point,
-/// its rate `dC/dt = S_u·du/dt + S_v·dv/dt`, and no second derivative (the engine's chord
-/// correction does without it).
+/// The contact path of a surface block at `t` from the surface at its pass point: the
+/// point, its rate `dC/dt = S_u·du/dt + S_v·dv/dt` (the chain rule, with the pass's rate
+/// at `t`), and no second derivative (the engine's chord correction does without it).
 #[inline]
-pub fn contact(block: &CommandBlock, s: &SurfacePoint) -> CurvePoint {
-    let (_, d) = pass_uv(block, 0.0);
+pub fn contact(block: &CommandBlock, t: f64, s: &SurfacePoint) -> CurvePoint {
+    let (_, d) = pass_uv(block, t);
+    contact_at_rate(d, s)
+}
+
+/// [`contact`] with the pass's rate `d(u, v)/dt` already known.
+#[inline]
+pub fn contact_at_rate(d: [f64; 2], s: &SurfacePoint) -> CurvePoint {
     CurvePoint {
         p: s.p,
         d1: [
@@ -125,7 +152,7 @@ pub fn domain(block: &CommandBlock) -> (f64, f64) {
 pub fn eval(block: &CommandBlock, u: f64) -> CurvePoint {
     if block.is_surface() {
         let s = surface_at(block, u);
-        let mut e = contact(block, &s);
+        let mut e = contact(block, u, &s);
         e.p = tool_point(block, &s);
         return e;
     }
@@ -176,7 +203,7 @@ pub fn length(block: &CommandBlock) -> f64 {
     // to far below a micrometre (4 pieces left 1e-4 mm on long rational spans).
     if block.is_surface() {
         return nurbs::arc_length(&[0.0, 1.0], 32, |t| {
-            norm(contact(block, &surface_at(block, t)).d1)
+            norm(contact(block, t, &surface_at(block, t)).d1)
         });
     }
     nurbs::arc_length(block.knots(), 32, |u| norm(eval(block, u).d1))
@@ -258,7 +285,7 @@ mod tests {
             );
             // The contact rate agrees with a central difference.
             let h = 1e-6;
-            let d = contact(&b, &s).d1;
+            let d = contact(&b, t, &s).d1;
             let (a, z) = (
                 surface_at(&b, (t - h).max(0.0)).p,
                 surface_at(&b, (t + h).min(1.0)).p,
@@ -269,6 +296,81 @@ mod tests {
             }
         }
         assert_eq!(domain(&b), (0.0, 1.0));
+    }
+
+    /// The cylinder pass bent into a cubic `(u, v)` curve across the patch.
+    fn cubic_pass() -> CommandBlock {
+        let mut b = cylinder_pass(20.0);
+        b.flags |= crate::protocol::FLAG_UV_CUBIC;
+        b.surface.uv_start = [0.1, 0.0];
+        b.surface.uv_inner = [[0.9, 0.2], [0.05, 0.7]];
+        b.surface.uv_end = [0.6, 1.0];
+        b.length_mm = length(&b);
+        b
+    }
+
+    #[test]
+    fn a_cubic_pass_runs_its_curve_with_the_chain_rule() {
+        let b = cubic_pass();
+        assert!(b.validate().is_ok(), "{:?}", b.validate());
+        // Both ends exactly, bit for bit: neighbouring blocks join there.
+        assert_eq!(pass_uv(&b, 0.0).0, b.surface.uv_start);
+        assert_eq!(pass_uv(&b, 1.0).0, b.surface.uv_end);
+        let h = 1e-6;
+        for k in 1..20 {
+            let t = k as f64 / 20.0;
+            // The uv rate and the contact rate against central differences.
+            let (uv_m, uv_p) = (pass_uv(&b, t - h).0, pass_uv(&b, t + h).0);
+            let rate = pass_uv(&b, t).1;
+            for i in 0..2 {
+                assert!((rate[i] - (uv_p[i] - uv_m[i]) / (2.0 * h)).abs() < 1e-7);
+            }
+            let d = contact(&b, t, &surface_at(&b, t)).d1;
+            let (a, z) = (surface_at(&b, t - h).p, surface_at(&b, t + h).p);
+            for i in 0..3 {
+                assert!((d[i] - (z[i] - a[i]) / (2.0 * h)).abs() < 1e-5, "{d:?}");
+            }
+            // On the cylinder whatever the (u, v).
+            let c = surface_at(&b, t).p;
+            assert!((c[1].hypot(c[2]) - 20.0).abs() < 1e-12);
+        }
+        // The fast evaluator of the pass gives the reference's points.
+        let mut fast = pass_evaluator(&b).unwrap();
+        for k in 0..=10 {
+            let t = k as f64 / 10.0;
+            let (uv, _) = pass_uv(&b, t);
+            let (f, r) = (fast.eval(uv[0], uv[1]).p, surface_at(&b, t).p);
+            assert!(norm([f[0] - r[0], f[1] - r[1], f[2] - r[2]]) < 1e-12);
+        }
+    }
+
+    #[test]
+    fn cubic_pass_points_are_validated() {
+        let mut b = cubic_pass();
+        b.surface.uv_inner[1] = [0.5, 1.2];
+        assert!(b.validate().is_err());
+        let mut b = cubic_pass();
+        b.surface.uv_inner[0] = [f64::NAN, 0.5];
+        assert!(b.validate().is_err());
+        // Inner points without the flag would say two things: refused.
+        let mut b = cylinder_pass(20.0);
+        b.surface.uv_inner[0] = [0.5, 0.5];
+        assert!(b.validate().is_err());
+        // The flag on a curve block is refused too.
+        let mut b = CommandBlock::empty(crate::protocol::BlockKind::Motion, 0, 1);
+        b.flags = crate::protocol::FLAG_UV_CUBIC;
+        b.degree = 1;
+        b.n_ctrl = 2;
+        b.knots[..4].copy_from_slice(&[0.0, 0.0, 1.0, 1.0]);
+        b.ctrl[0] = [0.0, 0.0, 0.0, 1.0];
+        b.ctrl[1] = [1.0, 0.0, 0.0, 1.0];
+        b.feed_mm_per_min = 100.0;
+        b.length_mm = 1.0;
+        b.acc_mm_per_s2 = 1.0;
+        b.jerk_mm_per_s3 = 1.0;
+        assert!(b.validate().is_err());
+        b.flags = 0;
+        assert!(b.validate().is_ok(), "{:?}", b.validate());
     }
 
     #[test]

@@ -9,7 +9,7 @@ use crate::nurbs::{self, CurveError, MAX_CTRL, MAX_KNOTS};
 use iceoryx2::prelude::ZeroCopySend;
 
 /// Bumped whenever a payload's layout or meaning changes.
-pub const PROTOCOL_VERSION: u32 = 3;
+pub const PROTOCOL_VERSION: u32 = 4;
 
 /// What a command block asks for.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -49,9 +49,16 @@ pub const FLAG_RAPID: u32 = 1;
 pub const FLAG_STOP_AT_END: u32 = 2;
 
 /// `CommandBlock::flags`: a surface block. The motion is the cutter-contact point moving
-/// on a Bézier surface patch along a straight line of its `(u, v)` domain, and the
-/// set-point is the ball-nose tool's reference point (see [`SurfacePass`]).
+/// on a Bézier surface patch along a straight line of its `(u, v)` domain (or a cubic
+/// curve, with [`FLAG_UV_CUBIC`]), and the set-point is the ball-nose tool's reference
+/// point (see [`SurfacePass`]).
 pub const FLAG_SURFACE: u32 = 4;
+
+/// `CommandBlock::flags`, surface blocks only: the pass is the cubic Bézier curve with
+/// control points `uv_start`, `uv_inner[0]`, `uv_inner[1]`, `uv_end` in the patch's
+/// `(u, v)` domain (a `PLANE_CC_STRATEGY` pass: the intersection of the surface with a
+/// plane) instead of the straight line from `uv_start` to `uv_end` (see [`SurfacePass`]).
+pub const FLAG_UV_CUBIC: u32 = 8;
 
 /// Axis code meaning "no helical axis".
 pub const NO_AXIS: u32 = 3;
@@ -81,8 +88,13 @@ pub struct Helix {
 /// `n_ctrl = (p + 1)(q + 1)` and `ctrl[i·(q + 1) + j]` (`i` along `u`) its control points
 /// `[x, y, z, w]`; the patch's domain is `[0, 1]²` and its knots are not carried. The
 /// cutter-contact point runs `C(t) = S(u(t), v(t))` for `t` in `[0, 1]`, with `(u, v)`
-/// moving in a straight line from `uv_start` to `uv_end`; `length_mm` and the feeds are
-/// those of the contact point. The set-point is the tool reference point
+/// moving in a straight line from `uv_start` to `uv_end` or, with [`FLAG_UV_CUBIC`],
+/// along the cubic Bézier curve `uv_start, uv_inner[0], uv_inner[1], uv_end` (its rate
+/// `d(u, v)/dt` then changes along the pass: `C' = S_u·u' + S_v·v'`). A straight pass is
+/// the cubic's collinear special case, carried without the flag (and with `uv_inner`
+/// zero) so that it keeps the exact line and the iso-parametric evaluators; every
+/// control point lies in `[0, 1]²`, so the whole curve does. `length_mm` and the feeds
+/// are those of the contact point. The set-point is the tool reference point
 /// `M = C + R·n + (H − R)·z`, with `n` the unit normal `normal_sign·(S_u × S_v)/|…|`
 /// and `z` the tool axis `+Z` (3-axis machining).
 #[repr(C)]
@@ -98,6 +110,8 @@ pub struct SurfacePass {
     pub tool_radius_mm: f64,
     /// Distance `H` from the ball's tip to the tool reference point (`H >= R`).
     pub tool_length_mm: f64,
+    /// The inner control points of a cubic pass ([`FLAG_UV_CUBIC`]); zero otherwise.
+    pub uv_inner: [[f64; 2]; 2],
 }
 
 impl SurfacePass {
@@ -108,6 +122,7 @@ impl SurfacePass {
         uv_end: [0.0; 2],
         tool_radius_mm: 0.0,
         tool_length_mm: 0.0,
+        uv_inner: [[0.0; 2]; 2],
     };
 }
 
@@ -125,7 +140,7 @@ impl Helix {
 /// One command from the interpreter to the interpolator.
 #[repr(C)]
 #[derive(Debug, Clone, Copy, ZeroCopySend)]
-#[type_name("cnc::CommandBlockV3")]
+#[type_name("cnc::CommandBlockV4")]
 pub struct CommandBlock {
     pub protocol: u32,
     /// A [`BlockKind`] code.
@@ -275,7 +290,13 @@ impl CommandBlock {
             .iter()
             .chain(sp.uv_end.iter())
             .all(|x| x.is_finite() && (0.0..=1.0).contains(x));
-        if !uv_ok {
+        let cubic = self.flags & FLAG_UV_CUBIC != 0;
+        let inner_ok = sp
+            .uv_inner
+            .iter()
+            .flatten()
+            .all(|x| x.is_finite() && (0.0..=1.0).contains(x) && (cubic || *x == 0.0));
+        if !uv_ok || !inner_ok {
             return Err(bad("surface uv"));
         }
         let (r, h) = (sp.tool_radius_mm, sp.tool_length_mm);
@@ -314,6 +335,12 @@ impl CommandBlock {
                     self.length_mm,
                     [self.acc_mm_per_s2, self.jerk_mm_per_s3],
                 )?;
+                if self.flags & FLAG_UV_CUBIC != 0 && !self.is_surface() {
+                    return Err(ProtocolError::BadField {
+                        seq: self.seq,
+                        field: "flags",
+                    });
+                }
                 let h = &self.helix;
                 if h.axis != NO_AXIS && self.is_surface() {
                     return Err(ProtocolError::BadField {

@@ -1,14 +1,25 @@
-//! A STEP-NC free-form part (seed 000) through the real three processes: `cnc run
-//! part.stp` compiles the surface workingstep into surface blocks and runs them to done.
+//! STEP-NC free-form parts (seed 000) through the real three processes: `cnc run
+//! part.stp` compiles the surface workingstep into surface blocks and runs them to done,
+//! with the UV strategy (straight `(u, v)` passes) and with `PLANE_CC_STRATEGY` (cubic
+//! `(u, v)` passes in parallel planes).
 
 use std::process::Command;
 use tests::{cnc_exe, csv, report, temp_dir};
 
 #[test]
 fn seed_surface_part_runs_to_done() {
+    runs_to_done("seed-surface");
+}
+
+#[test]
+fn seed_surface_planecc_part_runs_to_done() {
+    runs_to_done("seed-surface-planecc");
+}
+
+fn runs_to_done(name: &str) {
     let part =
-        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../examples/seed-surface.stp");
-    let dir = temp_dir("seed-surface");
+        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join(format!("../examples/{name}.stp"));
+    let dir = temp_dir(name);
     let out = Command::new(cnc_exe())
         .args(["run", "--clock", "sim", "--no-report", "--out"])
         .arg(&dir)
@@ -83,21 +94,27 @@ fn seed_surface_part_runs_to_done() {
     let _ = std::fs::remove_dir_all(&dir);
 }
 
-/// `cnc check` describes the part and its blocks.
+/// `cnc check` describes the parts and their blocks.
 #[test]
-fn seed_surface_part_checks() {
-    let part =
-        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../examples/seed-surface.stp");
-    let out = Command::new(cnc_exe())
-        .arg("check")
-        .arg(&part)
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    let text = String::from_utf8_lossy(&out.stdout);
-    assert!(text.contains("surface blocks"), "{text}");
+fn seed_surface_parts_check() {
+    for (name, strategy) in [
+        ("seed-surface", "UV zig-zag"),
+        ("seed-surface-planecc", "PLANE_CC zig-zag"),
+    ] {
+        let part = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join(format!("../examples/{name}.stp"));
+        let out = Command::new(cnc_exe())
+            .arg("check")
+            .arg(&part)
+            .output()
+            .unwrap();
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        let text = String::from_utf8_lossy(&out.stdout);
+        assert!(text.contains("surface blocks"), "{text}");
+        assert!(text.contains(strategy), "{text}");
+    }
 }

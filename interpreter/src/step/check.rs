@@ -1,9 +1,53 @@
 //! `cnc check part.stp`: what the file holds and what the planner makes of it.
 
-use super::{format_errors, read_part, PathMode, StepError};
-use crate::surface_path::{plan, SurfacePath};
+use super::{format_errors, read_part, PathMode, StepError, Strategy};
+use crate::surface_path::SurfacePath;
+use crate::surface_plane::PlanePath;
 use shared::nurbs::surface::Passes;
 use std::fmt::Write;
+
+/// The planned passes of a workingstep, by strategy.
+#[derive(Debug, Clone, PartialEq)]
+pub enum PlannedPath {
+    Uv(SurfacePath),
+    Plane(PlanePath),
+}
+
+impl PlannedPath {
+    /// The largest scallop height the planner predicts.
+    pub fn predicted_scallop_mm(&self) -> f64 {
+        match self {
+            PlannedPath::Uv(p) => p.predicted_scallop_mm,
+            PlannedPath::Plane(p) => p.predicted_scallop_mm,
+        }
+    }
+    pub fn length_mm(&self) -> f64 {
+        match self {
+            PlannedPath::Uv(p) => p.length_mm,
+            PlannedPath::Plane(p) => p.length_mm,
+        }
+    }
+    pub fn uv(&self) -> Option<&SurfacePath> {
+        match self {
+            PlannedPath::Uv(p) => Some(p),
+            PlannedPath::Plane(_) => None,
+        }
+    }
+    pub fn plane(&self) -> Option<&PlanePath> {
+        match self {
+            PlannedPath::Uv(_) => None,
+            PlannedPath::Plane(p) => Some(p),
+        }
+    }
+}
+
+/// Plans a workingstep with the planner of its strategy.
+pub fn plan_step(step: &super::FreeformStep) -> Result<PlannedPath, StepError> {
+    match &step.strategy {
+        Strategy::Uv(_) => crate::surface_path::plan(step).map(PlannedPath::Uv),
+        Strategy::PlaneCc(_) => crate::surface_plane::plan(step).map(PlannedPath::Plane),
+    }
+}
 
 /// Whether `name` or `text` says the file is a STEP exchange file rather than G-code.
 pub fn is_step_file(name: &str, text: &str) -> bool {
@@ -12,12 +56,12 @@ pub fn is_step_file(name: &str, text: &str) -> bool {
 }
 
 /// Every free-form workingstep of the file with its plan, as [`check_part`] describes it.
-pub fn plan_part(text: &str) -> Result<Vec<(super::FreeformStep, SurfacePath)>, Vec<StepError>> {
+pub fn plan_part(text: &str) -> Result<Vec<(super::FreeformStep, PlannedPath)>, Vec<StepError>> {
     let steps = read_part(text)?;
     let mut out = Vec::new();
     let mut errs = Vec::new();
     for s in steps {
-        match plan(&s) {
+        match plan_step(&s) {
             Ok(p) => out.push((s, p)),
             Err(e) => errs.push(e),
         }
@@ -41,7 +85,7 @@ pub fn check_part(name: &str, text: &str, machine: &shared::Machine) -> Result<S
         if n == 1 { "" } else { "s" }
     );
     for (s, p) in &planned {
-        let (cmds, _) = crate::surface_blocks::surface_commands(s, p, machine, [0.0; 3])
+        let (cmds, _) = crate::surface_blocks::step_commands(s, p, machine, [0.0; 3])
             .map_err(|e| format_errors(name, &[e]))?;
         let n_surf = cmds.iter().filter(|c| c.is_surface()).count();
         let sf = &s.surface;
@@ -76,35 +120,72 @@ pub fn check_part(name: &str, text: &str, machine: &shared::Machine) -> Result<S
             "    feed {:.1} mm/min, spindle {spindle}",
             s.technology.feed_mm_per_min
         );
-        let st = &s.strategy;
-        let _ = writeln!(
-            o,
-            "    strategy #{}: UV {}, passes along {}, scallop tolerance {} mm, stepover cap {}",
-            st.id,
-            match st.mode {
-                PathMode::Zigzag => "zig-zag",
-                PathMode::Forward => "forward",
-            },
-            match st.passes {
-                Passes::AlongU => "u",
-                Passes::AlongV => "v",
-            },
-            st.scallop_mm,
-            st.stepover_mm
-                .map_or("none".to_string(), |c| format!("{c} mm"))
-        );
-        let minutes = p.length_mm / s.technology.feed_mm_per_min;
-        let _ = writeln!(
-            o,
-            "    {} passes, spacing {:.3}..{:.3} mm, predicted scallop {:.2} µm; path {:.3} mm, \
-             {:.1} s at the programmed feed",
-            p.passes.len(),
-            p.min_spacing_mm,
-            p.max_spacing_mm,
-            p.predicted_scallop_mm * 1e3,
-            p.length_mm,
-            minutes * 60.0
-        );
+        match (&s.strategy, p) {
+            (Strategy::Uv(st), PlannedPath::Uv(p)) => {
+                let _ = writeln!(
+                    o,
+                    "    strategy #{}: UV {}, passes along {}, scallop tolerance {} mm, stepover \
+                     cap {}",
+                    st.id,
+                    mode_name(st.mode),
+                    match st.passes {
+                        Passes::AlongU => "u",
+                        Passes::AlongV => "v",
+                    },
+                    st.scallop_mm,
+                    st.stepover_mm
+                        .map_or("none".to_string(), |c| format!("{c} mm"))
+                );
+                let minutes = p.length_mm / s.technology.feed_mm_per_min;
+                let _ = writeln!(
+                    o,
+                    "    {} passes, spacing {:.3}..{:.3} mm, predicted scallop {:.2} µm; path \
+                     {:.3} mm, {:.1} s at the programmed feed",
+                    p.passes.len(),
+                    p.min_spacing_mm,
+                    p.max_spacing_mm,
+                    p.predicted_scallop_mm * 1e3,
+                    p.length_mm,
+                    minutes * 60.0
+                );
+            }
+            (Strategy::PlaneCc(st), PlannedPath::Plane(p)) => {
+                let n = st.normal;
+                let _ = writeln!(
+                    o,
+                    "    strategy #{}: PLANE_CC {}, planes normal to ({:.4}, {:.4}, {:.4}), \
+                     scallop tolerance {} mm, chordal tolerance {} mm, stepover cap {}",
+                    st.id,
+                    mode_name(st.mode),
+                    n[0],
+                    n[1],
+                    n[2],
+                    st.scallop_mm,
+                    st.chordal_mm,
+                    st.stepover_mm
+                        .map_or("none".to_string(), |c| format!("{c} mm"))
+                );
+                let length: f64 = cmds
+                    .iter()
+                    .filter(|c| c.is_surface())
+                    .map(|c| c.length_mm)
+                    .sum();
+                let minutes = length / s.technology.feed_mm_per_min;
+                let _ = writeln!(
+                    o,
+                    "    {} planes, {} passes, plane step {:.3}..{:.3} mm, predicted scallop \
+                     {:.2} µm; path {:.3} mm, {:.1} s at the programmed feed",
+                    p.planes,
+                    p.passes.len(),
+                    p.min_step_mm,
+                    p.max_step_mm,
+                    p.predicted_scallop_mm * 1e3,
+                    length,
+                    minutes * 60.0
+                );
+            }
+            _ => {}
+        }
         let _ = writeln!(
             o,
             "    {} blocks: {n_surf} surface blocks, {} rapid lines",
@@ -113,6 +194,13 @@ pub fn check_part(name: &str, text: &str, machine: &shared::Machine) -> Result<S
         );
     }
     Ok(o)
+}
+
+fn mode_name(m: PathMode) -> &'static str {
+    match m {
+        PathMode::Zigzag => "zig-zag",
+        PathMode::Forward => "forward",
+    }
 }
 
 #[cfg(test)]

@@ -4,7 +4,8 @@
 
 use super::p21::{Exchange, Instance, Param, Record};
 use super::{
-    BallEndmill, FreeformStep, PathMode, Placement, StepError, StepSurface, Technology, UvStrategy,
+    BallEndmill, FreeformStep, PathMode, Placement, PlaneCcStrategy, StepError, StepSurface,
+    Strategy, Technology, UvStrategy,
 };
 use crate::surface_blocks::OwnedSurface;
 use shared::nurbs::surface::Passes;
@@ -457,7 +458,10 @@ impl<'a> Ctx<'a> {
         })
     }
 
-    fn strategy(&self, from: &Instance, p: &Param) -> R<UvStrategy> {
+    /// `UV_STRATEGY` or `PLANE_CC_STRATEGY`; `to_machine` turns the plane normal (a
+    /// direction in the feature's coordinates, like the surface's points) into machine
+    /// coordinates.
+    fn strategy(&self, from: &Instance, p: &Param, to_machine: &Placement) -> R<Strategy> {
         let inst = self.deref(
             from,
             p,
@@ -465,13 +469,29 @@ impl<'a> Ctx<'a> {
             &["UV_STRATEGY", "PLANE_CC_STRATEGY"],
         )?;
         let rec = &inst.records[0];
+        if rec.name == "PLANE_CC_STRATEGY" {
+            return self.plane_cc(inst, rec, to_machine).map(Strategy::PlaneCc);
+        }
         if rec.name != "UV_STRATEGY" {
             return Err(err(
                 inst,
                 "strategy",
-                format!("{} is not supported yet; use UV_STRATEGY", rec.name),
+                format!(
+                    "{} is not supported; use UV_STRATEGY or PLANE_CC_STRATEGY",
+                    inst.type_name()
+                ),
             ));
         }
+        self.uv(inst, rec).map(Strategy::Uv)
+    }
+
+    /// The attributes every `FREEFORM_STRATEGY` has: pathmode, (cutmode,)
+    /// its_milling_tolerances, stepover, as (mode, chordal, scallop, stepover cap).
+    fn freeform_common(
+        &self,
+        inst: &Instance,
+        rec: &Record,
+    ) -> R<(PathMode, f64, f64, Option<f64>)> {
         let mode = match self.enumv(inst, rec, 0, "pathmode")?.as_str() {
             "FORWARD" => PathMode::Forward,
             "ZIGZAG" => PathMode::Zigzag,
@@ -494,6 +514,45 @@ impl<'a> Ctx<'a> {
         if stepover_mm.is_some_and(|s| s <= 0.0) {
             return Err(err(inst, "strategy", "stepover must be > 0"));
         }
+        Ok((mode, chordal_mm, scallop_mm, stepover_mm))
+    }
+
+    /// `PLANE_CC_STRATEGY(pathmode, cutmode, its_milling_tolerances, stepover,
+    /// its_plane_normal)`.
+    fn plane_cc(
+        &self,
+        inst: &Instance,
+        rec: &Record,
+        to_machine: &Placement,
+    ) -> R<PlaneCcStrategy> {
+        let (mode, chordal_mm, scallop_mm, stepover_mm) = self.freeform_common(inst, rec)?;
+        let p = self.attr(inst, rec, 4, "its_plane_normal")?;
+        let d_inst = self.deref(inst, p, "its_plane_normal", &["DIRECTION"])?;
+        let d = self.direction(d_inst)?;
+        let mut local = [0.0; 3];
+        for (o, x) in local.iter_mut().zip(&d) {
+            *o = *x;
+        }
+        // A direction turns with the placement; its origin does not move it.
+        let mut n = [0.0; 3];
+        for (r, o) in n.iter_mut().enumerate() {
+            *o = (0..3).map(|c| to_machine.rot[r][c] * local[c]).sum();
+        }
+        let len = (n[0] * n[0] + n[1] * n[1] + n[2] * n[2]).sqrt();
+        Ok(PlaneCcStrategy {
+            id: inst.id,
+            normal_id: d_inst.id,
+            normal_line: d_inst.line,
+            mode,
+            normal: n.map(|x| x / len),
+            stepover_mm,
+            scallop_mm,
+            chordal_mm,
+        })
+    }
+
+    fn uv(&self, inst: &Instance, rec: &Record) -> R<UvStrategy> {
+        let (mode, chordal_mm, scallop_mm, stepover_mm) = self.freeform_common(inst, rec)?;
         let dir = |i: usize, what: &str| -> R<(usize, f64)> {
             let p = self.attr(inst, rec, i, what)?;
             let d_inst = self.deref(inst, p, what, &["DIRECTION"])?;
@@ -626,7 +685,7 @@ impl<'a> Ctx<'a> {
             self.attr(op, orec, 6, "its_technology")
                 .and_then(|p| self.technology(op, p)),
             self.attr(op, orec, 11, "its_machining_strategy")
-                .and_then(|p| self.strategy(op, p)),
+                .and_then(|p| self.strategy(op, p, &to_machine)),
         );
         // Every part's error is reported, not only the first one's.
         let mut errs: Vec<StepError> = Vec::new();

@@ -35,7 +35,14 @@
 //!   `v` (a third ratio, if given, must be 0), the sign says which way; `stepover`, when
 //!   set, caps the pass spacing (mm on the surface). `TOLERANCES(chordal_tolerance,
 //!   scallop_height)` gives the scallop-height tolerance the planner keeps.
-//!   `PLANE_CC_STRATEGY` is recognised and refused (not implemented yet).
+//! * `PLANE_CC_STRATEGY(pathmode, cutmode, its_milling_tolerances, stepover,
+//!   its_plane_normal)` (ISO 14649-11: a `FREEFORM_STRATEGY` whose cutter-contact paths
+//!   are the surface's intersections with parallel planes): the first four as for
+//!   `UV_STRATEGY`; `its_plane_normal` is a `DIRECTION` in the feature's coordinates
+//!   (like the surface's points; turned into machine coordinates by the same placements,
+//!   a missing third ratio read as 0). The chordal tolerance bounds how far a contact
+//!   point may leave its plane ([`crate::surface_plane`]); a zero normal is refused here,
+//!   one the surface comes near parallel to by the planner.
 //! * The tool: `CUTTING_TOOL(its_id, its_tool_body, its_cutting_edge,
 //!   overall_assembly_length)` whose body is `BALL_ENDMILL(dimension, …)` with
 //!   `MILLING_TOOL_DIMENSION(diameter, …)`; the overall assembly length is the tool
@@ -216,6 +223,70 @@ pub struct UvStrategy {
     pub chordal_mm: f64,
 }
 
+/// `PLANE_CC_STRATEGY`: the cutter-contact points of each pass lie in one of a family of
+/// parallel planes (the passes are the surface's intersections with them).
+#[derive(Debug, Clone, PartialEq)]
+pub struct PlaneCcStrategy {
+    pub id: u64,
+    /// The `DIRECTION` instance of `its_plane_normal` and its line (for errors).
+    pub normal_id: u64,
+    pub normal_line: u32,
+    pub mode: PathMode,
+    /// Unit normal of the planes in machine coordinates (the placements applied).
+    pub normal: [f64; 3],
+    /// Upper bound of the pass spacing on the surface.
+    pub stepover_mm: Option<f64>,
+    pub scallop_mm: f64,
+    pub chordal_mm: f64,
+}
+
+/// How a free-form surface is covered with passes.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Strategy {
+    Uv(UvStrategy),
+    PlaneCc(PlaneCcStrategy),
+}
+
+impl Strategy {
+    pub fn id(&self) -> u64 {
+        match self {
+            Strategy::Uv(s) => s.id,
+            Strategy::PlaneCc(s) => s.id,
+        }
+    }
+    pub fn mode(&self) -> PathMode {
+        match self {
+            Strategy::Uv(s) => s.mode,
+            Strategy::PlaneCc(s) => s.mode,
+        }
+    }
+    pub fn scallop_mm(&self) -> f64 {
+        match self {
+            Strategy::Uv(s) => s.scallop_mm,
+            Strategy::PlaneCc(s) => s.scallop_mm,
+        }
+    }
+    pub fn stepover_mm(&self) -> Option<f64> {
+        match self {
+            Strategy::Uv(s) => s.stepover_mm,
+            Strategy::PlaneCc(s) => s.stepover_mm,
+        }
+    }
+    pub fn chordal_mm(&self) -> f64 {
+        match self {
+            Strategy::Uv(s) => s.chordal_mm,
+            Strategy::PlaneCc(s) => s.chordal_mm,
+        }
+    }
+    /// The UV strategy, if it is one.
+    pub fn uv(&self) -> Option<&UvStrategy> {
+        match self {
+            Strategy::Uv(s) => Some(s),
+            Strategy::PlaneCc(_) => None,
+        }
+    }
+}
+
 /// A free-form finishing workingstep, ready for the planner.
 #[derive(Debug, Clone, PartialEq)]
 pub struct FreeformStep {
@@ -225,7 +296,7 @@ pub struct FreeformStep {
     pub surface: StepSurface,
     pub tool: BallEndmill,
     pub technology: Technology,
-    pub strategy: UvStrategy,
+    pub strategy: Strategy,
 }
 
 /// Reads a STEP-NC file: its free-form workingsteps, or every error.

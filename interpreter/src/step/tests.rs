@@ -70,10 +70,11 @@ fn seed_surface_reads_as_the_seed_describes_it() {
     assert_eq!(s.tool.length_mm, 100.0);
     assert!((s.technology.feed_mm_per_min - 2400.0).abs() < 1e-9);
     assert!((s.technology.spindle_rpm.unwrap() - 4485.0).abs() < 1e-9);
-    assert_eq!(s.strategy.mode, PathMode::Zigzag);
-    assert_eq!(s.strategy.passes, Passes::AlongU);
-    assert_eq!(s.strategy.scallop_mm, 0.02);
-    assert_eq!(s.strategy.stepover_mm, None);
+    let st = s.strategy.uv().unwrap();
+    assert_eq!(st.mode, PathMode::Zigzag);
+    assert_eq!(st.passes, Passes::AlongU);
+    assert_eq!(st.scallop_mm, 0.02);
+    assert_eq!(st.stepover_mm, None);
 }
 
 #[test]
@@ -84,7 +85,7 @@ fn rational_torus_and_cubic_examples_read() {
     let c = std::f64::consts::FRAC_1_SQRT_2;
     assert!((t.surface.geometry.ctrl[4][3] - 0.5).abs() < 1e-15);
     assert!((t.surface.geometry.ctrl[1][3] - c).abs() < 1e-15);
-    assert_eq!(t.strategy.stepover_mm, Some(2.0));
+    assert_eq!(t.strategy.stepover_mm(), Some(2.0));
     // Setup origin (0,0,-20), then the workpiece at (20,10,5) turned 30° about z.
     let p0 = t.surface.workpiece.apply([0.0; 3]);
     assert!((p0[0] - 20.0).abs() < 1e-12 && (p0[1] - 10.0).abs() < 1e-12);
@@ -94,9 +95,10 @@ fn rational_torus_and_cubic_examples_read() {
         (q.surface.geometry.degree_u, q.surface.geometry.degree_v),
         (3, 3)
     );
-    assert_eq!(q.strategy.mode, PathMode::Forward);
-    assert_eq!(q.strategy.passes, Passes::AlongV);
-    assert_eq!(q.strategy.sideward_sign, -1.0);
+    let qs = q.strategy.uv().unwrap();
+    assert_eq!(qs.mode, PathMode::Forward);
+    assert_eq!(qs.passes, Passes::AlongV);
+    assert_eq!(qs.sideward_sign, -1.0);
     // Feature placement (5, 5, 0): the first control point moves by it.
     assert_eq!(
         q.surface.geometry.ctrl[0][..3],
@@ -185,13 +187,24 @@ fn every_error_of_a_file_comes_in_one_pass() {
 }
 
 #[test]
-fn plane_cc_strategy_is_refused_by_name() {
-    let bad = SEED.replace("UV_STRATEGY(", "PLANE_CC_STRATEGY(");
+fn plane_cc_strategy_reads_and_names_a_bad_normal() {
+    // The UV strategy's attributes as a PLANE_CC_STRATEGY: its_plane_normal is the
+    // forward direction #114, (1, 0), read as the plane normal (1, 0, 0).
+    let planes = SEED.replace("UV_STRATEGY(", "PLANE_CC_STRATEGY(");
+    let s = &read_part(&planes).unwrap()[0];
+    let super::Strategy::PlaneCc(st) = &s.strategy else {
+        panic!("{:?}", s.strategy)
+    };
+    assert_eq!((st.normal, st.normal_id), ([1.0, 0.0, 0.0], 114));
+    let (line, strat) = instance_line(SEED, "UV_STRATEGY(");
+    let bad = planes.replace("#113,$,#114,#115)", "#113,$,#113)");
     let text = format_errors("p.stp", &read_part(&bad).unwrap_err());
-    assert!(
-        text.contains("strategy: PLANE_CC_STRATEGY is not supported yet"),
-        "{text}"
+    let want = format!(
+        "p.stp:{line}: #{}: reference: its_plane_normal refers to #113, a TOLERANCES, where \
+         DIRECTION is expected",
+        id_of(&strat)
     );
+    assert!(text.starts_with(&want), "{text}");
 }
 
 #[test]

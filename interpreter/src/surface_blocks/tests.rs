@@ -12,6 +12,7 @@ use shared::protocol::CommandBlock;
 const SEED: &str = include_str!("../../../examples/seed-surface.stp");
 const TORUS: &str = include_str!("../../../examples/torus-patch.stp");
 const CUBIC: &str = include_str!("../../../examples/cubic-wave.stp");
+const PLANECC: &str = include_str!("../../../examples/seed-surface-planecc.stp");
 
 fn dist(a: [f64; 3], b: [f64; 3]) -> f64 {
     ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2) + (a[2] - b[2]).powi(2)).sqrt()
@@ -188,7 +189,7 @@ fn example_blocks_validate_and_join_up() {
         let surf = surface_count(&cmds);
         let rapids = cmds.len() - surf;
         // At least one block per pass (and per link in zig-zag).
-        match step.strategy.mode {
+        match step.strategy.mode() {
             PathMode::Zigzag => {
                 assert!(surf >= 2 * path.passes.len() - 1);
                 // Up and across from the start, down, and up at the end.
@@ -207,7 +208,9 @@ fn a_large_surface_is_cut_per_patch() {
     let mut step = read_part(SEED).unwrap().remove(0);
     let b = big();
     step.surface.geometry = b;
-    step.strategy.scallop_mm = 0.1;
+    if let crate::step::Strategy::Uv(st) = &mut step.strategy {
+        st.scallop_mm = 0.1;
+    }
     let cmds = check_blocks(&step);
     let path = plan(&step).unwrap();
     let surf = surface_count(&cmds);
@@ -253,7 +256,9 @@ fn a_part_is_planned_within_its_caps() {
 /// The set-points the interpolator's engine publishes for a part (stepped in-process, as
 /// `cnc check --estimate` does) are tool points of the ORIGINAL surface: each is located
 /// on its block's pass, the pass point mapped back to the surface's own `(u, v)`, and the
-/// tool point there recomputed with the reference evaluator (1e-9 mm).
+/// tool point there recomputed with the reference evaluator (1e-9 mm). On the
+/// plane-parallel example (cubic `(u, v)` passes) the contact point under each set-point
+/// lies in its block's plane, within the chordal tolerance.
 #[test]
 fn engine_set_points_are_tool_points_of_the_original_surface() {
     use interpolator::engine::{BlockSource, Engine, Limits, TickState};
@@ -265,8 +270,13 @@ fn engine_set_points_are_tool_points_of_the_original_surface() {
             b
         }
     }
-    for text in [SEED, TORUS] {
+    for text in [SEED, TORUS, PLANECC] {
         let machine = Machine::default();
+        let plane = match &read_part(text).unwrap()[0].strategy {
+            crate::step::Strategy::PlaneCc(st) => Some((st.normal, st.chordal_mm)),
+            crate::step::Strategy::Uv(_) => None,
+        };
+        let mut off_plane: f64 = 0.0;
         let step = read_part(text).unwrap().remove(0);
         let whole = step.surface.data();
         let patches = bezier_patches(&whole).unwrap();
@@ -307,9 +317,12 @@ fn engine_set_points_are_tool_points_of_the_original_surface() {
             }
             (last_seq, last_t) = (tick.block_seq, t);
             let sp = &b.surface;
-            let local =
-                core::array::from_fn(|i| sp.uv_start[i] + t * (sp.uv_end[i] - sp.uv_start[i]));
-            let (u, v) = global_uv(&patches, b, local);
+            let (u, v) = global_uv(&patches, b, path::pass_uv(b, t).0);
+            if let (Some((n, _)), true) = (plane, path::is_cubic_pass(b)) {
+                let f = |c: [f64; 3]| n[0] * c[0] + n[1] * c[1] + n[2] * c[2];
+                let level = f(path::surface_at(b, 0.0).p);
+                off_plane = off_plane.max((f(conventional_surface(&whole, u, v).p) - level).abs());
+            }
             let m = tool_point(
                 &whole,
                 sp.tool_radius_mm,
@@ -326,5 +339,11 @@ fn engine_set_points_are_tool_points_of_the_original_surface() {
             worst < 1e-9,
             "a set-point is {worst:e} mm off the original surface's tool point"
         );
+        if let Some((_, tol)) = plane {
+            assert!(
+                off_plane <= tol,
+                "a contact point {off_plane} mm off its plane"
+            );
+        }
     }
 }

@@ -224,7 +224,7 @@ fn measured_scallop(text: &str) -> (f64, f64, f64) {
             worst = worst.max(scallop_between(&s, &path, k, a));
         }
     }
-    (worst, step.strategy.scallop_mm, path.predicted_scallop_mm)
+    (worst, step.strategy.scallop_mm(), path.predicted_scallop_mm)
 }
 
 #[test]
@@ -267,7 +267,9 @@ fn passes_cover_the_domain_in_order_and_alternate_in_zigzag() {
 #[test]
 fn the_stepover_cap_limits_the_spacing() {
     let mut step = step_of(SEED);
-    step.strategy.stepover_mm = Some(0.25);
+    if let crate::step::Strategy::Uv(st) = &mut step.strategy {
+        st.stepover_mm = Some(0.25);
+    }
     let path = plan(&step).unwrap();
     assert!(
         path.max_spacing_mm <= 0.25 * (1.0 + 1e-6),
