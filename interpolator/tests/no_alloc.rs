@@ -121,9 +121,15 @@ fn cycle_work_does_not_allocate() {
             break;
         }
         if cycles.is_multiple_of(1024) {
-            // Let the writer keep up, without counting what sleeping may allocate.
+            // Let the writer keep up, without counting what sleeping may allocate: wait
+            // until it holds at most a quarter of its ring, however long a loaded
+            // machine keeps it from running (a fixed 6 ms sleep once let it fall a
+            // whole ring behind under load, and records were dropped).
             arm(false);
-            std::thread::sleep(std::time::Duration::from_millis(6));
+            let deadline = std::time::Instant::now() + std::time::Duration::from_secs(30);
+            while trace.queued() > 1024 && std::time::Instant::now() < deadline {
+                std::thread::sleep(std::time::Duration::from_millis(1));
+            }
             arm(true);
         }
     }

@@ -77,6 +77,11 @@ impl<T: Copy + Send + 'static> TraceWriter<T> {
         }
     }
 
+    /// Records queued and not yet taken by the writer.
+    pub fn queued(&self) -> usize {
+        self.producer.buffer().capacity() - self.producer.slots()
+    }
+
     /// Records that could not be queued because the writer was a whole ring behind.
     pub fn dropped(&self) -> u64 {
         self.dropped
