@@ -819,7 +819,7 @@ fn surface_samples(b: &CommandBlock) -> Samples {
 /// curvature jumps by `Δk`, the speed whose acceleration step `v²·Δk` in one period stays
 /// within the jerk. Zero (exact stop) for corners sharper than the machine's corner angle.
 ///
-/// Also returns the kink, if any, for [`close_kinks`]: its turn and the acceleration
+/// Also returns the kink, if any, for [`CloseKinks`]: its turn and the acceleration
 /// (times the period) its direction change may take.
 fn junction_speed(a: &Shape, b: &Shape, machine: &Machine, period_s: f64) -> (f64, Option<Kink>) {
     let cos = dot(a.t_end, b.t_start).clamp(-1.0, 1.0);
@@ -852,7 +852,6 @@ fn junction_speed(a: &Shape, b: &Shape, machine: &Machine, period_s: f64) -> (f6
         kink = Some(Kink {
             j: 0,
             s: 0.0,
-            chain: 0,
             turn: 2.0 * half_sin.min(1.0).asin(),
             acc_t,
         });
@@ -872,13 +871,11 @@ fn junction_speed(a: &Shape, b: &Shape, machine: &Machine, period_s: f64) -> (f6
     (v, kink)
 }
 
-/// A kink at the end of block `j`, `s` mm along the path, in the `chain`-th stretch of
-/// the path between stops.
+/// A kink at the end of block `j`, `s` mm along the path.
 #[derive(Debug, Clone, Copy)]
 struct Kink {
     j: usize,
     s: f64,
-    chain: u32,
     /// The tangent's turn (rad).
     turn: f64,
     /// The acceleration the direction change may take, times the period (mm/s).
@@ -890,34 +887,64 @@ struct Kink {
 /// acceleration over two steps is `v·2·sin(Θ/2)/T` with `Θ` at most the sum of the
 /// turns within the `2·v·T` of path the two steps cover; so every run of kinks that
 /// close (at the speeds planned at them) takes the speed whose direction change over
-/// all their turns stays within the acceleration. Conservative: the runs are measured
-/// at the speeds before this lowers them. Lowers `end` in place.
-fn close_kinks(kinks: &[Kink], end: &mut [f64], period_s: f64) {
-    for (l, first) in kinks.iter().enumerate() {
-        let mut turn = 0.0;
-        let mut acc_t = f64::INFINITY;
-        let mut v_max = 0.0f64;
-        let mut r = l;
-        for (k, next) in kinks.iter().enumerate().skip(l) {
-            if next.chain != first.chain {
-                break;
-            }
-            let v = v_max.max(end[next.j]);
-            if k > l && next.s - first.s >= 2.0 * v * period_s {
+/// all their turns stays within the acceleration.
+///
+/// Fed the kinks in path order as the planner finds them; it keeps only the recent ones
+/// a later kink may still be that close to. Each new kink closes the longest run ending
+/// at it, whose speed is the lowest of all the runs ending there, and all of that run's
+/// kinks take it. Conservative: runs are measured at the speeds before this lowers them.
+struct CloseKinks {
+    recent: std::collections::VecDeque<Kink>,
+    /// The highest junction speed seen: no run is longer than two steps at it.
+    v_bound: f64,
+    period_s: f64,
+}
+
+impl CloseKinks {
+    fn new(period_s: f64) -> Self {
+        CloseKinks {
+            recent: std::collections::VecDeque::new(),
+            v_bound: 0.0,
+            period_s,
+        }
+    }
+
+    /// A stop (or anything but a kink passed at speed) between kinks: no step spans it.
+    fn stop(&mut self) {
+        self.recent.clear();
+    }
+
+    /// Kink `k`, its junction speed already in `end[k.j]`; lowers `end` in place.
+    fn push(&mut self, k: Kink, end: &mut [f64]) {
+        let two_steps = 2.0 * self.period_s;
+        self.v_bound = self.v_bound.max(end[k.j]);
+        while self
+            .recent
+            .front()
+            .is_some_and(|f| k.s - f.s >= two_steps * self.v_bound)
+        {
+            self.recent.pop_front();
+        }
+        let (mut turn, mut acc_t, mut v_max) = (k.turn, k.acc_t, end[k.j]);
+        let mut first = self.recent.len();
+        for (i, l) in self.recent.iter().enumerate().rev() {
+            let v = v_max.max(end[l.j]);
+            if k.s - l.s >= two_steps * v {
                 break;
             }
             v_max = v;
-            turn += next.turn;
-            acc_t = acc_t.min(next.acc_t);
-            r = k;
+            turn += l.turn;
+            acc_t = acc_t.min(l.acc_t);
+            first = i;
         }
-        if r == l {
-            continue;
-        }
-        let v = acc_t / (2.0 * (0.5 * turn.min(std::f64::consts::PI)).sin());
-        for k in &kinks[l..=r] {
+        if first < self.recent.len() {
+            let v = acc_t / (2.0 * (0.5 * turn.min(std::f64::consts::PI)).sin());
+            for l in self.recent.range(first..) {
+                end[l.j] = end[l.j].min(v);
+            }
             end[k.j] = end[k.j].min(v);
         }
+        self.recent.push_back(k);
     }
 }
 
@@ -958,7 +985,7 @@ pub fn plan_alone(b: &mut CommandBlock, machine: &Machine, feed: f64) {
 /// Fills in lengths, feed caps, profile limits and start/end speeds of every motion
 /// block: a look-ahead over the whole program (the interpreter reads all of it before
 /// any motion). Junction speeds (lowered where kinks are closer than two steps, see
-/// [`close_kinks`]), then a backward pass with the jerk-limited distances of
+/// [`CloseKinks`]), then a backward pass with the jerk-limited distances of
 /// [`shared::profile`], make every block able to slow to its end speed; the
 /// interpolator accelerates as its limits allow by itself (no forward pass).
 pub fn plan<B: Plannable>(blocks: &mut [B], machine: &Machine, period_ns: u64) {
@@ -968,8 +995,8 @@ pub fn plan<B: Plannable>(blocks: &mut [B], machine: &Machine, period_ns: u64) {
     // block after it has its shape (a junction needs only its two blocks').
     let mut end = vec![0.0f64; n];
     let mut before: Option<Shape> = None;
-    let mut kinks: Vec<Kink> = Vec::new();
-    let (mut s, mut chain) = (0.0f64, 0u32);
+    let mut close = CloseKinks::new(period_s);
+    let mut s = 0.0f64;
     let straight_limits = StraightLimits::new(machine);
     for i in 0..n {
         let b = &mut blocks[i];
@@ -1007,22 +1034,17 @@ pub fn plan<B: Plannable>(blocks: &mut [B], machine: &Machine, period_ns: u64) {
                         .min(b.feed_mm_per_min() / 60.0)
                         .min(nb.feed_mm_per_min() / 60.0);
                     if let Some(k) = kink.filter(|_| end[j] > 0.0) {
-                        kinks.push(Kink {
-                            j,
-                            s: s - blocks[i].length_mm(),
-                            chain,
-                            ..k
-                        });
+                        let at = s - blocks[i].length_mm();
+                        close.push(Kink { j, s: at, ..k }, &mut end);
                     }
                 }
             }
             if end[j] <= 0.0 {
-                chain += 1;
+                close.stop();
             }
         }
         before = shp;
     }
-    close_kinks(&kinks, &mut end, period_s);
     // Backward pass: every block must be able to slow to its end speed. A block's end
     // speed is final once the block after it has been passed, so its feeds are set here.
     for i in (0..n).rev() {

@@ -543,7 +543,7 @@ proptest! {
 /// until its rounds ran out, leaving the softer one: the stop was reached at 2.5 mm/s
 /// (1.2 times the acceleration limit in one cycle, and a jump in speed). And kinks closer
 /// together than two steps, each planned for its own turn alone (see
-/// `blocks::close_kinks`).
+/// `blocks::CloseKinks`).
 #[test]
 fn chains_that_once_broke_a_limit() {
     let machine = Machine::default();
