@@ -179,17 +179,17 @@ pub fn eval2(s: &SurfaceData<'_>, u: f64, v: f64) -> Ders2 {
     }
 }
 
-fn dot(a: [f64; 3], b: [f64; 3]) -> f64 {
+pub(crate) fn dot(a: [f64; 3], b: [f64; 3]) -> f64 {
     a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
 }
-fn cross(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
+pub(crate) fn cross(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
     [
         a[1] * b[2] - a[2] * b[1],
         a[2] * b[0] - a[0] * b[2],
         a[0] * b[1] - a[1] * b[0],
     ]
 }
-fn norm(a: [f64; 3]) -> f64 {
+pub(crate) fn norm(a: [f64; 3]) -> f64 {
     dot(a, a).sqrt()
 }
 
@@ -237,7 +237,7 @@ fn local(d: &Ders2, along: Passes, sign: f64) -> Option<Local> {
     })
 }
 
-fn distinct(knots: &[f64]) -> Vec<f64> {
+pub(crate) fn distinct(knots: &[f64]) -> Vec<f64> {
     let mut out: Vec<f64> = Vec::new();
     for &k in knots {
         if out.last() != Some(&k) {
@@ -258,26 +258,93 @@ pub fn breaks_between(knots: &[f64], lo: f64, hi: f64) -> Vec<f64> {
 
 /// The samples along a pass: `SAMPLES_PER_SPAN` per knot span.
 fn samples(breaks: &[f64]) -> Vec<f64> {
+    subdivide(breaks, SAMPLES_PER_SPAN)
+}
+
+/// `per_span` equal steps in each interval between `breaks`, the breaks exactly.
+pub(crate) fn subdivide(breaks: &[f64], per_span: usize) -> Vec<f64> {
     let mut out = Vec::new();
     for w in breaks.windows(2) {
-        for s in 0..SAMPLES_PER_SPAN {
-            out.push(w[0] + (w[1] - w[0]) * s as f64 / SAMPLES_PER_SPAN as f64);
+        for s in 0..per_span {
+            out.push(w[0] + (w[1] - w[0]) * s as f64 / per_span as f64);
         }
     }
     out.extend(breaks.last());
     out
 }
 
-/// Plans the passes of a workingstep.
-pub fn plan(step: &FreeformStep) -> Result<SurfacePath, StepError> {
-    let s = step.surface.data();
-    let r = step.tool.radius_mm();
-    let fail = |rule: &'static str, message: String| StepError {
+/// An error of the workingstep, on its own line and instance.
+pub(crate) fn step_error(step: &FreeformStep, rule: &'static str, message: String) -> StepError {
+    StepError {
         line: step.line,
         id: Some(step.id),
         rule,
         message,
+    }
+}
+
+/// Which side of the surface the tool is on, over the sample points `(u, v)`: `+1` when
+/// `S_u × S_v` faces +z on the whole (3-axis, tool along z), else `-1`.
+pub(crate) fn tool_side_sign(s: &SurfaceData<'_>, points: impl Iterator<Item = (f64, f64)>) -> f64 {
+    let mut nz_sum = 0.0;
+    for (u, v) in points {
+        let d = eval2(s, u, v);
+        let n = cross(d.su, d.sv);
+        nz_sum += n[2] / norm(n).max(f64::MIN_POSITIVE);
+    }
+    if nz_sum >= 0.0 {
+        1.0
+    } else {
+        -1.0
+    }
+}
+
+/// Can a ball end mill along +z machine the surface at `(u, v)`, given there the unit
+/// normal towards the tool (`None`: degenerate) and the smallest normal curvature?
+pub(crate) fn check_reach(
+    step: &FreeformStep,
+    u: f64,
+    v: f64,
+    normal_and_kappa_min: Option<([f64; 3], f64)>,
+) -> Result<(), StepError> {
+    let id = step.surface.id;
+    let Some((n, kappa_min)) = normal_and_kappa_min else {
+        return Err(step_error(
+            step,
+            "surface",
+            format!("surface #{id} is degenerate at (u, v) = ({u:.4}, {v:.4})"),
+        ));
     };
+    if n[2] <= 1e-9 {
+        return Err(step_error(
+            step,
+            "surface",
+            format!(
+                "surface #{id} turns away from the tool axis at (u, v) = ({u:.4}, {v:.4}): \
+                 a 3-axis ball end mill cannot reach it"
+            ),
+        ));
+    }
+    let r = step.tool.radius_mm();
+    if 1.0 / r + kappa_min <= 0.0 {
+        return Err(step_error(
+            step,
+            "gouge",
+            format!(
+                "surface #{id} is concave with radius {:.3} mm at (u, v) = ({u:.4}, \
+                 {v:.4}), tighter than the ball radius {r} mm",
+                -1.0 / kappa_min
+            ),
+        ));
+    }
+    Ok(())
+}
+
+/// Plans the passes of a workingstep.
+pub fn plan(step: &FreeformStep) -> Result<SurfacePath, StepError> {
+    let s = step.surface.data();
+    let r = step.tool.radius_mm();
+    let fail = |rule: &'static str, message: String| step_error(step, rule, message);
     let Strategy::Uv(st) = &step.strategy else {
         return Err(fail(
             "internal",
@@ -302,49 +369,17 @@ pub fn plan(step: &FreeformStep) -> Result<SurfacePath, StepError> {
     // Which side the tool is on: the normal must face +z (3-axis, tool along z).
     let a_samples = samples(&a_breaks);
     let b_samples = samples(&b_breaks);
-    let mut nz_sum = 0.0;
+    let sign = tool_side_sign(
+        &s,
+        b_samples
+            .iter()
+            .flat_map(|&b| a_samples.iter().map(move |&a| uv(a, b))),
+    );
     for &b in &b_samples {
         for &a in &a_samples {
-            let d = at(a, b);
-            let n = cross(d.su, d.sv);
-            nz_sum += n[2] / norm(n).max(f64::MIN_POSITIVE);
-        }
-    }
-    let sign = if nz_sum >= 0.0 { 1.0 } else { -1.0 };
-    for &b in &b_samples {
-        for &a in &a_samples {
-            let d = at(a, b);
             let (u, v) = uv(a, b);
-            let l = local(&d, st.passes, sign).ok_or_else(|| {
-                fail(
-                    "surface",
-                    format!(
-                        "surface #{} is degenerate at (u, v) = ({u:.4}, {v:.4})",
-                        step.surface.id
-                    ),
-                )
-            })?;
-            if l.n[2] <= 1e-9 {
-                return Err(fail(
-                    "surface",
-                    format!(
-                        "surface #{} turns away from the tool axis at (u, v) = ({u:.4}, {v:.4}): \
-                         a 3-axis ball end mill cannot reach it",
-                        step.surface.id
-                    ),
-                ));
-            }
-            if 1.0 / r + l.kappa_min <= 0.0 {
-                return Err(fail(
-                    "gouge",
-                    format!(
-                        "surface #{} is concave with radius {:.3} mm at (u, v) = ({u:.4}, \
-                         {v:.4}), tighter than the ball radius {r} mm",
-                        step.surface.id,
-                        -1.0 / l.kappa_min
-                    ),
-                ));
-            }
+            let l = local(&at(a, b), st.passes, sign);
+            check_reach(step, u, v, l.as_ref().map(|l| (l.n, l.kappa_min)))?;
         }
     }
     let h_aim = SAFETY * st.scallop_mm;

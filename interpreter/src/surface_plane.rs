@@ -37,7 +37,9 @@
 //! naming the point and the `DIRECTION` of the normal.
 
 use crate::step::{FreeformStep, PathMode, PlaneCcStrategy, StepError, Strategy};
-use crate::surface_path::{eval2, SAFETY};
+use crate::surface_path::{
+    check_reach, cross, distinct, dot, eval2, norm, step_error, subdivide, tool_side_sign, SAFETY,
+};
 use shared::nurbs::surface::SurfaceData;
 
 /// Grid cells per knot span in each direction.
@@ -99,43 +101,13 @@ pub struct PlanePath {
     pub length_mm: f64,
 }
 
-fn dot(a: [f64; 3], b: [f64; 3]) -> f64 {
-    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
-}
-fn cross(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
-    [
-        a[1] * b[2] - a[2] * b[1],
-        a[2] * b[0] - a[0] * b[2],
-        a[0] * b[1] - a[1] * b[0],
-    ]
-}
-fn norm(a: [f64; 3]) -> f64 {
-    dot(a, a).sqrt()
-}
 fn scale(a: [f64; 3], k: f64) -> [f64; 3] {
     [a[0] * k, a[1] * k, a[2] * k]
 }
 
-fn distinct(knots: &[f64]) -> Vec<f64> {
-    let mut out: Vec<f64> = Vec::new();
-    for &k in knots {
-        if out.last() != Some(&k) {
-            out.push(k);
-        }
-    }
-    out
-}
-
 /// Grid lines of one direction: `CELLS_PER_SPAN` per knot span, the knots exactly.
 fn grid_lines(breaks: &[f64]) -> Vec<f64> {
-    let mut out = Vec::new();
-    for w in breaks.windows(2) {
-        for s in 0..CELLS_PER_SPAN {
-            out.push(w[0] + (w[1] - w[0]) * s as f64 / CELLS_PER_SPAN as f64);
-        }
-    }
-    out.extend(breaks.last());
-    out
+    subdivide(breaks, CELLS_PER_SPAN)
 }
 
 /// What the spacing needs at a surface point, for planes with unit normal `n`.
@@ -472,54 +444,12 @@ fn tool_side(
     gu: &[f64],
     gv: &[f64],
 ) -> Result<f64, StepError> {
-    let fail = |rule: &'static str, message: String| StepError {
-        line: step.line,
-        id: Some(step.id),
-        rule,
-        message,
-    };
-    let mut nz_sum = 0.0;
+    let sign = tool_side_sign(s, gu.iter().flat_map(|&u| gv.iter().map(move |&v| (u, v))));
     for &u in gu {
         for &v in gv {
-            let d = eval2(s, u, v);
-            let n = cross(d.su, d.sv);
-            nz_sum += n[2] / norm(n).max(f64::MIN_POSITIVE);
-        }
-    }
-    let sign = if nz_sum >= 0.0 { 1.0 } else { -1.0 };
-    let r = step.tool.radius_mm();
-    for &u in gu {
-        for &v in gv {
-            let l = plane_local(s, u, v, st.normal, sign).ok_or_else(|| {
-                fail(
-                    "surface",
-                    format!(
-                        "surface #{} is degenerate at (u, v) = ({u:.4}, {v:.4})",
-                        step.surface.id
-                    ),
-                )
-            })?;
-            if l.n[2] <= 1e-9 {
-                return Err(fail(
-                    "surface",
-                    format!(
-                        "surface #{} turns away from the tool axis at (u, v) = ({u:.4}, {v:.4}): \
-                         a 3-axis ball end mill cannot reach it",
-                        step.surface.id
-                    ),
-                ));
-            }
-            if 1.0 / r + l.kappa_min <= 0.0 {
-                return Err(fail(
-                    "gouge",
-                    format!(
-                        "surface #{} is concave with radius {:.3} mm at (u, v) = ({u:.4}, \
-                         {v:.4}), tighter than the ball radius {r} mm",
-                        step.surface.id,
-                        -1.0 / l.kappa_min
-                    ),
-                ));
-            }
+            let l = plane_local(s, u, v, st.normal, sign);
+            check_reach(step, u, v, l.as_ref().map(|l| (l.n, l.kappa_min)))?;
+            let Some(l) = l else { continue };
             if l.slope < MIN_SLOPE_DEG.to_radians().sin() {
                 return Err(StepError {
                     line: st.normal_line,
@@ -578,19 +508,12 @@ pub fn grid(s: &SurfaceData<'_>, st: &PlaneCcStrategy, radius_mm: f64, sign: f64
 
 /// Plans the plane-parallel passes of a workingstep with a `PLANE_CC_STRATEGY`.
 pub fn plan(step: &FreeformStep) -> Result<PlanePath, StepError> {
+    let fail = |rule: &'static str, message: String| step_error(step, rule, message);
     let Strategy::PlaneCc(st) = &step.strategy else {
-        return Err(StepError {
-            line: step.line,
-            id: Some(step.id),
-            rule: "internal",
-            message: "plane planner called for another strategy".into(),
-        });
-    };
-    let fail = |rule: &'static str, message: String| StepError {
-        line: step.line,
-        id: Some(step.id),
-        rule,
-        message,
+        return Err(fail(
+            "internal",
+            "plane planner called for another strategy".into(),
+        ));
     };
     let s = step.surface.data();
     let r = step.tool.radius_mm();
