@@ -340,6 +340,9 @@ struct Shape {
     t_end: [f64; 3],
     k_start: [f64; 3],
     k_end: [f64; 3],
+    /// `|dk/ds|` at the start and at the end (1/mm²).
+    dk_start: f64,
+    dk_end: f64,
     /// Surface blocks: the largest ratio of the tool point's speed to the contact
     /// point's (the speeds above are the contact's); `None` for curves.
     surface_ratio: Option<f64>,
@@ -403,6 +406,8 @@ fn shape(g: Geometry, machine: &Machine, period_s: f64, feed_mm_s: f64) -> Shape
     };
     let first = pts.first().copied().unwrap_or(([1.0, 0.0, 0.0], [0.0; 3]));
     let last = pts.last().copied().unwrap_or(first);
+    let dk_first = dk.first().map_or(0.0, |d| path::norm(*d));
+    let dk_last = dk.last().map_or(dk_first, |d| path::norm(*d));
     let mut v = feed_mm_s;
     for jump in jumps {
         if *jump > 1e-9 {
@@ -476,6 +481,8 @@ fn shape(g: Geometry, machine: &Machine, period_s: f64, feed_mm_s: f64) -> Shape
         t_end: last.0,
         k_start: first.1,
         k_end: last.1,
+        dk_start: dk_first,
+        dk_end: dk_last,
         surface_ratio: surface.then_some(ratio),
         m_start: match g {
             Geometry::Curve(b) if surface => Some(tool_rate(b, 0.0)),
@@ -582,6 +589,8 @@ fn shape_straight(d: [f64; 3], lim: &StraightLimits, feed_mm_s: f64) -> Option<S
         t_end: t,
         k_start: [0.0; 3],
         k_end: [0.0; 3],
+        dk_start: 0.0,
+        dk_end: 0.0,
         surface_ratio: None,
         m_start: None,
         m_end: None,
@@ -847,8 +856,18 @@ fn junction_speed(a: &Shape, b: &Shape, machine: &Machine, period_s: f64) -> (f6
     let half_sin = (0.5 * (1.0 - cos)).max(0.0).sqrt();
     let mut kink = None;
     if half_sin > 1e-7 {
-        let acc_t = acc * period_s / r;
+        let mut acc_t = acc * period_s / r;
         v = v.min(acc_t / (2.0 * half_sin));
+        if ratio.is_none() {
+            // The direction change with the normal acceleration there takes at most
+            // `KINK_SHARE` of the path's, so the profile keeps some (see `junction_load`).
+            let load = Load::of(a, b, half_sin, 0.0, period_s);
+            let share = KINK_SHARE * machine.path_acc_mm_per_s2;
+            if load.acc(v) > share {
+                v = load.speed_for_acc(share);
+            }
+            acc_t = acc_t.min(share * period_s);
+        }
         kink = Some(Kink {
             j: 0,
             s: 0.0,
@@ -867,8 +886,121 @@ fn junction_speed(a: &Shape, b: &Shape, machine: &Machine, period_s: f64) -> (f6
     let dk = path::norm(sub(a.k_end, b.k_start));
     if dk > 1e-9 {
         v = v.min((jerk * period_s / dk).sqrt() / r);
+        if ratio.is_none() {
+            // The acceleration's step with the normal jerk there takes at most
+            // `JUMP_SHARE` of the path's jerk.
+            let load = Load::of(a, b, half_sin, dk, period_s);
+            let share = JUMP_SHARE * machine.path_jerk_mm_per_s3;
+            if load.jerk(v) > share {
+                v = load.speed_for_jerk(share);
+            }
+        }
     }
     (v, kink)
+}
+
+/// Share of the path acceleration a kink's direction change in one period may take,
+/// with the normal acceleration of the curves at the junction; the profile of the two
+/// blocks keeps what that leaves at the junction speed, at least `sqrt(1 − share²)` of
+/// it (the direction change is normal to the path, so the two add as a right angle).
+const KINK_SHARE: f64 = 0.9;
+/// The same for a jump in curvature (a degree-2 curve's knot, a line meeting an arc):
+/// the share of the path jerk the acceleration's step in one period may take, with the
+/// normal jerk of the curves there.
+const JUMP_SHARE: f64 = 0.8;
+
+/// What a junction between two curves puts on the set-points besides the profile along
+/// the path, as a function of the speed `v` it is passed at: the acceleration normal to
+/// the path (a kink's direction change in one period, `v·2·sin(θ/2)/T`, and the
+/// curvature's `v²·κ`), and the jerk normal to it (a curvature jump's step in one period,
+/// `v²·Δk/T`, and the curvature's `3·v·a_t·κ + v³·|dk/ds|`). Both grow with `v`.
+#[derive(Debug, Clone, Copy)]
+struct Load {
+    /// `2·sin(θ/2)/T`.
+    turn_rate: f64,
+    kappa: f64,
+    /// `Δk/T`.
+    jump_rate: f64,
+    /// The larger side's `3·a_t·κ` and `|dk/ds|`.
+    acc_kappa3: f64,
+    dk: f64,
+}
+
+impl Load {
+    fn of(a: &Shape, b: &Shape, half_sin: f64, dk_jump: f64, period_s: f64) -> Load {
+        let (ka, kb) = (path::norm(a.k_end), path::norm(b.k_start));
+        Load {
+            turn_rate: 2.0 * half_sin / period_s,
+            kappa: ka.max(kb),
+            jump_rate: dk_jump / period_s,
+            acc_kappa3: (3.0 * a.acc * ka).max(3.0 * b.acc * kb),
+            dk: a.dk_end.max(b.dk_start),
+        }
+    }
+
+    fn acc(&self, v: f64) -> f64 {
+        v * self.turn_rate + v * v * self.kappa
+    }
+
+    fn jerk(&self, v: f64) -> f64 {
+        v * v * self.jump_rate + v * self.acc_kappa3 + v * v * v * self.dk
+    }
+
+    /// The speed whose `acc` is `share`: the positive root of `κ·v² + c·v = share`.
+    fn speed_for_acc(&self, share: f64) -> f64 {
+        let c = self.turn_rate;
+        2.0 * share / (c + (c * c + 4.0 * self.kappa * share).sqrt())
+    }
+
+    /// The highest speed whose `jerk` is at most `share` (bisection; `jerk` grows with `v`).
+    fn speed_for_jerk(&self, share: f64) -> f64 {
+        let (mut lo, mut hi) = (0.0f64, 1.0f64);
+        while self.jerk(hi) <= share && hi < 1e9 {
+            hi *= 2.0;
+        }
+        for _ in 0..64 {
+            let mid = 0.5 * (lo + hi);
+            if self.jerk(mid) <= share {
+                lo = mid;
+            } else {
+                hi = mid;
+            }
+        }
+        lo
+    }
+}
+
+/// The tangential acceleration and jerk the profiles of the two blocks at a junction
+/// between curves may keep, passed at `v`: what [`Load`] leaves of the path's limits
+/// (`sqrt(A² − acc²)`, `sqrt(J² − jerk²)`); `None` where nothing is taken (a smooth
+/// junction, or one between surface blocks, whose shares are their own).
+fn junction_leaves(a: &Shape, b: &Shape, v: f64, machine: &Machine, period_s: f64) -> Option<Jerk> {
+    if a.surface_ratio.is_some() || b.surface_ratio.is_some() {
+        return None;
+    }
+    let cos = dot(a.t_end, b.t_start).clamp(-1.0, 1.0);
+    let half_sin = (0.5 * (1.0 - cos)).max(0.0).sqrt();
+    let dk = path::norm(sub(a.k_end, b.k_start));
+    let kinked = half_sin > 1e-7;
+    let jumps = dk > 1e-9;
+    if !(kinked || jumps) || v <= 0.0 {
+        return None;
+    }
+    let load = Load::of(a, b, half_sin, dk, period_s);
+    let left = |limit: f64, taken: f64| (limit * limit - taken * taken).max(0.0).sqrt();
+    let (a_path, j_path) = (machine.path_acc_mm_per_s2, machine.path_jerk_mm_per_s3);
+    Some(Jerk {
+        acc: if kinked {
+            left(a_path, load.acc(v))
+        } else {
+            f64::INFINITY
+        },
+        jerk: if jumps {
+            left(j_path, load.jerk(v))
+        } else {
+            f64::INFINITY
+        },
+    })
 }
 
 /// A kink at the end of block `j`, `s` mm along the path.
@@ -914,8 +1046,11 @@ impl CloseKinks {
         self.recent.clear();
     }
 
-    /// Kink `k`, its junction speed already in `end[k.j]`; lowers `end` in place.
-    fn push(&mut self, k: Kink, end: &mut [f64]) {
+    /// Kink `k`, its junction speed already in `end[k.j]`; lowers `end` in place. When
+    /// `k` closes a run, returns the blocks the run's steps may touch (`first..=last`,
+    /// the block before its first kink to the one after `k`) and the acceleration its
+    /// whole direction change may take (mm/s²), which their profiles must leave room for.
+    fn push(&mut self, k: Kink, end: &mut [f64]) -> Option<(usize, usize, f64)> {
         let two_steps = 2.0 * self.period_s;
         self.v_bound = self.v_bound.max(end[k.j]);
         while self
@@ -937,14 +1072,30 @@ impl CloseKinks {
             acc_t = acc_t.min(l.acc_t);
             first = i;
         }
+        let mut run = None;
         if first < self.recent.len() {
             let v = acc_t / (2.0 * (0.5 * turn.min(std::f64::consts::PI)).sin());
             for l in self.recent.range(first..) {
                 end[l.j] = end[l.j].min(v);
             }
             end[k.j] = end[k.j].min(v);
+            run = Some((self.recent[first].j, k.j + 1, acc_t / self.period_s));
         }
         self.recent.push_back(k);
+        run
+    }
+}
+
+/// Lowers a block's profile limits to `left` where they are higher.
+fn keep_within<B: Plannable>(b: &mut B, left: Jerk) {
+    let now = b.limits();
+    if left.acc < now.acc || left.jerk < now.jerk {
+        let limits = Jerk {
+            acc: now.acc.min(left.acc),
+            jerk: now.jerk.min(left.jerk),
+        };
+        let (length, feed) = (b.length_mm(), b.feed_mm_per_min());
+        b.set_caps(length, feed, limits);
     }
 }
 
@@ -1033,9 +1184,25 @@ pub fn plan<B: Plannable>(blocks: &mut [B], machine: &Machine, period_ns: u64) {
                     end[j] = v
                         .min(b.feed_mm_per_min() / 60.0)
                         .min(nb.feed_mm_per_min() / 60.0);
+                    // What the junction takes at that speed, the blocks' profiles leave.
+                    if let Some(left) = junction_leaves(sa, sb, end[j], machine, period_s) {
+                        keep_within(&mut blocks[j], left);
+                        keep_within(&mut blocks[i], left);
+                    }
                     if let Some(k) = kink.filter(|_| end[j] > 0.0) {
                         let at = s - blocks[i].length_mm();
-                        close.push(Kink { j, s: at, ..k }, &mut end);
+                        if let Some((first, last, acc)) =
+                            close.push(Kink { j, s: at, ..k }, &mut end)
+                        {
+                            let a_path = machine.path_acc_mm_per_s2;
+                            let left = Jerk {
+                                acc: (a_path * a_path - acc * acc).max(0.0).sqrt(),
+                                jerk: f64::INFINITY,
+                            };
+                            for b in &mut blocks[first..=last.min(i)] {
+                                keep_within(b, left);
+                            }
+                        }
                     }
                 }
             }
