@@ -1139,16 +1139,26 @@ impl Engine {
                         None => {
                             let (v1, a1, mut ds) = self.profile_step(&m);
                             // Arriving at a stop: land on it exactly rather than creep
-                            // the last fraction of a jerk step.
-                            // (A thousandth of a jerk step: the jump it leaves is far
-                            // below the jerk limit.)
+                            // the last fraction of a jerk step: within a thousandth of
+                            // a jerk step's distance, when the speed and acceleration
+                            // left are a hundredth of one step's (so the jump dropping
+                            // them leaves is far below the jerk limit). A landing with
+                            // more left (the braking ends a fraction of a period into
+                            // the next cycle) runs on: dropped at once, it put up to 70
+                            // mm/s² into one period, and a next move starting in the
+                            // next cycle added its own jerk to it (1.03 times the limit
+                            // at a pass end of a surface part).
                             let snap = 1e-3
                                 * m.block.jerk_mm_per_s3.max(self.lim.path_jerk_mm_per_s3)
                                 * t
                                 * t
                                 * t;
                             let (mut v1, mut a1) = (v1, a1);
-                            if v_exit <= 0.0 && s_rem - ds <= snap && v1 <= 1e3 * snap / t {
+                            if v_exit <= 0.0
+                                && s_rem - ds <= snap
+                                && v1 <= 10.0 * snap / t
+                                && a1.abs() <= 10.0 * snap / (t * t)
+                            {
                                 ds = s_rem;
                                 v1 = 0.0;
                                 a1 = 0.0;

@@ -329,39 +329,19 @@ fn surface_parts_keep_every_limit_away_from_tool_path_kinks() {
             .collect();
         let surface_blocks = blocks.iter().filter(|b| b.is_surface()).count();
         assert_eq!(!kinks.is_empty(), kinked, "{name}: {} kinks", kinks.len());
-        // The landings on exact stops (pass ends, lifts) apart: see below.
-        let stops: HashSet<u64> = blocks
-            .windows(2)
-            .filter(|w| w[0].is_surface() && w[0].end_feed_mm_per_min <= 0.0)
-            .map(|w| w[1].seq)
-            .collect();
-        let away = check_with_kinks(
-            &blocks,
-            &cycles,
-            &machine,
-            &kinks.union(&stops).copied().collect(),
-        );
         let w = check_with_kinks(&blocks, &cycles, &machine, &kinks);
         println!(
-            "{name}: {} cycles, {surface_blocks} surface blocks, {} tool path kinks, {} stops; \
-             jerk away from stops {:.4}, at stops {:.4}; {w:?}",
+            "{name}: {} cycles, {surface_blocks} surface blocks, {} tool path kinks; {w:?}",
             cycles.len(),
             kinks.len(),
-            stops.len(),
-            away.jerk,
-            w.jerk
         );
         // The speed is the contact point's (the feed), which the tool point's exceeds
         // on convex sections: not checked here.
         assert!(w.acc <= 1.0 + 1e-3, "{name}: acceleration {w:?}");
-        assert!(away.jerk <= 1.0 + 1e-2, "{name}: jerk {away:?}");
-        // NOT MET YET: a pass that ends at rest may land with a little deceleration left,
-        // dropped in one period: 1.033 times the jerk limit at one of the plane part's
-        // stops (cycle 43 313, between its blocks 360 and 361). The braking to a stop
-        // lands short of its exact end (the engine then ends the block at rest), by
-        // about 1e-5 mm here; the cause is not found yet. The same is seen at the end of
-        // a crawling span of a random degree-5 curve (1.19 times; see the README).
-        assert!(w.jerk <= 1.05, "{name}: jerk at a stop {w:?}");
+        // (Landings on the exact stops at the passes' ends once reached 1.033 times the
+        // jerk limit here: the engine dropped what was left of the braking, up to 70
+        // mm/s², within one period, and the next move started in the next cycle.)
+        assert!(w.jerk <= 1.0 + 1e-2, "{name}: jerk {w:?}");
         assert!(w.chord <= 1.0 + 1e-3, "{name}: chord {w:?}");
     }
 }
@@ -699,6 +679,25 @@ fn junctions_leave_the_profile_its_share() {
         assert!(w.jerk <= 1.0 + 1e-2, "jerk {w:?}\n{text}");
         assert!(w.chord <= 1.0 + 1e-3, "chord {w:?}\n{text}");
     }
+}
+
+/// A degree-5 curve whose control polygon nearly turns back (a near-cusp holds its last
+/// span to 0.57 mm/s): its stop at the end once reached 1.19 times the jerk limit. The
+/// span's length was measured 4.7e-5 mm long (the speed `|C'|` dips nearly to zero in
+/// it, which 32 Gauss–Legendre pieces do not follow), so the braking still had that much
+/// to go where the curve ended, and the engine dropped 59 mm/s² of deceleration in one
+/// period (fixed: `shared::nurbs::arc_length` halves the pieces until they agree).
+#[test]
+fn a_near_cusp_span_lands_its_stop() {
+    let text = "G21 G17\nG0 X0.0000 Y0.0000\nG1 F3000\nG5.2 P1.0000 L6\n\
+        X21.0835 Y8.9963 P0.5964\nX23.0940 Y3.6389 P1.6911\nX36.8052 Y13.9383 P1.3610\n\
+        X54.4620 Y-1.5084 P0.9276\nX54.6994 Y-2.5634 P1.6340\nX36.0415 Y-7.0921 P1.6229\n\
+        X36.5474 Y-9.5268 P1.8650\nX54.0403 Y0.6353 P1.9294\nG5.3\nM2\n";
+    let machine = Machine::default();
+    let (blocks, cycles) = step(text, &machine);
+    let w = check(&blocks, &cycles, &machine);
+    assert!(w.jerk <= 1.0 + 1e-2, "{w:?}");
+    assert!(w.acc <= 1.0 + 1e-3 && w.speed <= 1.0 + 1e-6, "{w:?}");
 }
 
 /// A larger random search than the fixed-seed tests above, for exploring: the worst

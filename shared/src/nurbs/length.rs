@@ -10,8 +10,22 @@ const GL5: [(f64, f64); 5] = [
 ];
 
 /// Length of a curve given the distinct knots `breaks` of its domain and its speed
-/// `|C'(u)|`. Each span is cut into `subdiv` pieces for rational curves.
+/// `|C'(u)|`. Each span is cut into `subdiv` pieces (for rational curves), and each pair
+/// of neighbouring pieces is checked against the rule over both at once: where the two
+/// differ by more than [`REL_TOL`] the pieces are halved again, down to [`MAX_DEPTH`]
+/// halvings. Where they agree (every piece of an ordinary curve) the result is the sum
+/// of the `subdiv` pieces, in order. A curve whose speed dips nearly to zero inside a
+/// span (a control polygon folding back on itself) is no polynomial there: 32 pieces
+/// of a 24 mm span left 4.7e-5 mm out, and the interpolator, which lands exact stops
+/// on this length, came to the curve's end with speed still to lose.
 pub fn arc_length(knots: &[f64], subdiv: usize, speed: impl Fn(f64) -> f64) -> f64 {
+    let rule = |x0: f64, x1: f64| {
+        let (mid, half) = (0.5 * (x0 + x1), 0.5 * (x1 - x0));
+        GL5.iter()
+            .map(|&(x, wt)| wt * speed(mid + half * x))
+            .sum::<f64>()
+            * half
+    };
     let mut total = 0.0;
     for w in knots.windows(2) {
         let (a, b) = (w[0], w[1]);
@@ -19,15 +33,46 @@ pub fn arc_length(knots: &[f64], subdiv: usize, speed: impl Fn(f64) -> f64) -> f
             continue;
         }
         let h = (b - a) / subdiv as f64;
-        for s in 0..subdiv {
-            let (x0, x1) = (a + h * s as f64, a + h * (s + 1) as f64);
-            let (mid, half) = (0.5 * (x0 + x1), 0.5 * (x1 - x0));
-            total += GL5
-                .iter()
-                .map(|&(x, wt)| wt * speed(mid + half * x))
-                .sum::<f64>()
-                * half;
+        let at = |s: usize| a + h * s as f64;
+        let mut s = 0;
+        while s < subdiv {
+            if s + 1 == subdiv {
+                total += rule(at(s), at(s + 1));
+                break;
+            }
+            let (x0, x1, x2) = (at(s), at(s + 1), at(s + 2));
+            let (left, right) = (rule(x0, x1), rule(x1, x2));
+            if agree(rule(x0, x2), left + right) {
+                total += left;
+                total += right;
+            } else {
+                total += refined(&rule, x0, x1, left, MAX_DEPTH);
+                total += refined(&rule, x1, x2, right, MAX_DEPTH);
+            }
+            s += 2;
         }
     }
     total
+}
+
+/// How far the rule over a piece may differ from the sum over its halves, relative to
+/// the length (the rule's own error is far smaller where the two agree): a thousandth
+/// of a nanometre per metre. Rounding alone stays below 1e-15.
+const REL_TOL: f64 = 1e-12;
+/// Most halvings of a piece: a 2^-24 share of a span at the most.
+const MAX_DEPTH: u32 = 24;
+
+fn agree(whole: f64, halves: f64) -> bool {
+    (whole - halves).abs() <= REL_TOL * halves.abs() + 1e-15
+}
+
+/// The length over `[x0, x1]`, whose rule gave `whole`, halved until the halves agree.
+fn refined(rule: &impl Fn(f64, f64) -> f64, x0: f64, x1: f64, whole: f64, depth: u32) -> f64 {
+    let xm = 0.5 * (x0 + x1);
+    let (left, right) = (rule(x0, xm), rule(xm, x1));
+    if depth == 0 || agree(whole, left + right) {
+        left + right
+    } else {
+        refined(rule, x0, xm, left, depth - 1) + refined(rule, xm, x1, right, depth - 1)
+    }
 }
