@@ -340,9 +340,9 @@ struct Shape {
     t_end: [f64; 3],
     k_start: [f64; 3],
     k_end: [f64; 3],
-    /// `|dk/ds|` at the start and at the end (1/mm²).
-    dk_start: f64,
-    dk_end: f64,
+    /// `dk/ds` at the start and at the end (1/mm²).
+    dk_start: [f64; 3],
+    dk_end: [f64; 3],
     /// Surface blocks: the largest ratio of the tool point's speed to the contact
     /// point's (the speeds above are the contact's); `None` for curves.
     surface_ratio: Option<f64>,
@@ -406,8 +406,8 @@ fn shape(g: Geometry, machine: &Machine, period_s: f64, feed_mm_s: f64) -> Shape
     };
     let first = pts.first().copied().unwrap_or(([1.0, 0.0, 0.0], [0.0; 3]));
     let last = pts.last().copied().unwrap_or(first);
-    let dk_first = dk.first().map_or(0.0, |d| path::norm(*d));
-    let dk_last = dk.last().map_or(dk_first, |d| path::norm(*d));
+    let dk_first = dk.first().copied().unwrap_or([0.0; 3]);
+    let dk_last = dk.last().copied().unwrap_or(dk_first);
     let mut v = feed_mm_s;
     for jump in jumps {
         if *jump > 1e-9 {
@@ -589,8 +589,8 @@ fn shape_straight(d: [f64; 3], lim: &StraightLimits, feed_mm_s: f64) -> Option<S
         t_end: t,
         k_start: [0.0; 3],
         k_end: [0.0; 3],
-        dk_start: 0.0,
-        dk_end: 0.0,
+        dk_start: [0.0; 3],
+        dk_end: [0.0; 3],
         surface_ratio: None,
         m_start: None,
         m_end: None,
@@ -860,13 +860,14 @@ fn junction_speed(a: &Shape, b: &Shape, machine: &Machine, period_s: f64) -> (f6
         v = v.min(acc_t / (2.0 * half_sin));
         if ratio.is_none() {
             // The direction change with the normal acceleration there takes at most
-            // `KINK_SHARE` of the path's, so the profile keeps some (see `junction_load`).
-            let load = Load::of(a, b, half_sin, 0.0, period_s);
-            let share = KINK_SHARE * machine.path_acc_mm_per_s2;
-            if load.acc(v) > share {
-                v = load.speed_for_acc(share);
-            }
-            acc_t = acc_t.min(share * period_s);
+            // `KINK_SHARE` of the path's and of each axis's, so the profile keeps some
+            // (see `junction_leaves`).
+            let (acc_limits, _) = limits_of(machine);
+            v = Load::of(a, b, period_s).acc_speed(v, &acc_limits, KINK_SHARE);
+            // A run of close kinks (`CloseKinks`) bounds its whole direction change,
+            // whose every axis's share is at most its length.
+            let weakest = acc_limits.iter().fold(f64::INFINITY, |m, x| m.min(*x));
+            acc_t = acc_t.min(KINK_SHARE * weakest * period_s);
         }
         kink = Some(Kink {
             j: 0,
@@ -888,115 +889,172 @@ fn junction_speed(a: &Shape, b: &Shape, machine: &Machine, period_s: f64) -> (f6
         v = v.min((jerk * period_s / dk).sqrt() / r);
         if ratio.is_none() {
             // The acceleration's step with the normal jerk there takes at most
-            // `JUMP_SHARE` of the path's jerk.
-            let load = Load::of(a, b, half_sin, dk, period_s);
-            let share = JUMP_SHARE * machine.path_jerk_mm_per_s3;
-            if load.jerk(v) > share {
-                v = load.speed_for_jerk(share);
-            }
+            // `JUMP_SHARE` of the path's jerk and of each axis's.
+            let (_, jerk_limits) = limits_of(machine);
+            v = Load::of(a, b, period_s).jerk_speed(v, &jerk_limits, JUMP_SHARE);
         }
     }
     (v, kink)
 }
 
-/// Share of the path acceleration a kink's direction change in one period may take,
-/// with the normal acceleration of the curves at the junction; the profile of the two
-/// blocks keeps what that leaves at the junction speed, at least `sqrt(1 − share²)` of
-/// it (the direction change is normal to the path, so the two add as a right angle).
+/// Share of the path's (and each axis's) acceleration a kink's direction change in one
+/// period may take, with the normal acceleration of the curves at the junction; the
+/// profile of the two blocks keeps what that leaves at the junction speed: along the
+/// path at least `sqrt(1 − share²)` of it (the direction change is normal to the path,
+/// so the two add as a right angle), and on each axis what the step leaves of its own.
 const KINK_SHARE: f64 = 0.9;
 /// The same for a jump in curvature (a degree-2 curve's knot, a line meeting an arc):
-/// the share of the path jerk the acceleration's step in one period may take, with the
+/// the share of the jerk the acceleration's step in one period may take, with the
 /// normal jerk of the curves there.
 const JUMP_SHARE: f64 = 0.8;
 
+/// Where [`Load`]'s figures and the machine's limits are kept together: one per axis,
+/// then the path's.
+const PATH: usize = 3;
+
+/// The machine's acceleration and jerk limits, each axis's then the path's.
+fn limits_of(machine: &Machine) -> ([f64; 4], [f64; 4]) {
+    let ax = machine.axes.as_array();
+    (
+        [
+            ax[0].max_acc_mm_per_s2,
+            ax[1].max_acc_mm_per_s2,
+            ax[2].max_acc_mm_per_s2,
+            machine.path_acc_mm_per_s2,
+        ],
+        [
+            ax[0].max_jerk_mm_per_s3,
+            ax[1].max_jerk_mm_per_s3,
+            ax[2].max_jerk_mm_per_s3,
+            machine.path_jerk_mm_per_s3,
+        ],
+    )
+}
+
 /// What a junction between two curves puts on the set-points besides the profile along
-/// the path, as a function of the speed `v` it is passed at: the acceleration normal to
-/// the path (a kink's direction change in one period, `v·2·sin(θ/2)/T`, and the
-/// curvature's `v²·κ`), and the jerk normal to it (a curvature jump's step in one period,
-/// `v²·Δk/T`, and the curvature's `3·v·a_t·κ + v³·|dk/ds|`). Both grow with `v`.
+/// the path, as a function of the speed `v` it is passed at, on each axis and along the
+/// path (index [`PATH`]: lengths of the vectors): the acceleration normal to the path (a
+/// kink's velocity step in one period, `v·(T_b − T_a)/T`, and the curvature's `v²·k`),
+/// and the jerk normal to it (a curvature jump's step in one period, `v²·Δk/T`, and the
+/// curvature's `3·v·a_t·k + v³·dk/ds`). All grow with `v`. Per axis the larger of the
+/// two blocks' figures is taken.
 #[derive(Debug, Clone, Copy)]
 struct Load {
-    /// `2·sin(θ/2)/T`.
-    turn_rate: f64,
-    kappa: f64,
-    /// `Δk/T`.
-    jump_rate: f64,
-    /// The larger side's `3·a_t·κ` and `|dk/ds|`.
-    acc_kappa3: f64,
-    dk: f64,
+    /// `|T_b − T_a|/T`.
+    turn: [f64; 4],
+    kappa: [f64; 4],
+    /// `|k_b − k_a|/T`.
+    jump: [f64; 4],
+    /// `3·a_t·|k|`.
+    acc_kappa3: [f64; 4],
+    dk: [f64; 4],
 }
 
 impl Load {
-    fn of(a: &Shape, b: &Shape, half_sin: f64, dk_jump: f64, period_s: f64) -> Load {
-        let (ka, kb) = (path::norm(a.k_end), path::norm(b.k_start));
+    fn of(a: &Shape, b: &Shape, period_s: f64) -> Load {
+        let each = |f: &dyn Fn(usize) -> f64, whole: f64| [f(0), f(1), f(2), whole];
+        let turn = sub(b.t_start, a.t_end);
+        let jump = sub(b.k_start, a.k_end);
+        let (ka, kb) = (a.k_end, b.k_start);
+        let larger = |x: [f64; 3], y: [f64; 3]| {
+            each(
+                &|i| x[i].abs().max(y[i].abs()),
+                path::norm(x).max(path::norm(y)),
+            )
+        };
+        let acc_kappa3 = each(
+            &|i| (3.0 * a.acc * ka[i].abs()).max(3.0 * b.acc * kb[i].abs()),
+            (3.0 * a.acc * path::norm(ka)).max(3.0 * b.acc * path::norm(kb)),
+        );
         Load {
-            turn_rate: 2.0 * half_sin / period_s,
-            kappa: ka.max(kb),
-            jump_rate: dk_jump / period_s,
-            acc_kappa3: (3.0 * a.acc * ka).max(3.0 * b.acc * kb),
-            dk: a.dk_end.max(b.dk_start),
+            turn: each(&|i| turn[i].abs() / period_s, path::norm(turn) / period_s),
+            kappa: larger(ka, kb),
+            jump: each(&|i| jump[i].abs() / period_s, path::norm(jump) / period_s),
+            acc_kappa3,
+            dk: larger(a.dk_end, b.dk_start),
         }
     }
 
-    fn acc(&self, v: f64) -> f64 {
-        v * self.turn_rate + v * v * self.kappa
+    fn acc(&self, c: usize, v: f64) -> f64 {
+        v * self.turn[c] + v * v * self.kappa[c]
     }
 
-    fn jerk(&self, v: f64) -> f64 {
-        v * v * self.jump_rate + v * self.acc_kappa3 + v * v * v * self.dk
+    fn jerk(&self, c: usize, v: f64) -> f64 {
+        v * v * self.jump[c] + v * self.acc_kappa3[c] + v * v * v * self.dk[c]
     }
 
-    /// The speed whose `acc` is `share`: the positive root of `κ·v² + c·v = share`.
-    fn speed_for_acc(&self, share: f64) -> f64 {
-        let c = self.turn_rate;
-        2.0 * share / (c + (c * c + 4.0 * self.kappa * share).sqrt())
-    }
-
-    /// The highest speed whose `jerk` is at most `share` (bisection; `jerk` grows with `v`).
-    fn speed_for_jerk(&self, share: f64) -> f64 {
-        let (mut lo, mut hi) = (0.0f64, 1.0f64);
-        while self.jerk(hi) <= share && hi < 1e9 {
-            hi *= 2.0;
-        }
-        for _ in 0..64 {
-            let mid = 0.5 * (lo + hi);
-            if self.jerk(mid) <= share {
-                lo = mid;
-            } else {
-                hi = mid;
+    /// The highest speed up to `v` whose `acc` stays within `share` of every limit:
+    /// the positive root of `κ·v² + c·v = share·limit` where a limit binds.
+    fn acc_speed(&self, mut v: f64, limits: &[f64; 4], share: f64) -> f64 {
+        for (c, limit) in limits.iter().enumerate() {
+            let room = share * limit;
+            if self.acc(c, v) > room {
+                let (k, t) = (self.kappa[c], self.turn[c]);
+                v = 2.0 * room / (t + (t * t + 4.0 * k * room).sqrt());
             }
         }
-        lo
+        v
+    }
+
+    /// The highest speed up to `v` whose `jerk` stays within `share` of every limit
+    /// (bisection where one binds; `jerk` grows with `v`).
+    fn jerk_speed(&self, mut v: f64, limits: &[f64; 4], share: f64) -> f64 {
+        for (c, limit) in limits.iter().enumerate() {
+            let room = share * limit;
+            if self.jerk(c, v) > room {
+                let (mut lo, mut hi) = (0.0f64, v);
+                for _ in 0..64 {
+                    let mid = 0.5 * (lo + hi);
+                    if self.jerk(c, mid) <= room {
+                        lo = mid;
+                    } else {
+                        hi = mid;
+                    }
+                }
+                v = lo;
+            }
+        }
+        v
     }
 }
 
 /// The tangential acceleration and jerk the profiles of the two blocks at a junction
 /// between curves may keep, passed at `v`: what [`Load`] leaves of the path's limits
-/// (`sqrt(A² − acc²)`, `sqrt(J² − jerk²)`); `None` where nothing is taken (a smooth
-/// junction, or one between surface blocks, whose shares are their own).
+/// (`sqrt(A² − acc²)`, `sqrt(J² − jerk²)`) and of each axis's (`(A_i − acc_i)/|t_i|`,
+/// with `t` the larger of the two tangents' components there); `None` where nothing is
+/// taken (a smooth junction, or one between surface blocks, whose shares are their own).
 fn junction_leaves(a: &Shape, b: &Shape, v: f64, machine: &Machine, period_s: f64) -> Option<Jerk> {
     if a.surface_ratio.is_some() || b.surface_ratio.is_some() {
         return None;
     }
-    let cos = dot(a.t_end, b.t_start).clamp(-1.0, 1.0);
-    let half_sin = (0.5 * (1.0 - cos)).max(0.0).sqrt();
-    let dk = path::norm(sub(a.k_end, b.k_start));
-    let kinked = half_sin > 1e-7;
-    let jumps = dk > 1e-9;
+    let kinked = path::norm(sub(b.t_start, a.t_end)) > 2e-7;
+    let jumps = path::norm(sub(a.k_end, b.k_start)) > 1e-9;
     if !(kinked || jumps) || v <= 0.0 {
         return None;
     }
-    let load = Load::of(a, b, half_sin, dk, period_s);
-    let left = |limit: f64, taken: f64| (limit * limit - taken * taken).max(0.0).sqrt();
-    let (a_path, j_path) = (machine.path_acc_mm_per_s2, machine.path_jerk_mm_per_s3);
+    let load = Load::of(a, b, period_s);
+    let (acc_limits, jerk_limits) = limits_of(machine);
+    let left = |limits: &[f64; 4], taken: &dyn Fn(usize) -> f64| {
+        let path = (limits[PATH] * limits[PATH] - taken(PATH).powi(2))
+            .max(0.0)
+            .sqrt();
+        (0..PATH).fold(path, |m, i| {
+            let t = a.t_end[i].abs().max(b.t_start[i].abs());
+            if t > 1e-12 {
+                m.min((limits[i] - taken(i)).max(0.0) / t)
+            } else {
+                m
+            }
+        })
+    };
     Some(Jerk {
         acc: if kinked {
-            left(a_path, load.acc(v))
+            left(&acc_limits, &|c| load.acc(c, v))
         } else {
             f64::INFINITY
         },
         jerk: if jumps {
-            left(j_path, load.jerk(v))
+            left(&jerk_limits, &|c| load.jerk(c, v))
         } else {
             f64::INFINITY
         },
@@ -1194,9 +1252,16 @@ pub fn plan<B: Plannable>(blocks: &mut [B], machine: &Machine, period_ns: u64) {
                         if let Some((first, last, acc)) =
                             close.push(Kink { j, s: at, ..k }, &mut end)
                         {
-                            let a_path = machine.path_acc_mm_per_s2;
+                            // The run's direction change, at most `acc` on the path and on
+                            // each axis: what it leaves, whatever the tangents.
+                            let (limits, _) = limits_of(machine);
+                            let path = limits[PATH];
                             let left = Jerk {
-                                acc: (a_path * a_path - acc * acc).max(0.0).sqrt(),
+                                acc: limits[..PATH]
+                                    .iter()
+                                    .fold((path * path - acc * acc).max(0.0).sqrt(), |m, a| {
+                                        m.min((a - acc).max(0.0))
+                                    }),
                                 jerk: f64::INFINITY,
                             };
                             for b in &mut blocks[first..=last.min(i)] {
