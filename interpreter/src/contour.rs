@@ -560,10 +560,18 @@ impl OwnedTraces {
     }
 }
 
-/// Measures the run in `dir` from `commands.log`, `setpoints.csv` and `feedback.csv`; the
-/// error names the file that is missing or unreadable. Reads up to the first damaged row
-/// of a CSV file (a run cut short still gives the figures of what it did).
+/// Measures the run in `dir` from `commands.log`, `setpoints.csv` and `feedback.csv` (see
+/// [`read_dir`]).
 pub fn analyse_dir(dir: &std::path::Path) -> Result<Contour, String> {
+    let (blocks, t) = read_dir(dir)?;
+    Ok(analyse(&blocks, &t.traces()))
+}
+
+/// The valid blocks of `commands.log` in `dir` and the traces of `setpoints.csv` and
+/// `feedback.csv`; the error names the file that is missing or unreadable. Reads up to
+/// the first damaged row of a CSV file (a run cut short still gives the figures of what
+/// it did).
+pub fn read_dir(dir: &std::path::Path) -> Result<(Vec<CommandBlock>, OwnedTraces), String> {
     let log = shared::cmdlog::read(&dir.join("commands.log"))?;
     let blocks: Vec<CommandBlock> = log
         .blocks
@@ -588,7 +596,7 @@ pub fn analyse_dir(dir: &std::path::Path) -> Result<Contour, String> {
             t.fb_pos_mm.push([r[1], r[2], r[3]]);
         },
     )?;
-    Ok(analyse(&blocks, &t.traces()))
+    Ok((blocks, t))
 }
 
 /// Calls `row` with the named columns of each row of a CSV file, up to the first row that

@@ -90,6 +90,13 @@ pub struct Report {
     /// predicts it; absent for G-code.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub max_scallop_mm: Option<f64>,
+    /// The largest scallop height the run left, measured after it from the machine's
+    /// positions (the balls swept along the executed path, [`crate::scallop`]), and
+    /// where on the surface; absent for G-code.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub measured_max_scallop_mm: Option<f64>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub measured_max_scallop_at_mm: Option<[f64; 3]>,
     pub sched: Option<interpolator::rt::sched::SchedReport>,
     pub miss_list: Vec<interpolator::summary::MissEntry>,
     pub processes: Vec<Process>,
@@ -184,7 +191,13 @@ pub fn assemble(
     let fault = (!faults.is_empty()).then(|| faults.join("; "));
     let i = ipol.as_ref();
     // After every process has ended: the traces are complete and nothing runs in real time.
-    let contour = crate::contour::analyse_dir(dir).ok();
+    let traces = crate::contour::read_dir(dir).ok();
+    let contour = traces
+        .as_ref()
+        .map(|(blocks, t)| crate::contour::analyse(blocks, &t.traces()));
+    let scallop = traces
+        .as_ref()
+        .and_then(|(blocks, t)| crate::scallop::measure(blocks, &t.fb_pos_mm));
     let worst = contour.as_ref().and_then(|c| c.max);
     Report {
         outcome: if fault.is_some() { "fault" } else { "done" }.into(),
@@ -224,6 +237,8 @@ pub fn assemble(
         salvaged: interp.as_ref().and_then(|s| s.salvaged.clone()),
         dialect: interp.as_ref().and_then(|s| s.dialect.clone()),
         max_scallop_mm: interp.as_ref().and_then(|s| s.max_scallop_mm),
+        measured_max_scallop_mm: scallop.map(|s| s.max_mm),
+        measured_max_scallop_at_mm: scallop.map(|s| s.at_mm),
         sched: i.map(|s| s.sched.clone()),
         miss_list: i.map(|s| s.miss_list.clone()).unwrap_or_default(),
         processes,
@@ -279,11 +294,17 @@ impl Report {
             self.max_following_error_um,
             dir.display()
         );
-        if let Some(h) = self.max_scallop_mm {
-            s.push_str(&format!(
-                "  surface      max scallop {:.2} µm (as the passes were planned)\n",
+        match (self.max_scallop_mm, self.measured_max_scallop_mm) {
+            (Some(h), Some(m)) => s.push_str(&format!(
+                "  surface      max scallop {:.2} µm measured from the machine's positions ({:.2} µm as the passes were planned)\n",
+                m * 1e3,
                 h * 1e3
-            ));
+            )),
+            (Some(h), None) => s.push_str(&format!(
+                "  surface      max scallop {:.2} µm (as the passes were planned; not measured)\n",
+                h * 1e3
+            )),
+            _ => {}
         }
         if let Some(note) = &self.salvaged {
             s.push_str(&format!("  warning      {note}\n"));
