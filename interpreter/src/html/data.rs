@@ -74,6 +74,11 @@ pub struct Report {
     pub rms_contour_error_um: Option<f64>,
     pub roundness_um: Option<f64>,
     pub roundness_radius_error_um: Option<f64>,
+    /// A STEP-NC part's largest scallop height (mm), as planned and as measured after the
+    /// run, and where; absent for G-code and in older reports.
+    pub max_scallop_mm: Option<f64>,
+    pub measured_max_scallop_mm: Option<f64>,
+    pub measured_max_scallop_at_mm: Option<[f64; 3]>,
     pub lost_setpoints: Option<u64>,
     pub blocks: Option<u64>,
     pub sched: Option<Sched>,
@@ -533,6 +538,9 @@ fn load_report(path: &Path, problems: &mut Vec<String>) -> Option<Report> {
         max_contour_error_cycle: v.get("max_contour_error_cycle").and_then(Value::as_u64),
         max_contour_error_line: v.get("max_contour_error_line").and_then(Value::as_u64),
         rms_contour_error_um: v.get("rms_contour_error_um").and_then(Value::as_f64),
+        max_scallop_mm: v.get("max_scallop_mm").and_then(Value::as_f64),
+        measured_max_scallop_mm: v.get("measured_max_scallop_mm").and_then(Value::as_f64),
+        measured_max_scallop_at_mm: v.get("measured_max_scallop_at_mm").and_then(triple),
         roundness_um: v
             .get("roundness")
             .and_then(|r| r.get("roundness_um"))

@@ -246,6 +246,24 @@ fn summary(run: &Run, max_contour: Option<f64>, out: &mut String) {
             },
         ),
     );
+    if r.max_scallop_mm.is_some() || r.measured_max_scallop_mm.is_some() {
+        let at = r.measured_max_scallop_at_mm.map_or(String::new(), |p| {
+            format!(" at X {:.3} Y {:.3} Z {:.3} mm", p[0], p[1], p[2])
+        });
+        let measured = r.measured_max_scallop_mm.map_or_else(
+            || "not measured".into(),
+            |m| format!("{:.2} µm{at}", m * 1e3),
+        );
+        let planned = r
+            .max_scallop_mm
+            .map_or_else(|| "not recorded".into(), |h| format!("{:.2} µm", h * 1e3));
+        row(
+            out,
+            "max_scallop",
+            "max scallop height (measured from the machine's positions; as planned)",
+            &format!("{measured}; planned {planned}"),
+        );
+    }
     row(
         out,
         "chord_tolerance_mm",
