@@ -228,3 +228,103 @@ fn straight_limits_refuse_a_machine_they_cannot_shortcut() {
     machine.path_acc_mm_per_s2 = 0.0;
     assert!(StraightLimits::new(&machine).is_none());
 }
+
+/// [`find_cusp`] as it was before the speed bound ([`hodograph`]) let it skip parts
+/// of the curve: every pair of samples looked at, every sample evaluated twice.
+fn find_cusp_everywhere(c: &SplitCurve, machine: &Machine) -> Option<f64> {
+    const N: usize = 64;
+    let (u0, u1) = (c.knots[0], c.knots[c.knots.len() - 1]);
+    let at = |i: usize| u0 + (u1 - u0) * i as f64 / N as f64;
+    let d1 = |u: f64| nurbs::eval(c.degree, &c.knots, &c.ctrl, u).d1;
+    let cos_corner = machine.corner_angle_deg.to_radians().cos();
+    for i in 1..N {
+        let (a, b) = (d1(at(i - 1)), d1(at(i + 1)));
+        let (na, nb) = (path::norm(a), path::norm(b));
+        if na < 1e-12 || nb < 1e-12 {
+            continue;
+        }
+        if dot(a, b) / (na * nb) >= cos_corner {
+            continue;
+        }
+        let (mut lo, mut hi) = (at(i - 1), at(i + 1));
+        for _ in 0..100 {
+            let m1 = lo + (hi - lo) / 3.0;
+            let m2 = hi - (hi - lo) / 3.0;
+            if path::norm(d1(m1)) < path::norm(d1(m2)) {
+                hi = m2;
+            } else {
+                lo = m1;
+            }
+        }
+        let u = 0.5 * (lo + hi);
+        let len = path::norm(d1(u0)).max(path::norm(d1(u1))).max(1e-9);
+        if path::norm(d1(u)) <= 1e-6 * len && u > u0 + 1e-9 * (u1 - u0) && u < u1 - 1e-9 * (u1 - u0)
+        {
+            return Some(u);
+        }
+    }
+    None
+}
+
+proptest::proptest! {
+    #![proptest_config(proptest::prelude::ProptestConfig::with_cases(1000))]
+    /// The cusp search finds what looking everywhere finds, to the bit: on Bézier spans
+    /// made to have a cusp (their derivative zero at `t0`), on zig-zag polygons, with
+    /// weights or without.
+    #[test]
+    fn cusps_are_found_where_looking_everywhere_finds_them(
+        degree in 2usize..=4,
+        pts in proptest::collection::vec((-20.0f64..20.0, -20.0f64..20.0, -2.0f64..2.0), 5),
+        weights in proptest::collection::vec(0.3f64..3.0, 5),
+        rational in proptest::bool::ANY,
+        cusp in proptest::bool::ANY,
+        t0 in 0.1f64..0.6,
+        u0 in -2.0f64..2.0,
+        width in 0.1f64..5.0,
+    ) {
+        let mut ctrl: Vec<[f64; 4]> = pts[..=degree]
+            .iter()
+            .zip(&weights)
+            .map(|(&(x, y, z), &w)| [x, y, z, if rational { w } else { 1.0 }])
+            .collect();
+        if cusp && degree == 3 {
+            // C'(t0) = 0 for a polynomial cubic: solve for P2 (weights one).
+            let s = 1.0 - t0;
+            for c in ctrl.iter_mut() {
+                c[3] = 1.0;
+            }
+            let (p0, p1, p3) = (ctrl[0], ctrl[1], ctrl[3]);
+            let k = 2.0 * t0 * s - t0 * t0;
+            for x in 0..3 {
+                ctrl[2][x] = (-(s * s) * (p1[x] - p0[x]) + 2.0 * t0 * s * p1[x] - t0 * t0 * p3[x]) / k;
+            }
+        }
+        let mut knots = vec![u0; degree + 1];
+        knots.extend(std::iter::repeat_n(u0 + width, degree + 1));
+        let c = SplitCurve { degree, knots, ctrl };
+        let machine = Machine::default();
+        let want = find_cusp_everywhere(&c, &machine);
+        let got = find_cusp(&c, &machine);
+        proptest::prop_assert_eq!(got.map(f64::to_bits), want.map(f64::to_bits));
+    }
+}
+
+#[test]
+fn a_cusp_of_a_cubic_is_found_as_before() {
+    // C'(1/2) = 0: out and back with a turn, the textbook cusp.
+    let ctrl = vec![
+        [0.0, 0.0, 0.0, 1.0],
+        [1.0, 1.0, 0.0, 1.0],
+        [0.0, 1.0, 0.0, 1.0],
+        [1.0, 0.0, 0.0, 1.0],
+    ];
+    let c = SplitCurve {
+        degree: 3,
+        knots: vec![0.0, 0.0, 0.0, 0.0, 1.0, 1.0, 1.0, 1.0],
+        ctrl,
+    };
+    let machine = Machine::default();
+    let u = find_cusp(&c, &machine).expect("a cusp");
+    assert!((u - 0.5).abs() < 1e-6, "{u}");
+    assert_eq!(Some(u), find_cusp_everywhere(&c, &machine));
+}
