@@ -66,7 +66,7 @@ proptest! {
         let bezier = SplitCurve { degree: p, knots: bezier_knots, ctrl: c.ctrl[..=p].to_vec() };
         for (c, u) in [(&c, lo + t * (hi - lo)), (&c, at_knot), (&bezier, lo + t * (hi - lo))] {
             let got = eval(c.degree, &c.knots, &c.ctrl, u);
-            let general = super::eval::eval_with::<0, 2, false>(c.degree, &c.knots, &c.ctrl, u);
+            let general = super::eval::eval_with::<0, 2, false, 10>(c.degree, &c.knots, &c.ctrl, u);
             let bits = |e: &CurvePoint| {
                 [e.p, e.d1, e.d2].concat().iter().map(|x| x.to_bits()).collect::<Vec<_>>()
             };
