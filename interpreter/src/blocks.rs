@@ -741,8 +741,11 @@ fn samples(b: &CommandBlock) -> Samples {
         (|x| path::norm(x.0 .1), &curvature),
         (|x| path::norm(x.1), &curvature_rate),
     ];
+    let mut values: Vec<f64> = Vec::with_capacity(pts.len());
     for (m, search) in measures {
-        let value = |i: usize| m(&(pts[i], dk[i]));
+        values.clear();
+        values.extend(pts.iter().zip(&dk).map(|(f, d)| m(&(*f, *d))));
+        let value = |i: usize| values[i];
         let mut peaks: Vec<usize> = (1..pts.len().saturating_sub(1))
             .filter(|&i| value(i) >= value(i - 1) && value(i) >= value(i + 1) && value(i) > 0.0)
             .collect();
