@@ -52,6 +52,10 @@ impl Hodograph {
         if p == 0 || p > MAX_DEGREE || ctrl.len() != p + 1 || knots.len() != 2 * p + 2 {
             return None;
         }
+        // Clamped: the first `p + 1` knots one number, the others another.
+        if knots[0] != knots[p] || knots[p + 1] != knots[2 * p + 1] {
+            return None;
+        }
         let width = knots[knots.len() - 1] - knots[0];
         if !(width > 0.0 && width.is_finite()) || ctrl.iter().flatten().any(|x| !x.is_finite()) {
             return None;
