@@ -31,6 +31,7 @@ use shared::Machine;
 use std::f64::consts::{FRAC_PI_2, PI};
 
 pub mod blend;
+mod hodograph;
 
 /// Most quadratic segments (of at most 90°) in one arc block: 2n+1 control points.
 const ARC_SEGMENTS_PER_BLOCK: usize = (MAX_CTRL - 1) / 2;
@@ -155,13 +156,26 @@ pub(crate) fn sweep_of(
 /// angle, as where a curve runs back along itself. The tool must stop there; a block
 /// boundary at the cusp makes it a corner the planner stops at.
 fn find_cusp(c: &SplitCurve, machine: &Machine) -> Option<f64> {
-    const N: usize = 64;
+    const N: usize = hodograph::CELLS;
     let (u0, u1) = (c.knots[0], c.knots[c.knots.len() - 1]);
     let at = |i: usize| u0 + (u1 - u0) * i as f64 / N as f64;
-    let d1 = |u: f64| nurbs::eval(c.degree, &c.knots, &c.ctrl, u).d1;
+    let d1 = |u: f64| nurbs::eval_d1(c.degree, &c.knots, &c.ctrl, u).d1;
     let cos_corner = machine.corner_angle_deg.to_radians().cos();
+    let len = path::norm(d1(u0)).max(path::norm(d1(u1))).max(1e-9);
+    // A cusp is only taken where the speed is within 1e-6 of the ends' at the minimum
+    // found: between two samples whose cells are proven well above that, the search
+    // would find none, so it is not run (for a curve that is one Bézier span, as
+    // `build` hands over; any other is searched everywhere).
+    let clear = hodograph::Hodograph::of_span(c.degree, &c.knots, &c.ctrl)
+        .map_or(0, |h| h.cells_above(1e-6 * len));
+    // Each sample's derivative is needed by the two pairs it is in.
+    let mut sampled: [Option<[f64; 3]>; N + 1] = [None; N + 1];
+    let mut sample = |i: usize| *sampled[i].get_or_insert_with(|| d1(at(i)));
     for i in 1..N {
-        let (a, b) = (d1(at(i - 1)), d1(at(i + 1)));
+        if clear >> (i - 1) & 3 == 3 {
+            continue;
+        }
+        let (a, b) = (sample(i - 1), sample(i + 1));
         let (na, nb) = (path::norm(a), path::norm(b));
         if na < 1e-12 || nb < 1e-12 {
             continue;
@@ -181,7 +195,6 @@ fn find_cusp(c: &SplitCurve, machine: &Machine) -> Option<f64> {
             }
         }
         let u = 0.5 * (lo + hi);
-        let len = path::norm(d1(u0)).max(path::norm(d1(u1))).max(1e-9);
         if path::norm(d1(u)) <= 1e-6 * len && u > u0 + 1e-9 * (u1 - u0) && u < u1 - 1e-9 * (u1 - u0)
         {
             return Some(u);
@@ -318,7 +331,11 @@ fn dot(a: [f64; 3], b: [f64; 3]) -> f64 {
 /// The path's unit tangent and curvature vector `dT/ds` (length the curvature, pointing
 /// to the centre) at `u`.
 fn frame(b: &CommandBlock, u: f64) -> Option<([f64; 3], [f64; 3])> {
-    let e = path::eval(b, u);
+    frame_at(&path::eval(b, u))
+}
+
+/// [`frame`] at a point already evaluated.
+fn frame_at(e: &nurbs::CurvePoint) -> Option<([f64; 3], [f64; 3])> {
     let sp = path::norm(e.d1);
     if sp < 1e-12 {
         return None;
@@ -612,6 +629,8 @@ type Frame = ([f64; 3], [f64; 3]);
 /// One sample: the frame and dk/ds.
 type Sample = (Frame, [f64; 3]);
 type Samples = (Vec<Frame>, Vec<[f64; 3]>, Vec<f64>);
+/// A measure of a sample, and the search of it between samples (at a parameter).
+type Measure<'a> = (fn(&Sample) -> f64, &'a dyn Fn(f64) -> Option<f64>);
 
 /// Samples of a curved block for [`shape`]: unit tangent and curvature vector at each,
 /// the curvature's derivative along the path at each, and the curvature jumps at its
@@ -619,14 +638,9 @@ type Samples = (Vec<Frame>, Vec<[f64; 3]>, Vec<f64>);
 /// Local maxima of the curvature and of its rate searched between samples, of each.
 const PEAKS_REFINED: usize = 3;
 
-/// The largest `m(f(u))` on `[lo, hi]`, by golden-section search (for one peak there),
-/// with what `f` gave there.
-fn golden_max<T>(
-    lo: f64,
-    hi: f64,
-    f: impl Fn(f64) -> Option<T>,
-    m: impl Fn(&T) -> f64,
-) -> Option<T> {
+/// Where on `[lo, hi]` the measure `f` is largest, by golden-section search (for one
+/// peak there); `None` where `f` has no value at a point it tries.
+fn golden_max(lo: f64, hi: f64, f: impl Fn(f64) -> Option<f64>) -> Option<f64> {
     const R: f64 = 0.618_033_988_749_895;
     let (mut a, mut b) = (lo, hi);
     let mut c = b - R * (b - a);
@@ -636,7 +650,7 @@ fn golden_max<T>(
         if b - a <= 1e-9 * (hi - lo) {
             break;
         }
-        if m(&fc) >= m(&fd) {
+        if fc >= fd {
             b = d;
             d = c;
             fd = fc;
@@ -650,7 +664,7 @@ fn golden_max<T>(
             fd = f(d)?;
         }
     }
-    Some(if m(&fc) >= m(&fd) { fc } else { fd })
+    Some(if fc >= fd { c } else { d })
 }
 
 fn samples(b: &CommandBlock) -> Samples {
@@ -667,15 +681,18 @@ fn samples(b: &CommandBlock) -> Samples {
             .clamp(1, spans.len().max(2) - 1);
         (spans[i - 1], spans[i.min(spans.len() - 1)])
     };
-    // The frame and dk/ds at `u` (dk/ds by a central difference inside u's span).
-    let at = |u: f64| -> Option<Sample> {
-        let (t, k) = frame(b, u)?;
+    // dk/ds at `u`, by a central difference inside u's span.
+    let rate = |u: f64| -> [f64; 3] {
         let (lo, hi) = span_of(u);
         let h = 1e-4 * (hi - lo);
         let (ua, ub) = ((u - h).max(lo), (u + h).min(hi));
-        let d = match (frame(b, ua), frame(b, ub)) {
-            (Some((_, ka)), Some((_, kb))) if ub > ua => {
-                let ds = path::norm(sub(path::eval(b, ub).p, path::eval(b, ua).p));
+        if ub.partial_cmp(&ua) != Some(std::cmp::Ordering::Greater) {
+            return [0.0; 3];
+        }
+        let (ea, eb) = (path::eval(b, ua), path::eval(b, ub));
+        match (frame_at(&ea), frame_at(&eb)) {
+            (Some((_, ka)), Some((_, kb))) => {
+                let ds = path::norm(sub(eb.p, ea.p));
                 if ds > 1e-15 {
                     sub(kb, ka).map(|x| x / ds)
                 } else {
@@ -683,9 +700,10 @@ fn samples(b: &CommandBlock) -> Samples {
                 }
             }
             _ => [0.0; 3],
-        };
-        Some(((t, k), d))
+        }
     };
+    // The frame and dk/ds at `u`; none where the curve (nearly) stops.
+    let at = |u: f64| -> Option<Sample> { Some((frame(b, u)?, rate(u))) };
     let mut us: Vec<f64> = Vec::with_capacity(samples + 1);
     let mut pts: Vec<Frame> = Vec::with_capacity(samples + 1);
     let mut dk: Vec<[f64; 3]> = Vec::with_capacity(samples + 1);
@@ -701,17 +719,48 @@ fn samples(b: &CommandBlock) -> Samples {
     // polygon folding back on itself turns in a few µm) is found between its samples:
     // the largest local maxima of each are searched (golden section) between their
     // neighbours, and what is found joins the samples (before the last, which gives
-    // the end's tangent).
+    // the end's tangent). The searches look at one measure: the curvature takes one
+    // evaluation, its rate the two of its difference, plus one to know the curve does
+    // not stop there, unless its speed is proven well above that stop
+    // ([`hodograph`]; curves without a helix that are one Bézier span).
+    let moving = match (b.helix.axis == Helix::NONE.axis)
+        .then(|| hodograph::Hodograph::of_span(b.degree as usize, b.knots(), b.ctrl()))
+        .flatten()
+    {
+        Some(h) => h.cells_above(1e-12),
+        None => 0,
+    };
+    let surely_moving = |u: f64| {
+        let cell = ((u - u0) / (u1 - u0) * hodograph::CELLS as f64).floor();
+        (0.0..hodograph::CELLS as f64).contains(&cell) && {
+            let c = cell as usize;
+            let (lo, hi) = (c.saturating_sub(1), (c + 1).min(hodograph::CELLS - 1));
+            (lo..=hi).all(|j| moving >> j & 1 == 1)
+        }
+    };
+    let curvature = |u: f64| frame(b, u).map(|(_, k)| path::norm(k));
+    let curvature_rate = |u: f64| {
+        if !surely_moving(u) {
+            frame(b, u)?;
+        }
+        Some(path::norm(rate(u)))
+    };
     let mut extra: Vec<Sample> = Vec::new();
-    let measures: [fn(&Sample) -> f64; 2] = [|x| path::norm(x.0 .1), |x| path::norm(x.1)];
-    for m in measures {
-        let value = |i: usize| m(&(pts[i], dk[i]));
+    let measures: [Measure; 2] = [
+        (|x| path::norm(x.0 .1), &curvature),
+        (|x| path::norm(x.1), &curvature_rate),
+    ];
+    let mut values: Vec<f64> = Vec::with_capacity(pts.len());
+    for (m, search) in measures {
+        values.clear();
+        values.extend(pts.iter().zip(&dk).map(|(f, d)| m(&(*f, *d))));
+        let value = |i: usize| values[i];
         let mut peaks: Vec<usize> = (1..pts.len().saturating_sub(1))
             .filter(|&i| value(i) >= value(i - 1) && value(i) >= value(i + 1) && value(i) > 0.0)
             .collect();
         peaks.sort_by(|a, b| value(*b).total_cmp(&value(*a)));
         for &i in peaks.iter().take(PEAKS_REFINED) {
-            if let Some(found) = golden_max(us[i - 1], us[i + 1], at, m) {
+            if let Some(found) = golden_max(us[i - 1], us[i + 1], search).and_then(at) {
                 extra.push(found);
             }
         }

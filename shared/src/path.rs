@@ -206,7 +206,12 @@ pub fn length(block: &CommandBlock) -> f64 {
             norm(contact(block, t, &surface_at(block, t)).d1)
         });
     }
-    nurbs::arc_length(block.knots(), 32, |u| norm(eval(block, u).d1))
+    // The speed needs no second derivative: the same bits of it, for a third less work.
+    nurbs::arc_length(block.knots(), 32, |u| {
+        let mut e = nurbs::eval_d1(block.degree as usize, block.knots(), block.ctrl(), u);
+        add_axial(block, u, &mut e);
+        norm(e.d1)
+    })
 }
 
 /// A surface block with a known closed form, for tests and benches: a quarter of the

@@ -228,3 +228,269 @@ fn straight_limits_refuse_a_machine_they_cannot_shortcut() {
     machine.path_acc_mm_per_s2 = 0.0;
     assert!(StraightLimits::new(&machine).is_none());
 }
+
+/// [`find_cusp`] as it was before the speed bound ([`hodograph`]) let it skip parts
+/// of the curve: every pair of samples looked at, every sample evaluated twice.
+fn find_cusp_everywhere(c: &SplitCurve, machine: &Machine) -> Option<f64> {
+    const N: usize = 64;
+    let (u0, u1) = (c.knots[0], c.knots[c.knots.len() - 1]);
+    let at = |i: usize| u0 + (u1 - u0) * i as f64 / N as f64;
+    let d1 = |u: f64| nurbs::eval(c.degree, &c.knots, &c.ctrl, u).d1;
+    let cos_corner = machine.corner_angle_deg.to_radians().cos();
+    for i in 1..N {
+        let (a, b) = (d1(at(i - 1)), d1(at(i + 1)));
+        let (na, nb) = (path::norm(a), path::norm(b));
+        if na < 1e-12 || nb < 1e-12 {
+            continue;
+        }
+        if dot(a, b) / (na * nb) >= cos_corner {
+            continue;
+        }
+        let (mut lo, mut hi) = (at(i - 1), at(i + 1));
+        for _ in 0..100 {
+            let m1 = lo + (hi - lo) / 3.0;
+            let m2 = hi - (hi - lo) / 3.0;
+            if path::norm(d1(m1)) < path::norm(d1(m2)) {
+                hi = m2;
+            } else {
+                lo = m1;
+            }
+        }
+        let u = 0.5 * (lo + hi);
+        let len = path::norm(d1(u0)).max(path::norm(d1(u1))).max(1e-9);
+        if path::norm(d1(u)) <= 1e-6 * len && u > u0 + 1e-9 * (u1 - u0) && u < u1 - 1e-9 * (u1 - u0)
+        {
+            return Some(u);
+        }
+    }
+    None
+}
+
+proptest::proptest! {
+    #![proptest_config(proptest::prelude::ProptestConfig::with_cases(1000))]
+    /// The cusp search finds what looking everywhere finds, to the bit: on Bézier spans
+    /// made to have a cusp (their derivative zero at `t0`), on zig-zag polygons, with
+    /// weights or without.
+    #[test]
+    fn cusps_are_found_where_looking_everywhere_finds_them(
+        degree in 2usize..=4,
+        pts in proptest::collection::vec((-20.0f64..20.0, -20.0f64..20.0, -2.0f64..2.0), 5),
+        weights in proptest::collection::vec(0.3f64..3.0, 5),
+        rational in proptest::bool::ANY,
+        cusp in proptest::bool::ANY,
+        t0 in 0.1f64..0.6,
+        u0 in -2.0f64..2.0,
+        width in 0.1f64..5.0,
+    ) {
+        let mut ctrl: Vec<[f64; 4]> = pts[..=degree]
+            .iter()
+            .zip(&weights)
+            .map(|(&(x, y, z), &w)| [x, y, z, if rational { w } else { 1.0 }])
+            .collect();
+        if cusp && degree == 3 {
+            // C'(t0) = 0 for a polynomial cubic: solve for P2 (weights one).
+            let s = 1.0 - t0;
+            for c in ctrl.iter_mut() {
+                c[3] = 1.0;
+            }
+            let (p0, p1, p3) = (ctrl[0], ctrl[1], ctrl[3]);
+            let k = 2.0 * t0 * s - t0 * t0;
+            for x in 0..3 {
+                ctrl[2][x] = (-(s * s) * (p1[x] - p0[x]) + 2.0 * t0 * s * p1[x] - t0 * t0 * p3[x]) / k;
+            }
+        }
+        let mut knots = vec![u0; degree + 1];
+        knots.extend(std::iter::repeat_n(u0 + width, degree + 1));
+        let c = SplitCurve { degree, knots, ctrl };
+        let machine = Machine::default();
+        let want = find_cusp_everywhere(&c, &machine);
+        let got = find_cusp(&c, &machine);
+        proptest::prop_assert_eq!(got.map(f64::to_bits), want.map(f64::to_bits));
+    }
+}
+
+#[test]
+fn a_cusp_of_a_cubic_is_found_as_before() {
+    // C'(1/2) = 0: out and back with a turn, the textbook cusp.
+    let ctrl = vec![
+        [0.0, 0.0, 0.0, 1.0],
+        [1.0, 1.0, 0.0, 1.0],
+        [0.0, 1.0, 0.0, 1.0],
+        [1.0, 0.0, 0.0, 1.0],
+    ];
+    let c = SplitCurve {
+        degree: 3,
+        knots: vec![0.0, 0.0, 0.0, 0.0, 1.0, 1.0, 1.0, 1.0],
+        ctrl,
+    };
+    let machine = Machine::default();
+    let u = find_cusp(&c, &machine).expect("a cusp");
+    assert!((u - 0.5).abs() < 1e-6, "{u}");
+    assert_eq!(Some(u), find_cusp_everywhere(&c, &machine));
+}
+
+/// [`samples`] as it was before its searches looked at one measure (and with five
+/// evaluations a sample): the reference its bits are held to.
+fn golden_max_as_before<T>(
+    lo: f64,
+    hi: f64,
+    f: impl Fn(f64) -> Option<T>,
+    m: impl Fn(&T) -> f64,
+) -> Option<T> {
+    const R: f64 = 0.618_033_988_749_895;
+    let (mut a, mut b) = (lo, hi);
+    let mut c = b - R * (b - a);
+    let mut d = a + R * (b - a);
+    let (mut fc, mut fd) = (f(c)?, f(d)?);
+    for _ in 0..40 {
+        if b - a <= 1e-9 * (hi - lo) {
+            break;
+        }
+        if m(&fc) >= m(&fd) {
+            b = d;
+            d = c;
+            fd = fc;
+            c = b - R * (b - a);
+            fc = f(c)?;
+        } else {
+            a = c;
+            c = d;
+            fc = fd;
+            d = a + R * (b - a);
+            fd = f(d)?;
+        }
+    }
+    Some(if m(&fc) >= m(&fd) { fc } else { fd })
+}
+
+fn samples_as_before(b: &CommandBlock) -> Samples {
+    let (u0, u1) = path::domain(b);
+    let samples = (16 * b.n_ctrl.max(2) as usize).max(32);
+    // Distinct knots: dk/ds is taken by differences inside one span (where the curve is
+    // smooth), and the curvature jump at a knot of continuity below C² is a junction of
+    // its own.
+    let mut spans: Vec<f64> = b.knots().to_vec();
+    spans.dedup();
+    let span_of = |u: f64| {
+        let i = spans
+            .partition_point(|k| *k <= u)
+            .clamp(1, spans.len().max(2) - 1);
+        (spans[i - 1], spans[i.min(spans.len() - 1)])
+    };
+    // The frame and dk/ds at `u` (dk/ds by a central difference inside u's span).
+    let at = |u: f64| -> Option<Sample> {
+        let (t, k) = frame(b, u)?;
+        let (lo, hi) = span_of(u);
+        let h = 1e-4 * (hi - lo);
+        let (ua, ub) = ((u - h).max(lo), (u + h).min(hi));
+        let d = match (frame(b, ua), frame(b, ub)) {
+            (Some((_, ka)), Some((_, kb))) if ub > ua => {
+                let ds = path::norm(sub(path::eval(b, ub).p, path::eval(b, ua).p));
+                if ds > 1e-15 {
+                    sub(kb, ka).map(|x| x / ds)
+                } else {
+                    [0.0; 3]
+                }
+            }
+            _ => [0.0; 3],
+        };
+        Some(((t, k), d))
+    };
+    let mut us: Vec<f64> = Vec::with_capacity(samples + 1);
+    let mut pts: Vec<Frame> = Vec::with_capacity(samples + 1);
+    let mut dk: Vec<[f64; 3]> = Vec::with_capacity(samples + 1);
+    for i in 0..=samples {
+        let u = u0 + (u1 - u0) * i as f64 / samples as f64;
+        if let Some((f, d)) = at(u) {
+            us.push(u);
+            pts.push(f);
+            dk.push(d);
+        }
+    }
+    // A peak of the curvature or of its rate narrower than the sampling (a control
+    // polygon folding back on itself turns in a few µm) is found between its samples:
+    // the largest local maxima of each are searched (golden section) between their
+    // neighbours, and what is found joins the samples (before the last, which gives
+    // the end's tangent).
+    let mut extra: Vec<Sample> = Vec::new();
+    let measures: [fn(&Sample) -> f64; 2] = [|x| path::norm(x.0 .1), |x| path::norm(x.1)];
+    for m in measures {
+        let value = |i: usize| m(&(pts[i], dk[i]));
+        let mut peaks: Vec<usize> = (1..pts.len().saturating_sub(1))
+            .filter(|&i| value(i) >= value(i - 1) && value(i) >= value(i + 1) && value(i) > 0.0)
+            .collect();
+        peaks.sort_by(|a, b| value(*b).total_cmp(&value(*a)));
+        for &i in peaks.iter().take(PEAKS_REFINED) {
+            if let Some(found) = golden_max_as_before(us[i - 1], us[i + 1], at, m) {
+                extra.push(found);
+            }
+        }
+    }
+    if !extra.is_empty() {
+        let n = pts.len() - 1;
+        pts.splice(n..n, extra.iter().map(|x| x.0));
+        dk.splice(n..n, extra.iter().map(|x| x.1));
+    }
+    // Curvature jumps at interior knots where the curve is only C¹ (or less).
+    let mut jumps: Vec<f64> = Vec::new();
+    let degree = b.degree as usize;
+    for w in spans.windows(2).skip(1) {
+        let knot = w[0];
+        let mult = b.knots().iter().filter(|k| **k == knot).count();
+        if degree < mult + 2 {
+            let eps = 1e-9 * (u1 - u0);
+            if let (Some((_, ka)), Some((_, kb))) = (frame(b, knot - eps), frame(b, knot + eps)) {
+                jumps.push(path::norm(sub(kb, ka)));
+            }
+        }
+    }
+    (pts, dk, jumps)
+}
+
+/// Every number of a block's samples as bits.
+fn samples_bits(s: &Samples) -> Vec<u64> {
+    let (pts, dk, jumps) = s;
+    pts.iter()
+        .flat_map(|(t, k)| t.iter().chain(k))
+        .chain(dk.iter().flatten())
+        .chain(jumps)
+        .map(|x| x.to_bits())
+        .collect()
+}
+
+proptest::proptest! {
+    #![proptest_config(proptest::prelude::ProptestConfig::with_cases(300))]
+    /// The planner's samples are the very ones it took before: on random curves of one
+    /// span and of several, rational or not, zig-zag or made to have a cusp, and on
+    /// arcs and helices.
+    #[test]
+    fn samples_are_as_before(
+        degree in 1usize..=5,
+        extra in 0usize..3,
+        pts in proptest::collection::vec((-20.0f64..20.0, -20.0f64..20.0, -2.0f64..2.0), 9),
+        weights in proptest::collection::vec(0.3f64..3.0, 9),
+        rational in proptest::bool::ANY,
+        fold in proptest::bool::ANY,
+        sweep in proptest::prop_oneof![-7.0f64..-0.1, 0.1f64..7.0],
+        dz in proptest::prop_oneof![proptest::strategy::Just(0.0), -3.0f64..3.0],
+    ) {
+        let n = degree + 1 + extra;
+        let mut ctrl: Vec<[f64; 4]> = pts[..n]
+            .iter()
+            .zip(&weights)
+            .map(|(&(x, y, z), &w)| [x, y, z, if rational { w } else { 1.0 }])
+            .collect();
+        if fold && n >= 3 {
+            // Back along itself: the curve (nearly) stops where it turns.
+            ctrl[2] = ctrl[0];
+        }
+        let mut knots = vec![0.0; degree + 1];
+        knots.extend((1..=extra).map(|i| i as f64 * 0.7));
+        knots.extend(std::iter::repeat_n(extra as f64 * 0.7 + 1.3, degree + 1));
+        let curve = SplitCurve { degree, knots, ctrl };
+        let arcs = arc_blocks(3, [5.0, 0.0, 1.0], [0.0, 0.0, 1.0], Plane::XY, sweep, dz, 900.0);
+        for b in std::iter::once(curve_block(3, &curve, Helix::NONE, 900.0)).chain(arcs) {
+            proptest::prop_assert_eq!(samples_bits(&samples(&b)), samples_bits(&samples_as_before(&b)));
+        }
+    }
+}

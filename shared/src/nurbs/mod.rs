@@ -13,7 +13,7 @@ mod length;
 pub mod reference;
 pub mod surface;
 
-pub use eval::{eval, find_span, CurvePoint};
+pub use eval::{eval, eval_d1, find_span, CurvePoint};
 pub use knots::{insert_knot, split_at, split_to_capacity, SplitCurve};
 pub use length::arc_length;
 

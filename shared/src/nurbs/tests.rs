@@ -52,6 +52,34 @@ proptest! {
     }
 
     #[test]
+    fn each_degrees_own_evaluators_give_the_general_ones_bits(
+        c in random_curve(),
+        t in prop_oneof![0.0f64..=1.0, Just(0.0), Just(1.0), Just(-0.5), Just(1.5)],
+    ) {
+        let (lo, hi) = (c.knots[0], *c.knots.last().unwrap());
+        // At knots too, where the span search and the basis meet their edge cases.
+        let at_knot = c.knots[(t.abs() * c.knots.len() as f64) as usize % c.knots.len()];
+        // And the curve's first control points as one Bézier span (evaluated its own way).
+        let p = c.degree;
+        let mut bezier_knots = vec![lo; p + 1];
+        bezier_knots.extend(std::iter::repeat_n(hi, p + 1));
+        let bezier = SplitCurve { degree: p, knots: bezier_knots, ctrl: c.ctrl[..=p].to_vec() };
+        for (c, u) in [(&c, lo + t * (hi - lo)), (&c, at_knot), (&bezier, lo + t * (hi - lo))] {
+            let got = eval(c.degree, &c.knots, &c.ctrl, u);
+            let general = super::eval::eval_with::<0, 2, false, 10>(c.degree, &c.knots, &c.ctrl, u);
+            let bits = |e: &CurvePoint| {
+                [e.p, e.d1, e.d2].concat().iter().map(|x| x.to_bits()).collect::<Vec<_>>()
+            };
+            prop_assert_eq!(bits(&got), bits(&general));
+            prop_assert_eq!(got.span, general.span);
+            // Without the second derivative: the same point and first derivative.
+            let d1 = eval_d1(c.degree, &c.knots, &c.ctrl, u);
+            let first = CurvePoint { d2: [0.0; 3], ..general };
+            prop_assert_eq!(bits(&d1), bits(&first));
+        }
+    }
+
+    #[test]
     fn derivatives_match_finite_differences(c in random_curve(), t in 0.05f64..0.95) {
         let (lo, hi) = (c.knots[0], *c.knots.last().unwrap());
         let u = lo + t * (hi - lo);
