@@ -188,8 +188,22 @@ fn own_servo_clock_holds_late_setpoints_and_counts_them() {
             skipped += b - a - 1;
         }
     }
-    assert_eq!(rep["servo_held_ticks"].as_u64(), Some(held), "{rep:#}");
-    assert_eq!(rep["servo_skipped_setpoints"].as_u64(), Some(skipped));
+    // A record the trace writer had to drop (a loaded machine: the servo-sim counts them
+    // in servo.json) hides a held tick, or shows as one more skipped set-point: the
+    // counts then agree to within the drops, and exactly without any (once seen under
+    // load: 65 held ticks reported, 64 in the trace).
+    let servo: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(run.join("servo.json")).unwrap()).unwrap();
+    let dropped = servo["trace_dropped"].as_u64().unwrap();
+    let (rep_held, rep_skipped) = (
+        rep["servo_held_ticks"].as_u64().unwrap(),
+        rep["servo_skipped_setpoints"].as_u64().unwrap(),
+    );
+    assert!(
+        rep_held.abs_diff(held) <= dropped && rep_skipped.abs_diff(skipped) <= dropped,
+        "held {rep_held} reported, {held} traced; skipped {rep_skipped} reported, \
+         {skipped} traced; {dropped} trace records dropped\n{rep:#}"
+    );
     // The last set-point reached the drives, and the tool ended on the circle's start.
     assert_eq!(fb.last().unwrap()[0], sp.last().unwrap()[0]);
     assert!(f(&rep, "max_contour_error_um") < 1000.0, "{rep:#}");
