@@ -902,9 +902,9 @@ fn junction_speed(a: &Shape, b: &Shape, machine: &Machine, period_s: f64) -> (f6
         ),
     };
     let mut v = a.v_cap.min(b.v_cap);
-    let half_sin = (0.5 * (1.0 - cos)).max(0.0).sqrt();
+    let half_sin = half_turn_sin(a, b);
     let mut kink = None;
-    if half_sin > 1e-7 {
+    if is_kink(half_sin) {
         let mut acc_t = acc * period_s / r;
         v = v.min(acc_t / (2.0 * half_sin));
         if ratio.is_none() {
@@ -933,8 +933,8 @@ fn junction_speed(a: &Shape, b: &Shape, machine: &Machine, period_s: f64) -> (f6
             v = v.min(acc * period_s / dm);
         }
     }
-    let dk = path::norm(sub(a.k_end, b.k_start));
-    if dk > 1e-9 {
+    let dk = curvature_jump(a, b);
+    if is_jump(dk) {
         v = v.min((jerk * period_s / dk).sqrt() / r);
         if ratio.is_none() {
             // The acceleration's step with the normal jerk there takes at most
@@ -944,6 +944,27 @@ fn junction_speed(a: &Shape, b: &Shape, machine: &Machine, period_s: f64) -> (f6
         }
     }
     (v, kink)
+}
+
+/// `sin(θ/2)` of the turn `θ` of the tangent at the junction between `a` and `b`.
+fn half_turn_sin(a: &Shape, b: &Shape) -> f64 {
+    let cos = dot(a.t_end, b.t_start).clamp(-1.0, 1.0);
+    (0.5 * (1.0 - cos)).max(0.0).sqrt()
+}
+
+/// Does a turn of this `sin(θ/2)` make the junction a kink?
+fn is_kink(half_sin: f64) -> bool {
+    half_sin > 1e-7
+}
+
+/// The jump of the curvature vector at the junction between `a` and `b` (1/mm).
+fn curvature_jump(a: &Shape, b: &Shape) -> f64 {
+    path::norm(sub(a.k_end, b.k_start))
+}
+
+/// Does a curvature jump this large count as one?
+fn is_jump(dk: f64) -> bool {
+    dk > 1e-9
 }
 
 /// Share of the path's (and each axis's) acceleration a kink's direction change in one
@@ -1076,8 +1097,8 @@ fn junction_leaves(a: &Shape, b: &Shape, v: f64, machine: &Machine, period_s: f6
     if a.surface_ratio.is_some() || b.surface_ratio.is_some() {
         return None;
     }
-    let kinked = path::norm(sub(b.t_start, a.t_end)) > 2e-7;
-    let jumps = path::norm(sub(a.k_end, b.k_start)) > 1e-9;
+    let kinked = is_kink(half_turn_sin(a, b));
+    let jumps = is_jump(curvature_jump(a, b));
     if !(kinked || jumps) || v <= 0.0 {
         return None;
     }
