@@ -304,7 +304,12 @@ impl Report {
                 "  surface      max scallop {:.2} µm (as the passes were planned; not measured)\n",
                 h * 1e3
             )),
-            _ => {}
+            // A replay has the blocks but not the planner's figure.
+            (None, Some(m)) => s.push_str(&format!(
+                "  surface      max scallop {:.2} µm measured from the machine's positions\n",
+                m * 1e3
+            )),
+            (None, None) => {}
         }
         if let Some(note) = &self.salvaged {
             s.push_str(&format!("  warning      {note}\n"));

@@ -409,6 +409,8 @@ pub fn surface_commands(
 /// tolerance of its plane, checked densely, the piece split where it is not). In
 /// zig-zag, a pass that ends on the same edge of the domain as the next one (of the next
 /// plane) starts is joined to it along that edge; everything else is joined by lifts.
+/// The boundary pass, if the path has one, follows the last pass as straight `(u, v)`
+/// segments along the edges.
 pub fn plane_commands(
     step: &FreeformStep,
     path: &PlanePath,
@@ -477,6 +479,23 @@ pub fn plane_commands(
             _ => runs.push(blocks),
         }
         prev = Some(pass);
+    }
+    // The boundary pass, straight on from the last pass where it begins at its end.
+    let edge: Vec<Segment> = path
+        .boundary
+        .windows(2)
+        .map(|w| Segment {
+            from: w[0],
+            to: w[1],
+        })
+        .collect();
+    if !edge.is_empty() {
+        let blocks = emit.segments(&edge);
+        let on = prev.is_some_and(|p| !p.closed && p.uv.last() == path.boundary.first());
+        match runs.last_mut() {
+            Some(run) if on => run.extend(blocks),
+            _ => runs.push(blocks),
+        }
     }
     let safe_z = safe_height(step, &emit);
     Ok(join_runs(runs, step.line, start, safe_z, machine))

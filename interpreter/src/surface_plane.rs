@@ -28,6 +28,19 @@
 //! touches (every cell of the narrower strip then allows at least the step taken). The
 //! planes run from just inside the lowest `f` of the surface to just inside the highest.
 //!
+//! # Edges
+//!
+//! Where passes end on a boundary edge of the domain at an angle `θ` to it, their ends lie
+//! `w/sin θ` apart along the edge, and the band between one pass's end and the next's is
+//! farther from the cut than the middle between two passes: a point there is at most
+//! `w/(1 + sin θ)` from the nearer pass (the end of one, the side of the other), against
+//! `w/2` between passes, so the scallop there is `(2/(1 + sin θ))²` times the one between
+//! passes (1.78 times at 30°). Zig-zag links run along the edge only in every other of
+//! those gaps. Where that factor would take the predicted scallop beyond the tolerance,
+//! the path ends with a boundary pass: the contact point goes once round the whole
+//! domain boundary, from where the last pass ends, so every point of such a band is
+//! within `w/2` of a cut (the edge pass on one side, the passes on the others).
+//!
 //! # Planes parallel to the tool axis or not
 //!
 //! Any normal is accepted, the tool axis included (horizontal planes: Z-level passes),
@@ -96,9 +109,63 @@ pub struct PlanePath {
     pub max_step_mm: f64,
     /// The largest scallop height the spacing formula predicts at the chosen planes.
     pub predicted_scallop_mm: f64,
+    /// The boundary pass ([Edges](self#edges)), cut after the last pass: straight
+    /// `(u, v)` segments along the domain's edges, from its first point (where the last
+    /// pass ends, if that is on an edge) once round and back to it. Empty where the
+    /// passes leave no band along the edges beyond the tolerance.
+    pub boundary: Vec<(f64, f64)>,
+    /// The largest factor `(2/(1 + sin θ))²` of the open passes' ends.
+    pub edge_factor: f64,
     /// Cutting length on the surface along the passes (polylines through the grid
-    /// crossings: a little short of the curves').
+    /// crossings: a little short of the curves') and the boundary pass.
     pub length_mm: f64,
+}
+
+/// How much more than between passes is left in the band along an edge that passes meet
+/// at an angle whose sine is `sin_theta` ([Edges](self#edges)).
+pub fn edge_factor(sin_theta: f64) -> f64 {
+    let k = 2.0 / (1.0 + sin_theta.clamp(0.0, 1.0));
+    k * k
+}
+
+/// The sine of the angle between an open pass and the edge one of its ends lies on.
+fn end_sine(s: &SurfaceData<'_>, pass: &PlanePass, at_end: bool) -> Option<f64> {
+    let n = pass.uv.len();
+    if pass.closed || n < 2 {
+        return None;
+    }
+    let (inner, end, edge) = if at_end {
+        (pass.uv[n - 2], pass.uv[n - 1], pass.end_edge?)
+    } else {
+        (pass.uv[1], pass.uv[0], pass.start_edge?)
+    };
+    let d = eval2(s, end.0, end.1);
+    let q = eval2(s, inner.0, inner.1).p;
+    let t = [d.p[0] - q[0], d.p[1] - q[1], d.p[2] - q[2]];
+    let e = match edge {
+        Edge::U0 | Edge::U1 => d.sv,
+        Edge::V0 | Edge::V1 => d.su,
+    };
+    let (lt, le) = (norm(t), norm(e));
+    (lt > 0.0 && le > 0.0).then(|| norm(cross(t, e)) / (lt * le))
+}
+
+/// The boundary pass from `start` on `edge` once round the domain `(u0, u1, v0, v1)`,
+/// counter-clockwise in `(u, v)`: along `V0` with `u` rising, `U1`, `V1`, `U0`.
+fn boundary_loop(start: (f64, f64), edge: Edge, domain: (f64, f64, f64, f64)) -> Vec<(f64, f64)> {
+    let (u0, u1, v0, v1) = domain;
+    // The corner each edge leads to, in that order.
+    let corners = [(u1, v0), (u1, v1), (u0, v1), (u0, v0)];
+    let first = match edge {
+        Edge::V0 => 0,
+        Edge::U1 => 1,
+        Edge::V1 => 2,
+        Edge::U0 => 3,
+    };
+    let mut out = vec![start];
+    out.extend((0..4).map(|k| corners[(first + k) % 4]));
+    out.push(start);
+    out
 }
 
 fn scale(a: [f64; 3], k: f64) -> [f64; 3] {
@@ -634,17 +701,46 @@ pub fn plan(step: &FreeformStep) -> Result<PlanePath, StepError> {
         }
         passes.extend(pieces);
     }
-    let length = passes
+    let edge_factor = passes
         .iter()
-        .map(|p| {
-            p.uv.windows(2)
-                .map(|w| {
-                    let (a, b) = (at(w[0]), at(w[1]));
-                    norm([b[0] - a[0], b[1] - a[1], b[2] - a[2]])
-                })
-                .sum::<f64>()
+        .flat_map(|p| [end_sine(&s, p, false), end_sine(&s, p, true)])
+        .flatten()
+        .map(edge_factor)
+        .fold(1.0, f64::max);
+    let boundary = if edge_factor * worst_h > st.scallop_mm {
+        let domain = (grid.gu[0], grid.gu[nu - 1], grid.gv[0], grid.gv[nv - 1]);
+        match passes.last() {
+            Some(p) if !p.closed && p.end_edge.is_some() => {
+                boundary_loop(p.uv[p.uv.len() - 1], p.end_edge.unwrap_or(Edge::V0), domain)
+            }
+            _ => boundary_loop((domain.0, domain.2), Edge::V0, domain),
+        }
+    } else {
+        Vec::new()
+    };
+    let polyline = |uv: &[(f64, f64)]| {
+        uv.windows(2)
+            .map(|w| {
+                let (a, b) = (at(w[0]), at(w[1]));
+                norm([b[0] - a[0], b[1] - a[1], b[2] - a[2]])
+            })
+            .sum::<f64>()
+    };
+    // The boundary's straight (u, v) segments through points 1/64 of each apart.
+    let boundary_points: Vec<(f64, f64)> = boundary
+        .windows(2)
+        .flat_map(|w| {
+            (0..64).map(move |k| {
+                let t = k as f64 / 64.0;
+                (
+                    w[0].0 + t * (w[1].0 - w[0].0),
+                    w[0].1 + t * (w[1].1 - w[0].1),
+                )
+            })
         })
-        .sum();
+        .chain(boundary.last().copied())
+        .collect();
+    let length = passes.iter().map(|p| polyline(&p.uv)).sum::<f64>() + polyline(&boundary_points);
     Ok(PlanePath {
         normal: st.normal,
         mode: st.mode,
@@ -656,6 +752,8 @@ pub fn plan(step: &FreeformStep) -> Result<PlanePath, StepError> {
         min_step_mm: min_d,
         max_step_mm: max_d,
         predicted_scallop_mm: worst_h,
+        boundary,
+        edge_factor,
         length_mm: length,
     })
 }

@@ -173,10 +173,20 @@ pub fn check_part(name: &str, text: &str, machine: &shared::Machine) -> Result<S
                 let minutes = length / s.technology.feed_mm_per_min;
                 let _ = writeln!(
                     o,
-                    "    {} planes, {} passes, plane step {:.3}..{:.3} mm, predicted scallop \
+                    "    {} planes, {} passes{}, plane step {:.3}..{:.3} mm, predicted scallop \
                      {:.2} µm; path {:.3} mm, {:.1} s at the programmed feed",
                     p.planes,
                     p.passes.len(),
+                    if p.boundary.is_empty() {
+                        String::new()
+                    } else {
+                        // Where the passes meet the edges: see surface_plane's "Edges".
+                        format!(
+                            " and a boundary pass (passes meet the edges at up to {:.2}x \
+                             the scallop between them)",
+                            p.edge_factor
+                        )
+                    },
                     p.min_step_mm,
                     p.max_step_mm,
                     p.predicted_scallop_mm * 1e3,

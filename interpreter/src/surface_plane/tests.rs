@@ -447,3 +447,75 @@ fn the_stepover_caps_the_spacing() {
     );
     assert!(capped.predicted_scallop_mm < free.predicted_scallop_mm);
 }
+
+/// The whole part's scallop as [`crate::scallop`] measures a run's, from tool points
+/// sampled along the surface blocks every 0.04 mm at most (a cycle's step at 2400 mm/min).
+fn part_scallop(step: &FreeformStep, p: &PlanePath) -> crate::scallop::Scallop {
+    let (cmds, _) = plane_commands(step, p, &Machine::default(), [0.0; 3]).unwrap();
+    let mut points = Vec::new();
+    for b in cmds.iter().filter(|b| b.is_surface()) {
+        let n = (b.length_mm / 0.04).ceil().max(1.0) as usize;
+        points.extend((0..=n).map(|i| path::eval(b, i as f64 / n as f64).p));
+    }
+    crate::scallop::measure(&cmds, &points).unwrap()
+}
+
+/// The example's passes meet the domain's edges at about 30°, where a band 1.8 times the
+/// scallop between passes is left between their ends; the boundary pass that follows
+/// the last one takes it down to the passes' own. Measured over the whole part, edges
+/// included, with and without it.
+#[test]
+fn the_boundary_pass_keeps_the_bands_along_the_edges_within_tolerance() {
+    let step = step_of(PLANECC);
+    let tol = step.strategy.scallop_mm();
+    let p = plan(&step).unwrap();
+    // Once round from where the last pass ends, through the four corners.
+    let last = p.passes.last().unwrap();
+    assert_eq!(p.boundary.first(), last.uv.last());
+    assert_eq!(p.boundary.first(), p.boundary.last());
+    let (u0, u1, v0, v1) = OwnedSurface::from_data(&step.surface.data()).domain();
+    for corner in [(u0, v0), (u1, v0), (u1, v1), (u0, v1)] {
+        assert!(p.boundary.contains(&corner), "{corner:?}: {:?}", p.boundary);
+    }
+    assert!(
+        p.edge_factor > 1.7 && p.edge_factor * p.predicted_scallop_mm > tol,
+        "{}",
+        p.edge_factor
+    );
+    let with = part_scallop(&step, &p);
+    let mut bare = p.clone();
+    bare.boundary.clear();
+    let without = part_scallop(&step, &bare);
+    eprintln!("with the boundary pass {with:?}, without {without:?}");
+    assert!(with.max_mm <= tol, "{with:?}");
+    assert!(
+        with.max_mm >= 0.95 * p.predicted_scallop_mm,
+        "{with:?} against {} mm predicted",
+        p.predicted_scallop_mm
+    );
+    // Without it, the band along an edge: the factor's share of it, at the boundary.
+    assert!(without.max_mm > 1.5 * p.predicted_scallop_mm, "{without:?}");
+    let s = step.surface.data();
+    let at_edge = [u0, u1]
+        .iter()
+        .flat_map(|&u| (0..=200).map(move |k| (u, v0 + (v1 - v0) * k as f64 / 200.0)))
+        .chain(
+            [v0, v1]
+                .iter()
+                .flat_map(|&v| (0..=200).map(move |k| (u0 + (u1 - u0) * k as f64 / 200.0, v))),
+        )
+        .map(|(u, v)| dist(eval2(&s, u, v).p, without.at_mm))
+        .fold(f64::INFINITY, f64::min);
+    assert!(at_edge < 1.0, "{without:?} is {at_edge} mm from the edges");
+}
+
+/// Passes that meet the edges square leave no wider band there: no boundary pass.
+#[test]
+fn passes_square_to_the_edges_need_no_boundary_pass() {
+    // Planes x = c cross the seed surface's edges y = 0 and y = 60 at right angles
+    // (its control net is a square grid in x and y).
+    let step = step_of(&with_planes(SEED, "ZIGZAG", [1.0, 0.0, 0.0], None));
+    let p = plan(&step).unwrap();
+    assert!(p.edge_factor < 1.1, "{}", p.edge_factor);
+    assert!(p.boundary.is_empty(), "{:?}", p.boundary);
+}
