@@ -87,6 +87,11 @@ pub struct Contour {
     pub error_um: Vec<Option<f64>>,
     pub max: Option<Worst>,
     pub rms_um: Option<f64>,
+    /// Chord error: the largest distance from the middle of the straight line between two
+    /// consecutive cycles' set-points to the exact commanded path (the sagitta of the
+    /// chord, what linear motion between set-points cuts off a curve), over the pairs on
+    /// feed moves; at the cycle of the second set-point.
+    pub chord: Option<Worst>,
     /// The roundness, or why the path has none.
     pub roundness: Result<Roundness, String>,
 }
@@ -319,6 +324,10 @@ pub fn analyse(blocks: &[CommandBlock], t: &Traces) -> Contour {
     // Where the last set-point on each block lay, to find the next one quickly.
     let mut last_u: Vec<f64> = segs.iter().map(|g| g.u0).collect();
     let mut cursor = 0usize;
+    // The chords between consecutive cycles' set-points on feed moves: (their middle, the
+    // second one's block, the chord's length; then its error in µm) and that cycle's row.
+    let mut chords: Vec<(Chord, usize)> = Vec::new();
+    let mut prev: Option<(usize, usize)> = None;
     if !segs.is_empty() {
         for_each_setpoint(t, |i, sp_i| {
             let (s, line) = (t.sp_pos_mm[sp_i], t.sp_line[sp_i]);
@@ -327,14 +336,25 @@ pub fn analyse(blocks: &[CommandBlock], t: &Traces) -> Contour {
             if !segs[cursor].rapid {
                 error_um[i] = Some(dist3(t.fb_pos_mm[i], s));
             }
+            if let Some((p_i, p_seg)) = prev {
+                let next = p_i + 1 == sp_i && t.sp_cycle[p_i] + 1 == t.sp_cycle[sp_i];
+                if next && !segs[cursor].rapid && !segs[p_seg].rapid {
+                    let a = t.sp_pos_mm[p_i];
+                    let mid = [
+                        0.5 * (a[0] + s[0]),
+                        0.5 * (a[1] + s[1]),
+                        0.5 * (a[2] + s[2]),
+                    ];
+                    chords.push(((mid, cursor, dist3(a, s)), i));
+                }
+            }
+            prev = Some((sp_i, cursor));
         });
     }
-    // Pass 2: the distance of every counted row to the path, each on its own, so spread
-    // over the cores (a one-hour run has 3.6 million rows).
-    let threads = std::thread::available_parallelism()
-        .map_or(1, |n| n.get())
-        .clamp(1, 8);
-    let chunk = n_fb.div_ceil(threads).max(4096);
+    // Pass 2: the distance of every counted row, and of every chord's middle, to the
+    // path, each on its own, so spread over the cores (a one-hour run has 3.6 million
+    // rows).
+    let chunk = n_fb.div_ceil(threads()).max(4096);
     std::thread::scope(|scope| {
         for ((err, seg), pos) in error_um
             .chunks_mut(chunk)
@@ -351,6 +371,20 @@ pub fn analyse(blocks: &[CommandBlock], t: &Traces) -> Contour {
             });
         }
     });
+    par_each(&mut chords, |((mid, at, len), _)| {
+        // The window reaches back over the first set-point's block.
+        *len = distance(&segs, *at, *mid, *len) * 1e3;
+    });
+    let chord = chords
+        .iter()
+        .map(|&((_, _, um), i)| Worst {
+            um,
+            cycle: t.fb_cycle[i],
+            line: segs[seg_of[i].unwrap_or(0)].b.source_line,
+        })
+        .fold(None, |w: Option<Worst>, c| {
+            Some(w.filter(|w| w.um >= c.um).unwrap_or(c))
+        });
     // Pass 3, in order: the figures.
     let mut worst: Option<Worst> = None;
     let (mut sum_sq, mut count) = (0.0f64, 0u64);
@@ -372,8 +406,31 @@ pub fn analyse(blocks: &[CommandBlock], t: &Traces) -> Contour {
         error_um,
         max: worst,
         rms_um: (count > 0).then(|| (sum_sq / count as f64).sqrt()),
+        chord,
         roundness,
     }
+}
+
+/// A chord between two set-points: its middle, the block of the second, its length (mm;
+/// then the middle's distance to the path, µm).
+type Chord = ([f64; 3], usize, f64);
+
+/// Threads for the searches: the cores, at most 8.
+fn threads() -> usize {
+    std::thread::available_parallelism()
+        .map_or(1, |n| n.get())
+        .clamp(1, 8)
+}
+
+/// Runs `f` on every item, the list split over the cores.
+fn par_each<T: Send>(items: &mut [T], f: impl Fn(&mut T) + Sync) {
+    let chunk = items.len().div_ceil(threads()).max(4096);
+    let f = &f;
+    std::thread::scope(|scope| {
+        for part in items.chunks_mut(chunk) {
+            scope.spawn(move || part.iter_mut().for_each(f));
+        }
+    });
 }
 
 /// Calls `f(feedback row, set-point row)` for each feedback row that has a set-point of
@@ -970,6 +1027,30 @@ mod tests {
             rd.commanded_roundness_um
         );
         assert!((rd.centre_mm[0] - c[0]).abs() < 1e-5 && rd.centre_mm[1].abs() < 1e-5);
+        // Chord error: set-points a turn/n apart on the circle leave the sagitta
+        // r·(1 − cos(π/n)) at each chord's middle. With one set-point left out (the
+        // cycles still consecutive), that chord spans twice the angle.
+        let sagitta = |half: f64| r * (1.0 - half.cos()) * 1e3;
+        let chord = out.chord.unwrap();
+        let want = sagitta(PI / n as f64);
+        assert!((chord.um - want).abs() < 1e-6, "{chord:?}, want {want} µm");
+        let mut skipped = sp.clone();
+        skipped.remove(700);
+        let cycles: Vec<u64> = (0..skipped.len() as u64).collect();
+        let out = analyse(
+            &blocks,
+            &Traces {
+                sp_cycle: &cycles,
+                sp_pos_mm: &skipped,
+                sp_line: &line[1..],
+                fb_cycle: &cycles,
+                fb_pos_mm: &skipped,
+            },
+        );
+        let chord = out.chord.unwrap();
+        let want = sagitta(2.0 * PI / n as f64);
+        assert!((chord.um - want).abs() < 1e-6, "{chord:?}, want {want} µm");
+        assert_eq!((chord.cycle, chord.line), (700, 2));
     }
 
     /// A closed NURBS (the demo's, from (0, 0) back to (0, 0)): a point on it near its

@@ -67,6 +67,15 @@ pub struct Report {
     pub max_contour_error_cycle: Option<u64>,
     pub max_contour_error_line: Option<u32>,
     pub rms_contour_error_um: Option<f64>,
+    /// Largest chord error of the interpolation: distance from the middle of the straight
+    /// line between two consecutive set-points to the exact commanded path, over feed
+    /// moves ([`crate::contour`]); its cycle and source line. Null when not computed.
+    #[serde(default)]
+    pub max_chord_error_um: Option<f64>,
+    #[serde(default)]
+    pub max_chord_error_cycle: Option<u64>,
+    #[serde(default)]
+    pub max_chord_error_line: Option<u32>,
     /// For a closed circular path: roundness and best-fit circle of the measured
     /// positions; null when the path has none.
     pub roundness: Option<RoundnessFigures>,
@@ -199,6 +208,7 @@ pub fn assemble(
         .as_ref()
         .and_then(|(blocks, t)| crate::scallop::measure(blocks, &t.fb_pos_mm));
     let worst = contour.as_ref().and_then(|c| c.max);
+    let chord = contour.as_ref().and_then(|c| c.chord);
     Report {
         outcome: if fault.is_some() { "fault" } else { "done" }.into(),
         fault,
@@ -223,6 +233,9 @@ pub fn assemble(
         max_contour_error_cycle: worst.map(|w| w.cycle),
         max_contour_error_line: worst.map(|w| w.line),
         rms_contour_error_um: contour.as_ref().and_then(|c| c.rms_um),
+        max_chord_error_um: chord.map(|w| w.um),
+        max_chord_error_cycle: chord.map(|w| w.cycle),
+        max_chord_error_line: chord.map(|w| w.line),
         roundness: contour
             .as_ref()
             .and_then(|c| c.roundness.as_ref().ok())
@@ -279,8 +292,14 @@ impl Report {
             (Some(c), None) => format!("max contour error {c:.2} µm"),
             _ => "contour error not computed".into(),
         };
+        let chord = match (self.max_chord_error_um, self.max_chord_error_line) {
+            (Some(c), Some(line)) => format!(
+                "  chord        max chord error {c:.3} µm between consecutive set-points (line {line})\n"
+            ),
+            _ => String::new(),
+        };
         let mut s = format!(
-            "{}: {}\n  program      {}\n  period       {} µs, {} cycles, {:.3} s machining ({} clock)\n  path         {:.3} mm, average feed {:.1} mm/min, peak {:.1} mm/min\n  servo        max following error {:.2} µm, {contour}\n  timing       {timing}\n  run dir      {}\n",
+            "{}: {}\n  program      {}\n  period       {} µs, {} cycles, {:.3} s machining ({} clock)\n  path         {:.3} mm, average feed {:.1} mm/min, peak {:.1} mm/min\n{chord}  servo        max following error {:.2} µm, {contour}\n  timing       {timing}\n  run dir      {}\n",
             self.outcome,
             self.fault.as_deref().unwrap_or("program completed"),
             self.program,

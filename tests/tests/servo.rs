@@ -101,6 +101,21 @@ fn circle_with_feed_forward_stays_within_1_um_of_the_path() {
         )
     );
     assert!(cell(&dir, "roundness").starts_with(&format!("{:.2} µm", f(r, "roundness_um"))));
+    // Chord error: at the feed, each period's chord of the circle cuts off its sagitta,
+    // R·(1 − cos(θ/2)) for θ = v·T/R, within what the speed and the engine's chord
+    // rule (a chord a hair shorter than the arc) change.
+    let step = FEED_MM_PER_MIN / 60.0 * 1e-3;
+    let sagitta_um = RADIUS_MM * (1.0 - (step / RADIUS_MM / 2.0).cos()) * 1e3;
+    let chord = f(&rep, "max_chord_error_um");
+    assert!(
+        (chord - sagitta_um).abs() < 1e-3 * sagitta_um,
+        "chord error {chord} µm, sagitta at the feed {sagitta_um} µm"
+    );
+    assert_eq!(rep["max_chord_error_line"], 2);
+    assert_eq!(
+        cell(&dir, "max_chord_error_um"),
+        format!("{chord:.3} µm at line 2")
+    );
 }
 
 /// Without feed-forward, and with a velocity loop far faster than the position loop, each

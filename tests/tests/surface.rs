@@ -47,6 +47,11 @@ fn runs_to_done(name: &str) {
         measured <= 0.02 && (measured - scallop).abs() <= 0.1 * scallop,
         "measured {measured} mm, planned {scallop} mm"
     );
+    // The interpolation's chord error: the straight lines between set-points stay within
+    // the machine's chord tolerance of the exact tool point path.
+    let chord = rep["max_chord_error_um"].as_f64().unwrap();
+    let tol = shared::Machine::default().chord_tolerance_mm * 1e3;
+    assert!(chord > 0.0 && chord <= tol, "chord error {chord} µm");
     // The surface paths are long (about 6 m of contact path plus the rapids).
     assert!(rep["path_length_mm"].as_f64().unwrap() > 5000.0, "{rep:#}");
     // The contour analysis measures surface runs on their tool point path.

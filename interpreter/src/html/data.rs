@@ -72,6 +72,9 @@ pub struct Report {
     pub max_contour_error_cycle: Option<u64>,
     pub max_contour_error_line: Option<u64>,
     pub rms_contour_error_um: Option<f64>,
+    /// The interpolation's chord error (newer still).
+    pub max_chord_error_um: Option<f64>,
+    pub max_chord_error_line: Option<u64>,
     pub roundness_um: Option<f64>,
     pub roundness_radius_error_um: Option<f64>,
     /// A STEP-NC part's largest scallop height (mm), as planned and as measured after the
@@ -538,6 +541,8 @@ fn load_report(path: &Path, problems: &mut Vec<String>) -> Option<Report> {
         max_contour_error_cycle: v.get("max_contour_error_cycle").and_then(Value::as_u64),
         max_contour_error_line: v.get("max_contour_error_line").and_then(Value::as_u64),
         rms_contour_error_um: v.get("rms_contour_error_um").and_then(Value::as_f64),
+        max_chord_error_um: v.get("max_chord_error_um").and_then(Value::as_f64),
+        max_chord_error_line: v.get("max_chord_error_line").and_then(Value::as_u64),
         max_scallop_mm: v.get("max_scallop_mm").and_then(Value::as_f64),
         measured_max_scallop_mm: v.get("measured_max_scallop_mm").and_then(Value::as_f64),
         measured_max_scallop_at_mm: v.get("measured_max_scallop_at_mm").and_then(triple),

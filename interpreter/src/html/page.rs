@@ -234,6 +234,20 @@ fn summary(run: &Run, max_contour: Option<f64>, out: &mut String) {
     );
     row(
         out,
+        "max_chord_error_um",
+        "max chord error (set-point chords to the commanded path)",
+        &r.max_chord_error_um.map_or_else(
+            || "not available".into(),
+            |v| {
+                let at = r
+                    .max_chord_error_line
+                    .map_or(String::new(), |l| format!(" at line {l}"));
+                format!("{v:.3} µm{at}")
+            },
+        ),
+    );
+    row(
+        out,
         "roundness",
         "roundness (closed circle)",
         &r.roundness_um.map_or_else(
