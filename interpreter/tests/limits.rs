@@ -182,6 +182,30 @@ fn fmt(v: f64) -> String {
     format!("{v:.4}")
 }
 
+/// A walk from the origin along legs `(length, turn from the last leg, weight)`: the
+/// control polygon of a random curve, or the vertices of a random chain, weight 1 at the
+/// start.
+fn walk(legs: impl IntoIterator<Item = (f64, f64, f64)>) -> Vec<(f64, f64, f64)> {
+    let mut pts = vec![(0.0, 0.0, 1.0)];
+    let (mut x, mut y, mut heading) = (0.0f64, 0.0f64, 0.0f64);
+    for (len, turn, w) in legs {
+        heading += turn;
+        x += len * heading.cos();
+        y += len * heading.sin();
+        pts.push((x, y, w));
+    }
+    pts
+}
+
+/// A chain of `G1` lines through the walk's points after the first.
+fn chain_program(pts: &[(f64, f64, f64)], feed: f64) -> String {
+    let mut text = format!("G21\nG1 F{feed}\n");
+    for (x, y, _) in &pts[1..] {
+        text += &format!("X{} Y{}\n", fmt(*x), fmt(*y));
+    }
+    text + "M2\n"
+}
+
 /// A LinuxCNC G5.2 NURBS through random control points with random weights and order,
 /// after a rapid to its start.
 fn nurbs_program(order: usize, pts: &[(f64, f64, f64)], feed: f64) -> String {
@@ -225,14 +249,7 @@ proptest! {
         // No leg turns back by more than about 115° on the last: a curve that nearly
         // reverses stops and turns in a spot shorter than the planner's sampling of the
         // span sees (a known gap: the cap then misses the curvature peak).
-        let mut pts = vec![(0.0, 0.0, 1.0)];
-        let (mut x, mut y, mut heading) = (0.0f64, 0.0f64, 0.0f64);
-        for (len, turn, w) in &legs {
-            heading += turn;
-            x += len * heading.cos();
-            y += len * heading.sin();
-            pts.push((x, y, *w));
-        }
+        let pts = walk(legs);
         let machine = Machine::default();
         let text = nurbs_program(order, &pts, feed);
         let (blocks, cycles) = step(&text, &machine);
@@ -266,15 +283,7 @@ proptest! {
         // A polyline turning by small random angles (a CAM chain): tangent kinks at
         // every vertex, so jerk is not checked next to them.
         let machine = Machine::default();
-        let mut text = format!("G21\nG1 F{feed}\n");
-        let (mut x, mut y, mut heading) = (0.0f64, 0.0f64, 0.0f64);
-        for (len, turn) in &steps {
-            heading += turn;
-            x += len * heading.cos();
-            y += len * heading.sin();
-            text += &format!("X{} Y{}\n", fmt(x), fmt(y));
-        }
-        text += "M2\n";
+        let text = chain_program(&walk(steps.iter().map(|&(len, turn)| (len, turn, 1.0))), feed);
         let (blocks, cycles) = step(&text, &machine);
         let w = check(&blocks, &cycles, &machine);
         prop_assert!(w.speed <= 1.0 + 1e-6, "speed {w:?}\n{text}");
@@ -756,23 +765,13 @@ proptest! {
         nurbs in any::<bool>(),
     ) {
         let machine = weak_x_machine();
-        let mut pts = vec![(0.0, 0.0, 1.0)];
-        let (mut x, mut y, mut heading) = (0.0f64, 0.0f64, 0.0f64);
-        for (len, turn, w) in &legs {
-            // Chains turn a little (a CAM polyline), curves' polygons a lot.
-            heading += if nurbs { *turn } else { 0.15 * turn };
-            x += len * heading.cos();
-            y += len * heading.sin();
-            pts.push((x, y, *w));
-        }
+        // Chains turn a little (a CAM polyline), curves' polygons a lot.
+        let bend = if nurbs { 1.0 } else { 0.15 };
+        let pts = walk(legs.iter().map(|&(len, turn, w)| (len, bend * turn, w)));
         let text = if nurbs {
             nurbs_program(order, &pts[..pts.len().min(11)], feed)
         } else {
-            let mut text = format!("G21\nG1 F{feed}\n");
-            for (x, y, _) in &pts[1..] {
-                text += &format!("X{} Y{}\n", fmt(*x), fmt(*y));
-            }
-            text + "M2\n"
+            chain_program(&pts, feed)
         };
         let (blocks, cycles) = step(&text, &machine);
         let w = check(&blocks, &cycles, &machine);
@@ -850,27 +849,23 @@ fn search_random_programs_for_broken_limits() {
                     4 + (uniform(0.0, 3.0) as usize).min(2)
                 };
                 let legs = 6 + uniform(0.0, 5.0) as usize;
-                let mut pts = vec![(0.0, 0.0, 1.0)];
-                let (mut x, mut y, mut heading) = (0.0f64, 0.0f64, 0.0f64);
-                for _ in 0..legs {
-                    heading += uniform(-2.0, 2.0);
-                    let len = uniform(1.0, 25.0);
-                    x += len * heading.cos();
-                    y += len * heading.sin();
-                    pts.push((x, y, uniform(0.5, 2.0)));
-                }
-                nurbs_program(order, &pts, feed)
+                // Drawn in this order: turn, length, weight.
+                let legs: Vec<_> = (0..legs)
+                    .map(|_| {
+                        let turn = uniform(-2.0, 2.0);
+                        let len = uniform(1.0, 25.0);
+                        (len, turn, uniform(0.5, 2.0))
+                    })
+                    .collect();
+                nurbs_program(order, &walk(legs), feed)
             } else {
-                let mut text = format!("G21\nG1 F{feed}\n");
-                let (mut x, mut y, mut heading) = (0.0f64, 0.0f64, 0.0f64);
-                for _ in 0..(5 + uniform(0.0, 55.0) as usize) {
-                    heading += uniform(-0.3, 0.3);
-                    let len = uniform(0.01, 5.0);
-                    x += len * heading.cos();
-                    y += len * heading.sin();
-                    text += &format!("X{} Y{}\n", fmt(x), fmt(y));
-                }
-                text + "M2\n"
+                let legs: Vec<_> = (0..(5 + uniform(0.0, 55.0) as usize))
+                    .map(|_| {
+                        let turn = uniform(-0.3, 0.3);
+                        (uniform(0.01, 5.0), turn, 1.0)
+                    })
+                    .collect();
+                chain_program(&walk(legs), feed)
             };
             let (blocks, cycles) = step(&text, &machine);
             let w = check(&blocks, &cycles, &machine);
