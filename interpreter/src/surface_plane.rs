@@ -709,12 +709,13 @@ pub fn plan(step: &FreeformStep) -> Result<PlanePath, StepError> {
         .fold(1.0, f64::max);
     let boundary = if edge_factor * worst_h > st.scallop_mm {
         let domain = (grid.gu[0], grid.gu[nu - 1], grid.gv[0], grid.gv[nv - 1]);
-        match passes.last() {
-            Some(p) if !p.closed && p.end_edge.is_some() => {
-                boundary_loop(p.uv[p.uv.len() - 1], p.end_edge.unwrap_or(Edge::V0), domain)
-            }
-            _ => boundary_loop((domain.0, domain.2), Edge::V0, domain),
-        }
+        // From where the last pass ends on an edge, else (a loop) from the first corner.
+        let (from, edge) = passes
+            .last()
+            .filter(|p| !p.closed)
+            .and_then(|p| Some((*p.uv.last()?, p.end_edge?)))
+            .unwrap_or(((domain.0, domain.2), Edge::V0));
+        boundary_loop(from, edge, domain)
     } else {
         Vec::new()
     };
