@@ -519,3 +519,43 @@ fn passes_square_to_the_edges_need_no_boundary_pass() {
     assert!(p.edge_factor < 1.1, "{}", p.edge_factor);
     assert!(p.boundary.is_empty(), "{:?}", p.boundary);
 }
+
+/// For exploring: the whole-part scallop (edges included) of plane paths at many plane
+/// directions on the example surfaces, printed against the tolerance. Run with
+/// `cargo test --release -p interpreter --lib -- --ignored --nocapture plane_directions`.
+#[test]
+#[ignore]
+fn search_plane_directions_for_scallops_beyond_tolerance() {
+    let mut over = 0;
+    for (name, text, h) in [
+        ("seed", SEED, 0.02),
+        ("torus", TORUS, 0.05),
+        ("cubic", CUBIC, 0.05),
+    ] {
+        for k in 0..12 {
+            let a = (k as f64 * 15.0 + 7.0).to_radians();
+            for tilt in [0.0, 0.4] {
+                let n = [a.cos(), a.sin(), tilt];
+                let step = step_of(&with_planes(text, "ZIGZAG", n, Some(h)));
+                let Ok(p) = plan(&step) else {
+                    eprintln!("{name} {:.0}° tilt {tilt}: refused", a.to_degrees());
+                    continue;
+                };
+                let got = part_scallop(&step, &p);
+                let bad = got.max_mm > h;
+                over += usize::from(bad);
+                eprintln!(
+                    "{name} {:.0}° tilt {tilt}: measured {:.2} µm, predicted {:.2} µm, tolerance {:.0} µm, edge factor {:.2}, boundary pass {}{}",
+                    a.to_degrees(),
+                    got.max_mm * 1e3,
+                    p.predicted_scallop_mm * 1e3,
+                    h * 1e3,
+                    p.edge_factor,
+                    !p.boundary.is_empty(),
+                    if bad { "  OVER" } else { "" }
+                );
+            }
+        }
+    }
+    eprintln!("{over} over the tolerance");
+}
