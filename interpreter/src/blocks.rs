@@ -877,12 +877,19 @@ fn surface_samples(b: &CommandBlock) -> Samples {
 /// curvature jumps by `Δk`, the speed whose acceleration step `v²·Δk` in one period stays
 /// within the jerk. Zero (exact stop) for corners sharper than the machine's corner angle.
 ///
-/// Also returns the kink, if any, for [`CloseKinks`]: its turn and the acceleration
-/// (times the period) its direction change may take.
-fn junction_speed(a: &Shape, b: &Shape, machine: &Machine, period_s: f64) -> (f64, Option<Kink>) {
+/// Also returns the kink, if any, for [`CloseKinks`] (its turn and the acceleration,
+/// times the period, its direction change may take), and the junction's [`Load`] where
+/// it was worked out, for [`junction_leaves`].
+fn junction_speed(
+    a: &Shape,
+    b: &Shape,
+    machine: &Machine,
+    fixed: &PlanLimits,
+    period_s: f64,
+) -> (f64, Option<Kink>, Option<Load>) {
     let cos = dot(a.t_end, b.t_start).clamp(-1.0, 1.0);
-    if cos < machine.corner_angle_deg.to_radians().cos() {
-        return (0.0, None);
+    if cos < fixed.corner_cos {
+        return (0.0, None, None);
     }
     // Between surface blocks the tangents and curvatures are the tool point's, which
     // moves up to `ratio` times the contact speed the caps are in. Its kinks (where the
@@ -904,6 +911,8 @@ fn junction_speed(a: &Shape, b: &Shape, machine: &Machine, period_s: f64) -> (f6
     let mut v = a.v_cap.min(b.v_cap);
     let half_sin = half_turn_sin(a, b);
     let mut kink = None;
+    // Worked out once a junction (it is the same whichever limit asks for it).
+    let mut load = None;
     if is_kink(half_sin) {
         let mut acc_t = acc * period_s / r;
         v = v.min(acc_t / (2.0 * half_sin));
@@ -911,17 +920,16 @@ fn junction_speed(a: &Shape, b: &Shape, machine: &Machine, period_s: f64) -> (f6
             // The direction change with the normal acceleration there takes at most
             // `KINK_SHARE` of the path's and of each axis's, so the profile keeps some
             // (see `junction_leaves`).
-            let (acc_limits, _) = limits_of(machine);
-            v = Load::of(a, b, period_s).acc_speed(v, &acc_limits, KINK_SHARE);
+            let l = load.get_or_insert_with(|| Load::of(a, b, period_s));
+            v = l.acc_speed(v, &fixed.acc, KINK_SHARE);
             // A run of close kinks (`CloseKinks`) bounds its whole direction change,
             // whose every axis's share is at most its length.
-            let weakest = acc_limits.iter().fold(f64::INFINITY, |m, x| m.min(*x));
-            acc_t = acc_t.min(KINK_SHARE * weakest * period_s);
+            acc_t = acc_t.min(KINK_SHARE * fixed.weakest_acc * period_s);
         }
         kink = Some(Kink {
             j: 0,
             s: 0.0,
-            turn: 2.0 * half_sin.min(1.0).asin(),
+            half_sin,
             acc_t,
         });
     }
@@ -939,11 +947,34 @@ fn junction_speed(a: &Shape, b: &Shape, machine: &Machine, period_s: f64) -> (f6
         if ratio.is_none() {
             // The acceleration's step with the normal jerk there takes at most
             // `JUMP_SHARE` of the path's jerk and of each axis's.
-            let (_, jerk_limits) = limits_of(machine);
-            v = Load::of(a, b, period_s).jerk_speed(v, &jerk_limits, JUMP_SHARE);
+            let l = load.get_or_insert_with(|| Load::of(a, b, period_s));
+            v = l.jerk_speed(v, &fixed.jerk, JUMP_SHARE);
         }
     }
-    (v, kink)
+    (v, kink, load)
+}
+
+/// What [`plan`] takes from the machine for every junction, worked out once.
+struct PlanLimits {
+    /// The cosine of the machine's corner angle: a sharper turn stops.
+    corner_cos: f64,
+    /// [`limits_of`] the machine.
+    acc: [f64; 4],
+    jerk: [f64; 4],
+    /// The least of `acc`.
+    weakest_acc: f64,
+}
+
+impl PlanLimits {
+    fn new(machine: &Machine) -> Self {
+        let (acc, jerk) = limits_of(machine);
+        PlanLimits {
+            corner_cos: machine.corner_angle_deg.to_radians().cos(),
+            acc,
+            jerk,
+            weakest_acc: acc.iter().fold(f64::INFINITY, |m, x| m.min(*x)),
+        }
+    }
 }
 
 /// `sin(θ/2)` of the turn `θ` of the tangent at the junction between `a` and `b`.
@@ -1093,7 +1124,14 @@ impl Load {
 /// (`sqrt(A² − acc²)`, `sqrt(J² − jerk²)`) and of each axis's (`(A_i − acc_i)/|t_i|`,
 /// with `t` the larger of the two tangents' components there); `None` where nothing is
 /// taken (a smooth junction, or one between surface blocks, whose shares are their own).
-fn junction_leaves(a: &Shape, b: &Shape, v: f64, machine: &Machine, period_s: f64) -> Option<Jerk> {
+fn junction_leaves(
+    a: &Shape,
+    b: &Shape,
+    v: f64,
+    load: Option<&Load>,
+    fixed: &PlanLimits,
+    period_s: f64,
+) -> Option<Jerk> {
     if a.surface_ratio.is_some() || b.surface_ratio.is_some() {
         return None;
     }
@@ -1102,8 +1140,14 @@ fn junction_leaves(a: &Shape, b: &Shape, v: f64, machine: &Machine, period_s: f6
     if !(kinked || jumps) || v <= 0.0 {
         return None;
     }
-    let load = Load::of(a, b, period_s);
-    let (acc_limits, jerk_limits) = limits_of(machine);
+    let worked_out;
+    let load = match load {
+        Some(l) => l,
+        None => {
+            worked_out = Load::of(a, b, period_s);
+            &worked_out
+        }
+    };
     let left = |limits: &[f64; 4], taken: &dyn Fn(usize) -> f64| {
         let path = (limits[PATH] * limits[PATH] - taken(PATH).powi(2))
             .max(0.0)
@@ -1119,12 +1163,12 @@ fn junction_leaves(a: &Shape, b: &Shape, v: f64, machine: &Machine, period_s: f6
     };
     Some(Jerk {
         acc: if kinked {
-            left(&acc_limits, &|c| load.acc(c, v))
+            left(&fixed.acc, &|c| load.acc(c, v))
         } else {
             f64::INFINITY
         },
         jerk: if jumps {
-            left(&jerk_limits, &|c| load.jerk(c, v))
+            left(&fixed.jerk, &|c| load.jerk(c, v))
         } else {
             f64::INFINITY
         },
@@ -1136,10 +1180,18 @@ fn junction_leaves(a: &Shape, b: &Shape, v: f64, machine: &Machine, period_s: f6
 struct Kink {
     j: usize,
     s: f64,
-    /// The tangent's turn (rad).
-    turn: f64,
+    /// `sin(θ/2)` of the tangent's turn `θ` (its angle, `2·asin`, is worked out only
+    /// for a run of close kinks, which few kinks are part of).
+    half_sin: f64,
     /// The acceleration the direction change may take, times the period (mm/s).
     acc_t: f64,
+}
+
+impl Kink {
+    /// The tangent's turn (rad).
+    fn turn(&self) -> f64 {
+        2.0 * self.half_sin.min(1.0).asin()
+    }
 }
 
 /// Kinks closer together than two steps: one step's direction can then change by the
@@ -1188,7 +1240,7 @@ impl CloseKinks {
         {
             self.recent.pop_front();
         }
-        let (mut turn, mut acc_t, mut v_max) = (k.turn, k.acc_t, end[k.j]);
+        let (mut acc_t, mut v_max) = (k.acc_t, end[k.j]);
         let mut first = self.recent.len();
         for (i, l) in self.recent.iter().enumerate().rev() {
             let v = v_max.max(end[l.j]);
@@ -1196,12 +1248,17 @@ impl CloseKinks {
                 break;
             }
             v_max = v;
-            turn += l.turn;
             acc_t = acc_t.min(l.acc_t);
             first = i;
         }
         let mut run = None;
         if first < self.recent.len() {
+            // The run's whole turn, summed from `k` back to its first kink.
+            let turn = self
+                .recent
+                .range(first..)
+                .rev()
+                .fold(k.turn(), |sum, l| sum + l.turn());
             let v = acc_t / (2.0 * (0.5 * turn.min(std::f64::consts::PI)).sin());
             for l in self.recent.range(first..) {
                 end[l.j] = end[l.j].min(v);
@@ -1268,6 +1325,19 @@ pub fn plan_alone(b: &mut CommandBlock, machine: &Machine, feed: f64) {
 /// [`shared::profile`], make every block able to slow to its end speed; the
 /// interpolator accelerates as its limits allow by itself (no forward pass).
 pub fn plan<B: Plannable>(blocks: &mut [B], machine: &Machine, period_ns: u64) {
+    plan_and(blocks, machine, period_ns, |_, _| {});
+}
+
+/// [`plan`], handing every block to `done` (with its index) as soon as it is final, in
+/// the backward pass: from the last block to the first. What looks at every planned
+/// block (`cnc check` validates them) then finds it still in the cache, instead of
+/// going over the whole list again.
+pub fn plan_and<B: Plannable>(
+    blocks: &mut [B],
+    machine: &Machine,
+    period_ns: u64,
+    mut done: impl FnMut(usize, &B),
+) {
     let period_s = period_ns as f64 * 1e-9;
     let n = blocks.len();
     // Junction speed limits (mm/s) at the end of each block, each found as soon as the
@@ -1277,6 +1347,7 @@ pub fn plan<B: Plannable>(blocks: &mut [B], machine: &Machine, period_ns: u64) {
     let mut close = CloseKinks::new(period_s);
     let mut s = 0.0f64;
     let straight_limits = StraightLimits::new(machine);
+    let fixed = PlanLimits::new(machine);
     for i in 0..n {
         let b = &mut blocks[i];
         let shp = b.is_motion().then(|| {
@@ -1308,12 +1379,14 @@ pub fn plan<B: Plannable>(blocks: &mut [B], machine: &Machine, period_ns: u64) {
                 let rapid_change = (b.flags() ^ nb.flags()) & FLAG_RAPID != 0;
                 let stop = b.flags() & FLAG_STOP_AT_END != 0;
                 if !(rapid_change || stop) {
-                    let (v, kink) = junction_speed(sa, sb, machine, period_s);
+                    let (v, kink, load) = junction_speed(sa, sb, machine, &fixed, period_s);
                     end[j] = v
                         .min(b.feed_mm_per_min() / 60.0)
                         .min(nb.feed_mm_per_min() / 60.0);
                     // What the junction takes at that speed, the blocks' profiles leave.
-                    if let Some(left) = junction_leaves(sa, sb, end[j], machine, period_s) {
+                    if let Some(left) =
+                        junction_leaves(sa, sb, end[j], load.as_ref(), &fixed, period_s)
+                    {
                         keep_within(&mut blocks[j], left);
                         keep_within(&mut blocks[i], left);
                     }
@@ -1324,7 +1397,7 @@ pub fn plan<B: Plannable>(blocks: &mut [B], machine: &Machine, period_ns: u64) {
                         {
                             // The run's direction change, at most `acc` on the path and on
                             // each axis: what it leaves, whatever the tangents.
-                            let (limits, _) = limits_of(machine);
+                            let limits = fixed.acc;
                             let path = limits[PATH];
                             let left = Jerk {
                                 acc: limits[..PATH]
@@ -1351,6 +1424,7 @@ pub fn plan<B: Plannable>(blocks: &mut [B], machine: &Machine, period_ns: u64) {
     // speed is final once the block after it has been passed, so its feeds are set here.
     for i in (0..n).rev() {
         if !blocks[i].is_motion() {
+            done(i, &blocks[i]);
             continue;
         }
         let len = blocks[i].length_mm();
@@ -1369,6 +1443,7 @@ pub fn plan<B: Plannable>(blocks: &mut [B], machine: &Machine, period_ns: u64) {
             entry.min(blocks[i].limits().reachable_speed(end[i], len))
         };
         blocks[i].set_feeds(start * 60.0, end[i] * 60.0);
+        done(i, &blocks[i]);
         if i > 0 {
             end[i - 1] = start;
         }
