@@ -877,19 +877,18 @@ fn surface_samples(b: &CommandBlock) -> Samples {
 /// curvature jumps by `Δk`, the speed whose acceleration step `v²·Δk` in one period stays
 /// within the jerk. Zero (exact stop) for corners sharper than the machine's corner angle.
 ///
-/// Also returns the kink, if any, for [`CloseKinks`] (its turn and the acceleration,
-/// times the period, its direction change may take), and the junction's [`Load`] where
-/// it was worked out, for [`junction_leaves`].
+/// Also returns the kink, if any, for [`CloseKinks`]: its turn and the acceleration
+/// (times the period) its direction change may take.
 fn junction_speed(
     a: &Shape,
     b: &Shape,
+    at: &Junction,
     machine: &Machine,
     fixed: &PlanLimits,
     period_s: f64,
-) -> (f64, Option<Kink>, Option<Load>) {
-    let cos = dot(a.t_end, b.t_start).clamp(-1.0, 1.0);
-    if cos < fixed.corner_cos {
-        return (0.0, None, None);
+) -> (f64, Option<Kink>) {
+    if at.cos < fixed.corner_cos {
+        return (0.0, None);
     }
     // Between surface blocks the tangents and curvatures are the tool point's, which
     // moves up to `ratio` times the contact speed the caps are in. Its kinks (where the
@@ -909,19 +908,16 @@ fn junction_speed(
         ),
     };
     let mut v = a.v_cap.min(b.v_cap);
-    let half_sin = half_turn_sin(a, b);
+    let half_sin = at.half_sin;
     let mut kink = None;
-    // Worked out once a junction (it is the same whichever limit asks for it).
-    let mut load = None;
     if is_kink(half_sin) {
         let mut acc_t = acc * period_s / r;
         v = v.min(acc_t / (2.0 * half_sin));
-        if ratio.is_none() {
+        if let Some(load) = &at.load {
             // The direction change with the normal acceleration there takes at most
             // `KINK_SHARE` of the path's and of each axis's, so the profile keeps some
             // (see `junction_leaves`).
-            let l = load.get_or_insert_with(|| Load::of(a, b, period_s));
-            v = l.acc_speed(v, &fixed.acc, KINK_SHARE);
+            v = load.acc_speed(v, &fixed.acc, KINK_SHARE);
             // A run of close kinks (`CloseKinks`) bounds its whole direction change,
             // whose every axis's share is at most its length.
             acc_t = acc_t.min(KINK_SHARE * fixed.weakest_acc * period_s);
@@ -941,17 +937,46 @@ fn junction_speed(
             v = v.min(acc * period_s / dm);
         }
     }
-    let dk = curvature_jump(a, b);
+    let dk = at.dk;
     if is_jump(dk) {
         v = v.min((jerk * period_s / dk).sqrt() / r);
-        if ratio.is_none() {
+        if let Some(load) = &at.load {
             // The acceleration's step with the normal jerk there takes at most
             // `JUMP_SHARE` of the path's jerk and of each axis's.
-            let l = load.get_or_insert_with(|| Load::of(a, b, period_s));
-            v = l.jerk_speed(v, &fixed.jerk, JUMP_SHARE);
+            v = load.jerk_speed(v, &fixed.jerk, JUMP_SHARE);
         }
     }
-    (v, kink, load)
+    (v, kink)
+}
+
+/// What a junction's speed and what it leaves the blocks are worked out from, each once.
+struct Junction {
+    /// `T_a·T_b`, the cosine of the tangent's turn.
+    cos: f64,
+    /// [`half_turn_sin`].
+    half_sin: f64,
+    /// [`curvature_jump`].
+    dk: f64,
+    /// The junction's [`Load`] between curves (not surface blocks) that kink or jump,
+    /// unless the turn is a corner (an exact stop, which takes nothing).
+    load: Option<Load>,
+}
+
+impl Junction {
+    fn of(a: &Shape, b: &Shape, fixed: &PlanLimits, period_s: f64) -> Junction {
+        let cos = dot(a.t_end, b.t_start).clamp(-1.0, 1.0);
+        let half_sin = half_turn_sin(cos);
+        let dk = curvature_jump(a, b);
+        let curves = a.surface_ratio.is_none() && b.surface_ratio.is_none();
+        let load = (cos >= fixed.corner_cos && curves && (is_kink(half_sin) || is_jump(dk)))
+            .then(|| Load::of(a, b, period_s));
+        Junction {
+            cos,
+            half_sin,
+            dk,
+            load,
+        }
+    }
 }
 
 /// What [`plan`] takes from the machine for every junction, worked out once.
@@ -978,8 +1003,8 @@ impl PlanLimits {
 }
 
 /// `sin(θ/2)` of the turn `θ` of the tangent at the junction between `a` and `b`.
-fn half_turn_sin(a: &Shape, b: &Shape) -> f64 {
-    let cos = dot(a.t_end, b.t_start).clamp(-1.0, 1.0);
+/// from its cosine `cos`, `T_a·T_b` clamped to [-1, 1].
+fn half_turn_sin(cos: f64) -> f64 {
     (0.5 * (1.0 - cos)).max(0.0).sqrt()
 }
 
@@ -1055,6 +1080,36 @@ impl Load {
     fn of(a: &Shape, b: &Shape, period_s: f64) -> Load {
         let each = |f: &dyn Fn(usize) -> f64, whole: f64| [f(0), f(1), f(2), whole];
         let turn = sub(b.t_start, a.t_end);
+        let turn = each(&|i| turn[i].abs() / period_s, path::norm(turn) / period_s);
+        // Between two lines (most junctions of most programs) every figure but the turn
+        // is zero: without curvature the general form below works out `|0|`, norms of
+        // zero vectors, `0/T` and `3·a·0`, each `+0` for a positive period and a finite
+        // acceleration of positive sign (`-0` would make `-0`). Those zeros, without the
+        // arithmetic.
+        let flat = |x: [f64; 3]| x == [0.0; 3];
+        let plain = |acc: f64| acc.is_sign_positive() && acc < 1e300;
+        if flat(a.k_end)
+            && flat(b.k_start)
+            && flat(a.dk_end)
+            && flat(b.dk_start)
+            && plain(a.acc)
+            && plain(b.acc)
+            && period_s > 0.0
+        {
+            return Load {
+                turn,
+                kappa: [0.0; 4],
+                jump: [0.0; 4],
+                acc_kappa3: [0.0; 4],
+                dk: [0.0; 4],
+            };
+        }
+        Load::general(a, b, turn, period_s)
+    }
+
+    /// [`Load::of`] worked out in full, `turn` given.
+    fn general(a: &Shape, b: &Shape, turn: [f64; 4], period_s: f64) -> Load {
+        let each = |f: &dyn Fn(usize) -> f64, whole: f64| [f(0), f(1), f(2), whole];
         let jump = sub(b.k_start, a.k_end);
         let (ka, kb) = (a.k_end, b.k_start);
         let larger = |x: [f64; 3], y: [f64; 3]| {
@@ -1068,7 +1123,7 @@ impl Load {
             (3.0 * a.acc * path::norm(ka)).max(3.0 * b.acc * path::norm(kb)),
         );
         Load {
-            turn: each(&|i| turn[i].abs() / period_s, path::norm(turn) / period_s),
+            turn,
             kappa: larger(ka, kb),
             jump: each(&|i| jump[i].abs() / period_s, path::norm(jump) / period_s),
             acc_kappa3,
@@ -1128,20 +1183,22 @@ fn junction_leaves(
     a: &Shape,
     b: &Shape,
     v: f64,
-    load: Option<&Load>,
+    at: &Junction,
     fixed: &PlanLimits,
     period_s: f64,
 ) -> Option<Jerk> {
     if a.surface_ratio.is_some() || b.surface_ratio.is_some() {
         return None;
     }
-    let kinked = is_kink(half_turn_sin(a, b));
-    let jumps = is_jump(curvature_jump(a, b));
+    let kinked = is_kink(at.half_sin);
+    let jumps = is_jump(at.dk);
     if !(kinked || jumps) || v <= 0.0 {
         return None;
     }
+    // Worked out here only past a corner, where the speed is not zero unless the
+    // feeds are: the same numbers as `Junction::of` would have.
     let worked_out;
-    let load = match load {
+    let load = match &at.load {
         Some(l) => l,
         None => {
             worked_out = Load::of(a, b, period_s);
@@ -1379,14 +1436,13 @@ pub fn plan_and<B: Plannable>(
                 let rapid_change = (b.flags() ^ nb.flags()) & FLAG_RAPID != 0;
                 let stop = b.flags() & FLAG_STOP_AT_END != 0;
                 if !(rapid_change || stop) {
-                    let (v, kink, load) = junction_speed(sa, sb, machine, &fixed, period_s);
+                    let at = Junction::of(sa, sb, &fixed, period_s);
+                    let (v, kink) = junction_speed(sa, sb, &at, machine, &fixed, period_s);
                     end[j] = v
                         .min(b.feed_mm_per_min() / 60.0)
                         .min(nb.feed_mm_per_min() / 60.0);
                     // What the junction takes at that speed, the blocks' profiles leave.
-                    if let Some(left) =
-                        junction_leaves(sa, sb, end[j], load.as_ref(), &fixed, period_s)
-                    {
+                    if let Some(left) = junction_leaves(sa, sb, end[j], &at, &fixed, period_s) {
                         keep_within(&mut blocks[j], left);
                         keep_within(&mut blocks[i], left);
                     }
