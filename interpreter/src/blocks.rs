@@ -370,6 +370,24 @@ struct Shape {
     m_end: Option<[f64; 3]>,
 }
 
+impl Shape {
+    /// A shape to overwrite.
+    const NONE: Shape = Shape {
+        v_cap: 0.0,
+        acc: 0.0,
+        jerk: 0.0,
+        t_start: [0.0; 3],
+        t_end: [0.0; 3],
+        k_start: [0.0; 3],
+        k_end: [0.0; 3],
+        dk_start: [0.0; 3],
+        dk_end: [0.0; 3],
+        surface_ratio: None,
+        m_start: None,
+        m_end: None,
+    };
+}
+
 /// Share of the path (and each axis's) acceleration the curvature may take at the cap
 /// speed, and of the jerk; the rest is left to the speed profile along the path.
 const NORMAL_SHARE: f64 = 0.5;
@@ -577,10 +595,18 @@ impl StraightLimits {
 /// curvature makes zero; `None` where those terms might not be exact zeros (a feed
 /// that is not a finite number below 1e100, a chord without a length), which `shape`
 /// then handles. Lines are most blocks of most programs: this is the planner's hot path.
+#[cfg(test)]
 fn shape_straight(d: [f64; 3], lim: &StraightLimits, feed_mm_s: f64) -> Option<Shape> {
+    let mut shape = Shape::NONE;
+    shape_straight_into(d, lim, feed_mm_s, &mut shape).then_some(shape)
+}
+
+/// [`shape_straight`] written into `out` (where it stays: a shape is 248 bytes), `false`
+/// where it is `None`, leaving `out` as it was.
+fn shape_straight_into(d: [f64; 3], lim: &StraightLimits, feed_mm_s: f64, out: &mut Shape) -> bool {
     let len = path::norm(d);
     if !(len > 0.0 && feed_mm_s.is_finite() && feed_mm_s.abs() < 1e100) {
-        return None;
+        return false;
     }
     let t = d.map(|x| x / len);
     // As in `shape`, axis by axis, in its order: the cap speed (only the velocity
@@ -598,7 +624,7 @@ fn shape_straight(d: [f64; 3], lim: &StraightLimits, feed_mm_s: f64) -> Option<S
     let v = axis_by_axis(feed_mm_s, &lim.vel_mm_s);
     let acc = axis_by_axis(lim.a_tangential, &lim.acc);
     let jerk = axis_by_axis(lim.j_path, &lim.jerk);
-    Some(Shape {
+    *out = Shape {
         v_cap: v,
         acc: acc.max(lim.acc_floor),
         jerk: jerk.max(lim.jerk_floor),
@@ -611,7 +637,8 @@ fn shape_straight(d: [f64; 3], lim: &StraightLimits, feed_mm_s: f64) -> Option<S
         surface_ratio: None,
         m_start: None,
         m_end: None,
-    })
+    };
+    true
 }
 
 /// The chord of a block that is a straight segment (degree 1, two control points, no
@@ -913,7 +940,7 @@ fn junction_speed(
     if is_kink(half_sin) {
         let mut acc_t = acc * period_s / r;
         v = v.min(acc_t / (2.0 * half_sin));
-        if let Some(load) = &at.load {
+        if let Some(load) = at.load {
             // The direction change with the normal acceleration there takes at most
             // `KINK_SHARE` of the path's and of each axis's, so the profile keeps some
             // (see `junction_leaves`).
@@ -940,7 +967,7 @@ fn junction_speed(
     let dk = at.dk;
     if is_jump(dk) {
         v = v.min((jerk * period_s / dk).sqrt() / r);
-        if let Some(load) = &at.load {
+        if let Some(load) = at.load {
             // The acceleration's step with the normal jerk there takes at most
             // `JUMP_SHARE` of the path's jerk and of each axis's.
             v = load.jerk_speed(v, &fixed.jerk, JUMP_SHARE);
@@ -950,7 +977,7 @@ fn junction_speed(
 }
 
 /// What a junction's speed and what it leaves the blocks are worked out from, each once.
-struct Junction {
+struct Junction<'a> {
     /// `T_a·T_b`, the cosine of the tangent's turn.
     cos: f64,
     /// [`half_turn_sin`].
@@ -959,22 +986,31 @@ struct Junction {
     dk: f64,
     /// The junction's [`Load`] between curves (not surface blocks) that kink or jump,
     /// unless the turn is a corner (an exact stop, which takes nothing).
-    load: Option<Load>,
+    load: Option<&'a Load>,
 }
 
-impl Junction {
-    fn of(a: &Shape, b: &Shape, fixed: &PlanLimits, period_s: f64) -> Junction {
+impl<'a> Junction<'a> {
+    /// The junction between `a` and `b`; its load, if any, is written into `load`.
+    fn of(
+        a: &Shape,
+        b: &Shape,
+        fixed: &PlanLimits,
+        period_s: f64,
+        load: &'a mut Load,
+    ) -> Junction<'a> {
         let cos = dot(a.t_end, b.t_start).clamp(-1.0, 1.0);
         let half_sin = half_turn_sin(cos);
         let dk = curvature_jump(a, b);
         let curves = a.surface_ratio.is_none() && b.surface_ratio.is_none();
-        let load = (cos >= fixed.corner_cos && curves && (is_kink(half_sin) || is_jump(dk)))
-            .then(|| Load::of(a, b, period_s));
+        let loaded = cos >= fixed.corner_cos && curves && (is_kink(half_sin) || is_jump(dk));
+        if loaded {
+            load.fill(a, b, period_s);
+        }
         Junction {
             cos,
             half_sin,
             dk,
-            load,
+            load: loaded.then_some(&*load),
         }
     }
 }
@@ -1077,10 +1113,29 @@ struct Load {
 }
 
 impl Load {
+    const ZERO: Load = Load {
+        turn: [0.0; 4],
+        kappa: [0.0; 4],
+        jump: [0.0; 4],
+        acc_kappa3: [0.0; 4],
+        dk: [0.0; 4],
+    };
+
     fn of(a: &Shape, b: &Shape, period_s: f64) -> Load {
-        let each = |f: &dyn Fn(usize) -> f64, whole: f64| [f(0), f(1), f(2), whole];
+        let mut load = Load::ZERO;
+        load.fill(a, b, period_s);
+        load
+    }
+
+    /// Makes this [`Load::of`] `a` and `b`, in place.
+    fn fill(&mut self, a: &Shape, b: &Shape, period_s: f64) {
         let turn = sub(b.t_start, a.t_end);
-        let turn = each(&|i| turn[i].abs() / period_s, path::norm(turn) / period_s);
+        let turn = [
+            turn[0].abs() / period_s,
+            turn[1].abs() / period_s,
+            turn[2].abs() / period_s,
+            path::norm(turn) / period_s,
+        ];
         // Between two lines (most junctions of most programs) every figure but the turn
         // is zero: without curvature the general form below works out `|0|`, norms of
         // zero vectors, `0/T` and `3·a·0`, each `+0` for a positive period and a finite
@@ -1096,15 +1151,14 @@ impl Load {
             && plain(b.acc)
             && period_s > 0.0
         {
-            return Load {
-                turn,
-                kappa: [0.0; 4],
-                jump: [0.0; 4],
-                acc_kappa3: [0.0; 4],
-                dk: [0.0; 4],
-            };
+            self.turn = turn;
+            self.kappa = [0.0; 4];
+            self.jump = [0.0; 4];
+            self.acc_kappa3 = [0.0; 4];
+            self.dk = [0.0; 4];
+        } else {
+            *self = Load::general(a, b, turn, period_s);
         }
-        Load::general(a, b, turn, period_s)
     }
 
     /// [`Load::of`] worked out in full, `turn` given.
@@ -1198,7 +1252,7 @@ fn junction_leaves(
     // Worked out here only past a corner, where the speed is not zero unless the
     // feeds are: the same numbers as `Junction::of` would have.
     let worked_out;
-    let load = match &at.load {
+    let load = match at.load {
         Some(l) => l,
         None => {
             worked_out = Load::of(a, b, period_s);
@@ -1400,43 +1454,50 @@ pub fn plan_and<B: Plannable>(
     // Junction speed limits (mm/s) at the end of each block, each found as soon as the
     // block after it has its shape (a junction needs only its two blocks').
     let mut end = vec![0.0f64; n];
-    let mut before: Option<Shape> = None;
+    // The shapes of the block before and of this one (where they are motions), taking
+    // turns (`i % 2`), each worked out where it stays: a shape is 248 bytes, and making
+    // one and handing it on were copies a block.
+    let mut shapes = [Shape::NONE; 2];
+    let mut shaped = [false; 2];
     let mut close = CloseKinks::new(period_s);
     let mut s = 0.0f64;
     let straight_limits = StraightLimits::new(machine);
     let fixed = PlanLimits::new(machine);
+    // A junction's load, worked out where it stays (160 bytes) when it has one.
+    let mut load = Load::ZERO;
     for i in 0..n {
         let b = &mut blocks[i];
-        let shp = b.is_motion().then(|| {
+        shaped[i % 2] = b.is_motion();
+        if shaped[i % 2] {
+            let shp = &mut shapes[i % 2];
             let feed = b.feed_mm_per_min();
-            let (length, shp) = {
-                let g = b.geometry();
-                let length = match g {
-                    Geometry::Straight(d) => path::norm(d),
-                    Geometry::Curve(c) => path::length(c),
-                };
-                let fast = match (g, &straight_limits) {
-                    (Geometry::Straight(d), Some(lim)) => shape_straight(d, lim, feed / 60.0),
-                    _ => None,
-                };
-                let shp = fast.unwrap_or_else(|| shape(g, machine, period_s, feed / 60.0));
-                (length, shp)
+            let g = b.geometry();
+            let length = match g {
+                Geometry::Straight(d) => path::norm(d),
+                Geometry::Curve(c) => path::length(c),
             };
+            let fast = match (g, &straight_limits) {
+                (Geometry::Straight(d), Some(lim)) => shape_straight_into(d, lim, feed / 60.0, shp),
+                _ => false,
+            };
+            if !fast {
+                *shp = shape(g, machine, period_s, feed / 60.0);
+            }
             let limits = Jerk {
                 acc: shp.acc,
                 jerk: shp.jerk,
             };
             b.set_caps(length, feed.min(shp.v_cap * 60.0), limits);
             s += length;
-            shp
-        });
+        }
         if let Some(j) = i.checked_sub(1) {
-            if let (Some(sa), Some(sb)) = (&before, &shp) {
+            if shaped[j % 2] && shaped[i % 2] {
+                let (sa, sb) = (&shapes[j % 2], &shapes[i % 2]);
                 let (b, nb) = (&blocks[j], &blocks[i]);
                 let rapid_change = (b.flags() ^ nb.flags()) & FLAG_RAPID != 0;
                 let stop = b.flags() & FLAG_STOP_AT_END != 0;
                 if !(rapid_change || stop) {
-                    let at = Junction::of(sa, sb, &fixed, period_s);
+                    let at = Junction::of(sa, sb, &fixed, period_s, &mut load);
                     let (v, kink) = junction_speed(sa, sb, &at, machine, &fixed, period_s);
                     end[j] = v
                         .min(b.feed_mm_per_min() / 60.0)
@@ -1474,7 +1535,6 @@ pub fn plan_and<B: Plannable>(
                 close.stop();
             }
         }
-        before = shp;
     }
     // Backward pass: every block must be able to slow to its end speed. A block's end
     // speed is final once the block after it has been passed, so its feeds are set here.
