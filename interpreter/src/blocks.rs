@@ -612,10 +612,17 @@ fn shape_straight_into(d: [f64; 3], lim: &StraightLimits, feed_mm_s: f64, out: &
     // As in `shape`, axis by axis, in its order: the cap speed (only the velocity
     // limits bind a line), then the tangential acceleration (`max_acc - v²·0`), then
     // the jerk (`j - 3·v·a·0 - v³·0` is `j`).
+    //
+    // A component of the unit tangent is at most 1 (the norm is at least each
+    // component's length, rounding included), so `limit/|t_i|` is at least `limit`: an
+    // `x` already at or below the limit stays as it is, and the division (tens of
+    // cycles, nine a block) is left out. Checked, not assumed: a `|t_i|` above 1 (only
+    // where squares underflow) divides as before.
     let axis_by_axis = |start: f64, per_axis: &[f64; 3]| {
         t.iter().zip(per_axis).fold(start, |x, (ti, limit)| {
-            if ti.abs() > 1e-12 {
-                x.min(limit / ti.abs())
+            let ti = ti.abs();
+            if ti > 1e-12 && !(x <= *limit && ti <= 1.0) {
+                x.min(limit / ti)
             } else {
                 x
             }
@@ -1453,7 +1460,7 @@ pub fn plan_and<B: Plannable>(
     let n = blocks.len();
     // Junction speed limits (mm/s) at the end of each block, each found as soon as the
     // block after it has its shape (a junction needs only its two blocks').
-    let mut end = vec![0.0f64; n];
+    let mut end = crate::pages::filled(n, 0.0f64);
     // The shapes of the block before and of this one (where they are motions), taking
     // turns (`i % 2`), each worked out where it stays: a shape is 248 bytes, and making
     // one and handing it on were copies a block.

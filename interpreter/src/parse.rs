@@ -586,7 +586,7 @@ pub fn flow(o_words: &[Option<Box<OWord>>]) -> (Flow, Vec<Diagnostic>) {
     }
     let n = o_words.len();
     let mut f = Flow {
-        link: vec![None; n],
+        link: crate::pages::filled(n, None),
         closes_do: vec![false; n],
         subs: HashMap::new(),
     };

@@ -459,6 +459,7 @@ pub fn interpret_with(text: &str, opts: &Options) -> Result<Program, Vec<Diagnos
 fn lines_of(text: &str) -> Vec<&str> {
     let bytes = text.as_bytes();
     let mut lines = Vec::with_capacity(newlines(bytes) + 1);
+    crate::pages::prefer_huge_pages(&lines);
     let mut start = 0;
     let mut push = |end: usize, start: &mut usize| {
         // `\n` and `\r` are ASCII: slicing at them keeps the text's characters whole.
