@@ -324,9 +324,11 @@ pub fn interpret_with(text: &str, opts: &Options) -> Result<Program, Vec<Diagnos
         let file_o_words = subfile::o_words_of(&f.text, &file_lines, 1);
         units.append(&f.path, start, &file_o_words, &mut flow, &mut errors);
         lines.extend(file_lines);
+        // A list without O-words is empty: filled up to the file's first line.
+        o_words.resize_with(start, || None);
         o_words.extend(file_o_words);
     }
-    let mut run = Runner::new(o_words, flow, missing);
+    let mut run = Runner::new(o_words, lines.len(), flow, missing);
     let last_line = own_lines as u32;
     let mut pc = 0;
     let mut reader = LineReader::default();
