@@ -32,7 +32,7 @@ pub(super) fn o_words_of(text: &str, lines: &[&str], first_line: u32) -> Vec<Opt
     // bytes (a fold without an early exit, which the compiler vectorises) instead of a
     // look at each line, and no list at all (the flow, the subroutine files and the
     // runner then have nothing to look through).
-    if !text.bytes().fold(false, |o, b| o | (b | 0x20 == b'o')) {
+    if !may_have_o_words(text) {
         return Vec::new();
     }
     lines
@@ -44,6 +44,12 @@ pub(super) fn o_words_of(text: &str, lines: &[&str], first_line: u32) -> Vec<Opt
                 .map(Box::new)
         })
         .collect()
+}
+
+/// Whether `text` has an `o` or `O` anywhere, which an O-word needs: one pass over its
+/// bytes (a fold without an early exit, which the compiler vectorises).
+pub(super) fn may_have_o_words(text: &str) -> bool {
+    text.bytes().fold(false, |o, b| o | (b | 0x20 == b'o'))
 }
 
 /// Labels called and defined nowhere, with why no file supplied them.

@@ -173,6 +173,7 @@ proptest::proptest! {
     fn lines_of_is_str_lines(text in "([a-z \\r\\né€]{0,20}\\n?){0,12}[\\r\\n]{0,2}") {
         let ours = lines_of(&text);
         let std: Vec<&str> = text.lines().collect();
+        proptest::prop_assert_eq!(line_count(&text), std.len());
         proptest::prop_assert_eq!(ours, std);
     }
 }
@@ -194,6 +195,18 @@ fn lines_of_ends_and_blanks() {
     }
     let long = "G1 X1.5 Y-2 Z0.25\r\n".repeat(40) + "M2";
     assert_eq!(lines_of(&long), long.lines().collect::<Vec<_>>());
+    // Read in order (no O-words) or listed (an O-word), a program's lines are the same:
+    // CR LF endings, a blank line, a last line without its end.
+    let plain = "G1 X1 F100\r\n\r\nG1 X2\r\nG1 X3";
+    let with_o = format!("{plain}\r\no1 if [0]\r\no1 endif");
+    let (a, b) = (moves(plain), moves(&with_o));
+    // The same moves, to the program's end on its own last line.
+    assert_eq!(a[..a.len() - 1], b[..b.len() - 1]);
+    assert_eq!(a[a.len() - 1], Move::End { line: 4 });
+    assert_eq!(
+        errors("G1 X1 F100\r\n\nG1 E2\r"),
+        errors("G1 X1 F100\r\n\nG1 E2\r\n(o)")
+    );
 }
 
 #[test]
