@@ -570,8 +570,14 @@ fn newlines(bytes: &[u8]) -> usize {
 }
 
 fn gcode(w: &Word) -> Option<u32> {
-    let tenths = (w.value * 10.0).round();
-    ((tenths - w.value * 10.0).abs() < 1e-6 && tenths >= 0.0).then_some(tenths as u32)
+    // A whole number of tenths (`G1`, `G64`, `G5.2`: nearly every code) is its own
+    // rounding, so the `round` below (a call into libm) would give it back unchanged.
+    let t = w.value * 10.0;
+    if t >= 0.0 && t < 4e9 && f64::from(t as u32) == t {
+        return Some(t as u32);
+    }
+    let tenths = t.round();
+    ((tenths - t).abs() < 1e-6 && tenths >= 0.0).then_some(tenths as u32)
 }
 
 /// The G-codes of a line that start or shape motion, by kind.

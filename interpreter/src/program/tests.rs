@@ -236,3 +236,25 @@ fn newlines_counts_every_one() {
         assert_eq!(newlines(&some), n.div_ceil(3));
     }
 }
+
+/// `gcode` as it was: every value, whole tenths or not, gives the same code.
+#[test]
+fn gcode_whole_tenths_as_rounded() {
+    let before = |v: f64| {
+        let tenths = (v * 10.0).round();
+        ((tenths - v * 10.0).abs() < 1e-6 && tenths >= 0.0).then_some(tenths as u32)
+    };
+    let values = [
+        0.0, -0.0, 1.0, 5.2, 5.3, 6.2, 64.0, 61.1, 0.1, 0.25, 1.00000001, 2.9999999, -1.0,
+        -0.04, 4e8, 4.2e8, 1e300, f64::NAN, f64::INFINITY, f64::NEG_INFINITY, 429496729.5,
+        429496729.6,
+    ];
+    for v in values.into_iter().chain((0..20_000).map(|i| i as f64 * 0.013 - 7.0)) {
+        let w = Word {
+            letter: 'G',
+            value: v,
+            col: 1,
+        };
+        assert_eq!(gcode(&w), before(v), "{v}");
+    }
+}
