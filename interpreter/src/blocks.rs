@@ -598,13 +598,19 @@ impl StraightLimits {
 #[cfg(test)]
 fn shape_straight(d: [f64; 3], lim: &StraightLimits, feed_mm_s: f64) -> Option<Shape> {
     let mut shape = Shape::NONE;
-    shape_straight_into(d, lim, feed_mm_s, &mut shape).then_some(shape)
+    shape_straight_into(d, path::norm(d), lim, feed_mm_s, &mut shape).then_some(shape)
 }
 
 /// [`shape_straight`] written into `out` (where it stays: a shape is 248 bytes), `false`
-/// where it is `None`, leaving `out` as it was.
-fn shape_straight_into(d: [f64; 3], lim: &StraightLimits, feed_mm_s: f64, out: &mut Shape) -> bool {
-    let len = path::norm(d);
+/// where it is `None`, leaving `out` as it was; `len` is the chord's `path::norm`, which
+/// the planner has worked out already.
+fn shape_straight_into(
+    d: [f64; 3],
+    len: f64,
+    lim: &StraightLimits,
+    feed_mm_s: f64,
+    out: &mut Shape,
+) -> bool {
     if !(len > 0.0 && feed_mm_s.is_finite() && feed_mm_s.abs() < 1e100) {
         return false;
     }
@@ -1272,8 +1278,12 @@ fn junction_leaves(
             .sqrt();
         (0..PATH).fold(path, |m, i| {
             let t = a.t_end[i].abs().max(b.t_start[i].abs());
-            if t > 1e-12 {
-                m.min((limits[i] - taken(i)).max(0.0) / t)
+            let room = (limits[i] - taken(i)).max(0.0);
+            // A tangent's component is at most 1 (checked), so `room/t` is at least
+            // `room`, and an `m` at or below `room` stays: no division (as in
+            // `shape_straight`).
+            if t > 1e-12 && !(m <= room && t <= 1.0) {
+                m.min(room / t)
             } else {
                 m
             }
@@ -1484,7 +1494,9 @@ pub fn plan_and<B: Plannable>(
                 Geometry::Curve(c) => path::length(c),
             };
             let fast = match (g, &straight_limits) {
-                (Geometry::Straight(d), Some(lim)) => shape_straight_into(d, lim, feed / 60.0, shp),
+                (Geometry::Straight(d), Some(lim)) => {
+                    shape_straight_into(d, length, lim, feed / 60.0, shp)
+                }
                 _ => false,
             };
             if !fast {

@@ -502,8 +502,13 @@ const EXACT_POW10: [f64; 23] = [
 /// below 2^53 over an exact power of ten is one correctly rounded division, the same
 /// value `str::parse` gives; `None` for any other (then `str::parse` reads the text).
 fn exact_decimal(mantissa: u64, decimals: usize, digits: usize, points: usize) -> Option<f64> {
-    (digits > 0 && points <= 1 && mantissa < 1 << 53 && decimals < EXACT_POW10.len())
+    is_exact_decimal(mantissa, decimals, digits, points)
         .then(|| mantissa as f64 / EXACT_POW10[decimals])
+}
+
+/// Whether [`exact_decimal`] has a value for these.
+fn is_exact_decimal(mantissa: u64, decimals: usize, digits: usize, points: usize) -> bool {
+    digits > 0 && points <= 1 && mantissa < 1 << 53 && decimals < EXACT_POW10.len()
 }
 
 /// A number at the start of `bytes` (digits and points, no sign), read as [`number`]
@@ -531,7 +536,7 @@ pub(crate) fn plain_number(bytes: &[u8]) -> Option<(f64, usize)> {
     }
     let (mut mantissa, mut digits) = (0u64, 0usize);
     let whole = gather(bytes, 0, &mut mantissa, &mut digits);
-    let whole_digits = digits;
+    let (whole_digits, whole_value) = (digits, mantissa);
     let (len, points) = match bytes.get(whole) {
         Some(b'.') => (gather(bytes, whole + 1, &mut mantissa, &mut digits), 1),
         _ => (whole, 0),
@@ -540,7 +545,16 @@ pub(crate) fn plain_number(bytes: &[u8]) -> Option<(f64, usize)> {
     if bytes.get(len) == Some(&b'.') {
         return None;
     }
-    exact_decimal(mantissa, digits - whole_digits, digits, points).map(|v| (v, len))
+    let decimals = digits - whole_digits;
+    // Only zeros after the point (`Y125.000`, as CAM writes many numbers): the quotient
+    // is the whole part, exactly (below 2^53, as the mantissa is), which the division
+    // gives too: it is left out.
+    if is_exact_decimal(mantissa, decimals, digits, points)
+        && bytes[whole..len].iter().all(|&b| b == b'0' || b == b'.')
+    {
+        return Some((whole_value as f64, len));
+    }
+    exact_decimal(mantissa, decimals, digits, points).map(|v| (v, len))
 }
 
 fn number(cur: &mut Cursor) -> Result<f64, Diagnostic> {
@@ -678,6 +692,13 @@ mod tests {
             "12345678901234567890",
             "123456789012345678901234",
             "0000000000000000000000000012.5",
+            "125.000",
+            "5.",
+            ".000",
+            "0.0",
+            "9007199254740991.0",
+            "900719925474099.10",
+            "12.0000000000000000000000",
             "12x",
             "3.5 ",
         ] {

@@ -573,7 +573,7 @@ fn gcode(w: &Word) -> Option<u32> {
     // A whole number of tenths (`G1`, `G64`, `G5.2`: nearly every code) is its own
     // rounding, so the `round` below (a call into libm) would give it back unchanged.
     let t = w.value * 10.0;
-    if t >= 0.0 && t < 4e9 && f64::from(t as u32) == t {
+    if (0.0..4e9).contains(&t) && f64::from(t as u32) == t {
         return Some(t as u32);
     }
     let tenths = t.round();

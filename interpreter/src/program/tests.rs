@@ -245,11 +245,33 @@ fn gcode_whole_tenths_as_rounded() {
         ((tenths - v * 10.0).abs() < 1e-6 && tenths >= 0.0).then_some(tenths as u32)
     };
     let values = [
-        0.0, -0.0, 1.0, 5.2, 5.3, 6.2, 64.0, 61.1, 0.1, 0.25, 1.00000001, 2.9999999, -1.0,
-        -0.04, 4e8, 4.2e8, 1e300, f64::NAN, f64::INFINITY, f64::NEG_INFINITY, 429496729.5,
+        0.0,
+        -0.0,
+        1.0,
+        5.2,
+        5.3,
+        6.2,
+        64.0,
+        61.1,
+        0.1,
+        0.25,
+        1.00000001,
+        2.9999999,
+        -1.0,
+        -0.04,
+        4e8,
+        4.2e8,
+        1e300,
+        f64::NAN,
+        f64::INFINITY,
+        f64::NEG_INFINITY,
+        429496729.5,
         429496729.6,
     ];
-    for v in values.into_iter().chain((0..20_000).map(|i| i as f64 * 0.013 - 7.0)) {
+    for v in values
+        .into_iter()
+        .chain((0..20_000).map(|i| i as f64 * 0.013 - 7.0))
+    {
         let w = Word {
             letter: 'G',
             value: v,
