@@ -28,9 +28,9 @@ const HUGE_PAGE: usize = 2 << 20;
 const PAGE: usize = 4096;
 
 /// Asks the kernel to back the whole huge pages inside `v`'s allocation (its capacity,
-/// used or not) with huge pages, and maps all its whole pages at once. Call it once the
-/// capacity is reserved, before the list is filled: pages already touched stay small
-/// until the kernel collapses them.
+/// used or not) with huge pages, and maps its whole small pages around them at once.
+/// Call it once the capacity is reserved, before the list is filled: pages already
+/// touched stay small until the kernel collapses them.
 pub(crate) fn prefer_huge_pages<T>(v: &Vec<T>) {
     let bytes = v.capacity().saturating_mul(std::mem::size_of::<T>());
     let start = v.as_ptr() as usize;
@@ -39,11 +39,25 @@ pub(crate) fn prefer_huge_pages<T>(v: &Vec<T>) {
         let end = start.saturating_add(bytes) / size * size;
         (end > begin).then(|| (begin, end - begin))
     };
-    if let Some((begin, len)) = whole(HUGE_PAGE) {
-        advise(begin, len, MADV_HUGEPAGE);
+    let Some((first, len)) = whole(PAGE) else {
+        return;
+    };
+    let last = first + len;
+    // The huge pages fault in 2 MiB at a time by themselves: only the small pages
+    // around them are mapped at once (mapping again what a list reused from the
+    // allocator already has costs a walk over its pages).
+    let (huge_begin, huge_end) = match whole(HUGE_PAGE) {
+        Some((begin, len)) => {
+            advise(begin, len, MADV_HUGEPAGE);
+            (begin, begin + len)
+        }
+        None => (last, last),
+    };
+    if huge_begin > first {
+        advise(first, huge_begin - first, MADV_POPULATE_WRITE);
     }
-    if let Some((begin, len)) = whole(PAGE) {
-        advise(begin, len, MADV_POPULATE_WRITE);
+    if last > huge_end {
+        advise(huge_end, last - huge_end, MADV_POPULATE_WRITE);
     }
 }
 
