@@ -461,7 +461,7 @@ fn shape(g: Geometry, machine: &Machine, period_s: f64, feed_mm_s: f64) -> Shape
         }
         let dkn = path::norm(*dk);
         if dkn > 1e-12 {
-            v = v.min((NORMAL_SHARE * j_path / dkn).cbrt());
+            v = min_cbrt(v, NORMAL_SHARE * j_path / dkn);
         }
         for (i, ax) in axes.iter().enumerate() {
             if t[i].abs() > 1e-12 {
@@ -471,7 +471,7 @@ fn shape(g: Geometry, machine: &Machine, period_s: f64, feed_mm_s: f64) -> Shape
                 v = v.min((NORMAL_SHARE * ax.max_acc_mm_per_s2 / k[i].abs()).sqrt());
             }
             if dk[i].abs() > 1e-12 {
-                v = v.min((NORMAL_SHARE * ax.max_jerk_mm_per_s3 / dk[i].abs()).cbrt());
+                v = min_cbrt(v, NORMAL_SHARE * ax.max_jerk_mm_per_s3 / dk[i].abs());
             }
         }
     }
@@ -527,6 +527,19 @@ fn shape(g: Geometry, machine: &Machine, period_s: f64, feed_mm_s: f64) -> Shape
             Geometry::Curve(b) if surface => Some(tool_rate(b, 1.0)),
             _ => None,
         },
+    }
+}
+
+/// `v.min(x.cbrt())`, without the cube root where it cannot be the lower: where `v³`
+/// (a normal number, within a few roundings of the true cube) is below `x` by more than
+/// a millionth, `∛x` is above `v`, even as `cbrt` rounds it, and the minimum is `v`.
+/// Anything else (zeros, NaN, infinities, tiny or close numbers) takes the cube root.
+fn min_cbrt(v: f64, x: f64) -> f64 {
+    let cube = v * v * v;
+    if v >= 0.0 && cube > 1e-290 && cube < x * (1.0 - 1e-6) {
+        v
+    } else {
+        v.min(x.cbrt())
     }
 }
 

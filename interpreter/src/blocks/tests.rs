@@ -549,3 +549,18 @@ proptest::proptest! {
         }
     }
 }
+
+proptest::proptest! {
+    #![proptest_config(proptest::prelude::ProptestConfig::with_cases(5000))]
+    /// `min_cbrt` is `v.min(x.cbrt())` bit for bit, close to the root and far from it.
+    #[test]
+    fn min_cbrt_is_the_minimum_with_the_cube_root(
+        v in proptest::prop_oneof![number(), 1e-120..1e-90f64, 1e100..1e110f64],
+        x in proptest::prop_oneof![number(), 1e-310..1e-300f64, 1e300..f64::MAX],
+        near in proptest::prop_oneof![proptest::strategy::Just(None), proptest::strategy::Strategy::prop_map(-1e-5..1e-5f64, Some)],
+    ) {
+        // Close to the root too: x within a few millionths of v³.
+        let x = near.map_or(x, |e| v * v * v * (1.0 + e));
+        proptest::prop_assert_eq!(min_cbrt(v, x).to_bits(), v.min(x.cbrt()).to_bits(), "{} {}", v, x);
+    }
+}
