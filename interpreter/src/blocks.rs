@@ -370,6 +370,24 @@ struct Shape {
     m_end: Option<[f64; 3]>,
 }
 
+impl Shape {
+    /// A shape to overwrite.
+    const NONE: Shape = Shape {
+        v_cap: 0.0,
+        acc: 0.0,
+        jerk: 0.0,
+        t_start: [0.0; 3],
+        t_end: [0.0; 3],
+        k_start: [0.0; 3],
+        k_end: [0.0; 3],
+        dk_start: [0.0; 3],
+        dk_end: [0.0; 3],
+        surface_ratio: None,
+        m_start: None,
+        m_end: None,
+    };
+}
+
 /// Share of the path (and each axis's) acceleration the curvature may take at the cap
 /// speed, and of the jerk; the rest is left to the speed profile along the path.
 const NORMAL_SHARE: f64 = 0.5;
@@ -443,7 +461,7 @@ fn shape(g: Geometry, machine: &Machine, period_s: f64, feed_mm_s: f64) -> Shape
         }
         let dkn = path::norm(*dk);
         if dkn > 1e-12 {
-            v = v.min((NORMAL_SHARE * j_path / dkn).cbrt());
+            v = min_cbrt(v, NORMAL_SHARE * j_path / dkn);
         }
         for (i, ax) in axes.iter().enumerate() {
             if t[i].abs() > 1e-12 {
@@ -453,7 +471,7 @@ fn shape(g: Geometry, machine: &Machine, period_s: f64, feed_mm_s: f64) -> Shape
                 v = v.min((NORMAL_SHARE * ax.max_acc_mm_per_s2 / k[i].abs()).sqrt());
             }
             if dk[i].abs() > 1e-12 {
-                v = v.min((NORMAL_SHARE * ax.max_jerk_mm_per_s3 / dk[i].abs()).cbrt());
+                v = min_cbrt(v, NORMAL_SHARE * ax.max_jerk_mm_per_s3 / dk[i].abs());
             }
         }
     }
@@ -509,6 +527,19 @@ fn shape(g: Geometry, machine: &Machine, period_s: f64, feed_mm_s: f64) -> Shape
             Geometry::Curve(b) if surface => Some(tool_rate(b, 1.0)),
             _ => None,
         },
+    }
+}
+
+/// `v.min(x.cbrt())`, without the cube root where it cannot be the lower: where `v³`
+/// (a normal number, within a few roundings of the true cube) is below `x` by more than
+/// a millionth, `∛x` is above `v`, even as `cbrt` rounds it, and the minimum is `v`.
+/// Anything else (zeros, NaN, infinities, tiny or close numbers) takes the cube root.
+fn min_cbrt(v: f64, x: f64) -> f64 {
+    let cube = v * v * v;
+    if v >= 0.0 && cube > 1e-290 && cube < x * (1.0 - 1e-6) {
+        v
+    } else {
+        v.min(x.cbrt())
     }
 }
 
@@ -577,19 +608,40 @@ impl StraightLimits {
 /// curvature makes zero; `None` where those terms might not be exact zeros (a feed
 /// that is not a finite number below 1e100, a chord without a length), which `shape`
 /// then handles. Lines are most blocks of most programs: this is the planner's hot path.
+#[cfg(test)]
 fn shape_straight(d: [f64; 3], lim: &StraightLimits, feed_mm_s: f64) -> Option<Shape> {
-    let len = path::norm(d);
+    let mut shape = Shape::NONE;
+    shape_straight_into(d, path::norm(d), lim, feed_mm_s, &mut shape).then_some(shape)
+}
+
+/// [`shape_straight`] written into `out` (where it stays: a shape is 248 bytes), `false`
+/// where it is `None`, leaving `out` as it was; `len` is the chord's `path::norm`, which
+/// the planner has worked out already.
+fn shape_straight_into(
+    d: [f64; 3],
+    len: f64,
+    lim: &StraightLimits,
+    feed_mm_s: f64,
+    out: &mut Shape,
+) -> bool {
     if !(len > 0.0 && feed_mm_s.is_finite() && feed_mm_s.abs() < 1e100) {
-        return None;
+        return false;
     }
     let t = d.map(|x| x / len);
     // As in `shape`, axis by axis, in its order: the cap speed (only the velocity
     // limits bind a line), then the tangential acceleration (`max_acc - v²·0`), then
     // the jerk (`j - 3·v·a·0 - v³·0` is `j`).
+    //
+    // A component of the unit tangent is at most 1 (the norm is at least each
+    // component's length, rounding included), so `limit/|t_i|` is at least `limit`: an
+    // `x` already at or below the limit stays as it is, and the division (tens of
+    // cycles, nine a block) is left out. Checked, not assumed: a `|t_i|` above 1 (only
+    // where squares underflow) divides as before.
     let axis_by_axis = |start: f64, per_axis: &[f64; 3]| {
         t.iter().zip(per_axis).fold(start, |x, (ti, limit)| {
-            if ti.abs() > 1e-12 {
-                x.min(limit / ti.abs())
+            let ti = ti.abs();
+            if ti > 1e-12 && !(x <= *limit && ti <= 1.0) {
+                x.min(limit / ti)
             } else {
                 x
             }
@@ -598,7 +650,7 @@ fn shape_straight(d: [f64; 3], lim: &StraightLimits, feed_mm_s: f64) -> Option<S
     let v = axis_by_axis(feed_mm_s, &lim.vel_mm_s);
     let acc = axis_by_axis(lim.a_tangential, &lim.acc);
     let jerk = axis_by_axis(lim.j_path, &lim.jerk);
-    Some(Shape {
+    *out = Shape {
         v_cap: v,
         acc: acc.max(lim.acc_floor),
         jerk: jerk.max(lim.jerk_floor),
@@ -611,7 +663,8 @@ fn shape_straight(d: [f64; 3], lim: &StraightLimits, feed_mm_s: f64) -> Option<S
         surface_ratio: None,
         m_start: None,
         m_end: None,
-    })
+    };
+    true
 }
 
 /// The chord of a block that is a straight segment (degree 1, two control points, no
@@ -879,9 +932,15 @@ fn surface_samples(b: &CommandBlock) -> Samples {
 ///
 /// Also returns the kink, if any, for [`CloseKinks`]: its turn and the acceleration
 /// (times the period) its direction change may take.
-fn junction_speed(a: &Shape, b: &Shape, machine: &Machine, period_s: f64) -> (f64, Option<Kink>) {
-    let cos = dot(a.t_end, b.t_start).clamp(-1.0, 1.0);
-    if cos < machine.corner_angle_deg.to_radians().cos() {
+fn junction_speed(
+    a: &Shape,
+    b: &Shape,
+    at: &Junction,
+    machine: &Machine,
+    fixed: &PlanLimits,
+    period_s: f64,
+) -> (f64, Option<Kink>) {
+    if at.cos < fixed.corner_cos {
         return (0.0, None);
     }
     // Between surface blocks the tangents and curvatures are the tool point's, which
@@ -902,26 +961,24 @@ fn junction_speed(a: &Shape, b: &Shape, machine: &Machine, period_s: f64) -> (f6
         ),
     };
     let mut v = a.v_cap.min(b.v_cap);
-    let half_sin = half_turn_sin(a, b);
+    let half_sin = at.half_sin;
     let mut kink = None;
     if is_kink(half_sin) {
         let mut acc_t = acc * period_s / r;
         v = v.min(acc_t / (2.0 * half_sin));
-        if ratio.is_none() {
+        if let Some(load) = at.load {
             // The direction change with the normal acceleration there takes at most
             // `KINK_SHARE` of the path's and of each axis's, so the profile keeps some
             // (see `junction_leaves`).
-            let (acc_limits, _) = limits_of(machine);
-            v = Load::of(a, b, period_s).acc_speed(v, &acc_limits, KINK_SHARE);
+            v = load.acc_speed(v, &fixed.acc, KINK_SHARE);
             // A run of close kinks (`CloseKinks`) bounds its whole direction change,
             // whose every axis's share is at most its length.
-            let weakest = acc_limits.iter().fold(f64::INFINITY, |m, x| m.min(*x));
-            acc_t = acc_t.min(KINK_SHARE * weakest * period_s);
+            acc_t = acc_t.min(KINK_SHARE * fixed.weakest_acc * period_s);
         }
         kink = Some(Kink {
             j: 0,
             s: 0.0,
-            turn: 2.0 * half_sin.min(1.0).asin(),
+            half_sin,
             acc_t,
         });
     }
@@ -933,22 +990,83 @@ fn junction_speed(a: &Shape, b: &Shape, machine: &Machine, period_s: f64) -> (f6
             v = v.min(acc * period_s / dm);
         }
     }
-    let dk = curvature_jump(a, b);
+    let dk = at.dk;
     if is_jump(dk) {
         v = v.min((jerk * period_s / dk).sqrt() / r);
-        if ratio.is_none() {
+        if let Some(load) = at.load {
             // The acceleration's step with the normal jerk there takes at most
             // `JUMP_SHARE` of the path's jerk and of each axis's.
-            let (_, jerk_limits) = limits_of(machine);
-            v = Load::of(a, b, period_s).jerk_speed(v, &jerk_limits, JUMP_SHARE);
+            v = load.jerk_speed(v, &fixed.jerk, JUMP_SHARE);
         }
     }
     (v, kink)
 }
 
+/// What a junction's speed and what it leaves the blocks are worked out from, each once.
+struct Junction<'a> {
+    /// `T_a·T_b`, the cosine of the tangent's turn.
+    cos: f64,
+    /// [`half_turn_sin`].
+    half_sin: f64,
+    /// [`curvature_jump`].
+    dk: f64,
+    /// The junction's [`Load`] between curves (not surface blocks) that kink or jump,
+    /// unless the turn is a corner (an exact stop, which takes nothing).
+    load: Option<&'a Load>,
+}
+
+impl<'a> Junction<'a> {
+    /// The junction between `a` and `b`; its load, if any, is written into `load`.
+    fn of(
+        a: &Shape,
+        b: &Shape,
+        fixed: &PlanLimits,
+        period_s: f64,
+        load: &'a mut Load,
+    ) -> Junction<'a> {
+        let cos = dot(a.t_end, b.t_start).clamp(-1.0, 1.0);
+        let half_sin = half_turn_sin(cos);
+        let dk = curvature_jump(a, b);
+        let curves = a.surface_ratio.is_none() && b.surface_ratio.is_none();
+        let loaded = cos >= fixed.corner_cos && curves && (is_kink(half_sin) || is_jump(dk));
+        if loaded {
+            load.fill(a, b, period_s);
+        }
+        Junction {
+            cos,
+            half_sin,
+            dk,
+            load: loaded.then_some(&*load),
+        }
+    }
+}
+
+/// What [`plan`] takes from the machine for every junction, worked out once.
+struct PlanLimits {
+    /// The cosine of the machine's corner angle: a sharper turn stops.
+    corner_cos: f64,
+    /// [`limits_of`] the machine.
+    acc: [f64; 4],
+    jerk: [f64; 4],
+    /// The least of `acc`.
+    weakest_acc: f64,
+}
+
+impl PlanLimits {
+    fn new(machine: &Machine) -> Self {
+        let (acc, jerk) = limits_of(machine);
+        PlanLimits {
+            corner_cos: machine.corner_angle_deg.to_radians().cos(),
+            acc,
+            jerk,
+            weakest_acc: acc.iter().fold(f64::INFINITY, |m, x| m.min(*x)),
+        }
+    }
+}
+
 /// `sin(θ/2)` of the turn `θ` of the tangent at the junction between `a` and `b`.
-fn half_turn_sin(a: &Shape, b: &Shape) -> f64 {
-    let cos = dot(a.t_end, b.t_start).clamp(-1.0, 1.0);
+/// from its cosine `cos`, `T_a·T_b` clamped to [-1, 1].
+fn half_turn_sin(cos: f64) -> f64 {
     (0.5 * (1.0 - cos)).max(0.0).sqrt()
 }
 
@@ -1021,9 +1139,57 @@ struct Load {
 }
 
 impl Load {
+    const ZERO: Load = Load {
+        turn: [0.0; 4],
+        kappa: [0.0; 4],
+        jump: [0.0; 4],
+        acc_kappa3: [0.0; 4],
+        dk: [0.0; 4],
+    };
+
     fn of(a: &Shape, b: &Shape, period_s: f64) -> Load {
-        let each = |f: &dyn Fn(usize) -> f64, whole: f64| [f(0), f(1), f(2), whole];
+        let mut load = Load::ZERO;
+        load.fill(a, b, period_s);
+        load
+    }
+
+    /// Makes this [`Load::of`] `a` and `b`, in place.
+    fn fill(&mut self, a: &Shape, b: &Shape, period_s: f64) {
         let turn = sub(b.t_start, a.t_end);
+        let turn = [
+            turn[0].abs() / period_s,
+            turn[1].abs() / period_s,
+            turn[2].abs() / period_s,
+            path::norm(turn) / period_s,
+        ];
+        // Between two lines (most junctions of most programs) every figure but the turn
+        // is zero: without curvature the general form below works out `|0|`, norms of
+        // zero vectors, `0/T` and `3·a·0`, each `+0` for a positive period and a finite
+        // acceleration of positive sign (`-0` would make `-0`). Those zeros, without the
+        // arithmetic.
+        let flat = |x: [f64; 3]| x == [0.0; 3];
+        let plain = |acc: f64| acc.is_sign_positive() && acc < 1e300;
+        if flat(a.k_end)
+            && flat(b.k_start)
+            && flat(a.dk_end)
+            && flat(b.dk_start)
+            && plain(a.acc)
+            && plain(b.acc)
+            && period_s > 0.0
+        {
+            self.turn = turn;
+            self.kappa = [0.0; 4];
+            self.jump = [0.0; 4];
+            self.acc_kappa3 = [0.0; 4];
+            self.dk = [0.0; 4];
+        } else {
+            *self = Load::general(a, b, turn, period_s);
+        }
+    }
+
+    /// [`Load::of`] worked out in full, `turn` given.
+    fn general(a: &Shape, b: &Shape, turn: [f64; 4], period_s: f64) -> Load {
+        let each = |f: &dyn Fn(usize) -> f64, whole: f64| [f(0), f(1), f(2), whole];
         let jump = sub(b.k_start, a.k_end);
         let (ka, kb) = (a.k_end, b.k_start);
         let larger = |x: [f64; 3], y: [f64; 3]| {
@@ -1037,7 +1203,7 @@ impl Load {
             (3.0 * a.acc * path::norm(ka)).max(3.0 * b.acc * path::norm(kb)),
         );
         Load {
-            turn: each(&|i| turn[i].abs() / period_s, path::norm(turn) / period_s),
+            turn,
             kappa: larger(ka, kb),
             jump: each(&|i| jump[i].abs() / period_s, path::norm(jump) / period_s),
             acc_kappa3,
@@ -1093,25 +1259,44 @@ impl Load {
 /// (`sqrt(A² − acc²)`, `sqrt(J² − jerk²)`) and of each axis's (`(A_i − acc_i)/|t_i|`,
 /// with `t` the larger of the two tangents' components there); `None` where nothing is
 /// taken (a smooth junction, or one between surface blocks, whose shares are their own).
-fn junction_leaves(a: &Shape, b: &Shape, v: f64, machine: &Machine, period_s: f64) -> Option<Jerk> {
+fn junction_leaves(
+    a: &Shape,
+    b: &Shape,
+    v: f64,
+    at: &Junction,
+    fixed: &PlanLimits,
+    period_s: f64,
+) -> Option<Jerk> {
     if a.surface_ratio.is_some() || b.surface_ratio.is_some() {
         return None;
     }
-    let kinked = is_kink(half_turn_sin(a, b));
-    let jumps = is_jump(curvature_jump(a, b));
+    let kinked = is_kink(at.half_sin);
+    let jumps = is_jump(at.dk);
     if !(kinked || jumps) || v <= 0.0 {
         return None;
     }
-    let load = Load::of(a, b, period_s);
-    let (acc_limits, jerk_limits) = limits_of(machine);
+    // Worked out here only past a corner, where the speed is not zero unless the
+    // feeds are: the same numbers as `Junction::of` would have.
+    let worked_out;
+    let load = match at.load {
+        Some(l) => l,
+        None => {
+            worked_out = Load::of(a, b, period_s);
+            &worked_out
+        }
+    };
     let left = |limits: &[f64; 4], taken: &dyn Fn(usize) -> f64| {
         let path = (limits[PATH] * limits[PATH] - taken(PATH).powi(2))
             .max(0.0)
             .sqrt();
         (0..PATH).fold(path, |m, i| {
             let t = a.t_end[i].abs().max(b.t_start[i].abs());
-            if t > 1e-12 {
-                m.min((limits[i] - taken(i)).max(0.0) / t)
+            let room = (limits[i] - taken(i)).max(0.0);
+            // A tangent's component is at most 1 (checked), so `room/t` is at least
+            // `room`, and an `m` at or below `room` stays: no division (as in
+            // `shape_straight`).
+            if t > 1e-12 && !(m <= room && t <= 1.0) {
+                m.min(room / t)
             } else {
                 m
             }
@@ -1119,12 +1304,12 @@ fn junction_leaves(a: &Shape, b: &Shape, v: f64, machine: &Machine, period_s: f6
     };
     Some(Jerk {
         acc: if kinked {
-            left(&acc_limits, &|c| load.acc(c, v))
+            left(&fixed.acc, &|c| load.acc(c, v))
         } else {
             f64::INFINITY
         },
         jerk: if jumps {
-            left(&jerk_limits, &|c| load.jerk(c, v))
+            left(&fixed.jerk, &|c| load.jerk(c, v))
         } else {
             f64::INFINITY
         },
@@ -1136,10 +1321,18 @@ fn junction_leaves(a: &Shape, b: &Shape, v: f64, machine: &Machine, period_s: f6
 struct Kink {
     j: usize,
     s: f64,
-    /// The tangent's turn (rad).
-    turn: f64,
+    /// `sin(θ/2)` of the tangent's turn `θ` (its angle, `2·asin`, is worked out only
+    /// for a run of close kinks, which few kinks are part of).
+    half_sin: f64,
     /// The acceleration the direction change may take, times the period (mm/s).
     acc_t: f64,
+}
+
+impl Kink {
+    /// The tangent's turn (rad).
+    fn turn(&self) -> f64 {
+        2.0 * self.half_sin.min(1.0).asin()
+    }
 }
 
 /// Kinks closer together than two steps: one step's direction can then change by the
@@ -1188,7 +1381,7 @@ impl CloseKinks {
         {
             self.recent.pop_front();
         }
-        let (mut turn, mut acc_t, mut v_max) = (k.turn, k.acc_t, end[k.j]);
+        let (mut acc_t, mut v_max) = (k.acc_t, end[k.j]);
         let mut first = self.recent.len();
         for (i, l) in self.recent.iter().enumerate().rev() {
             let v = v_max.max(end[l.j]);
@@ -1196,12 +1389,17 @@ impl CloseKinks {
                 break;
             }
             v_max = v;
-            turn += l.turn;
             acc_t = acc_t.min(l.acc_t);
             first = i;
         }
         let mut run = None;
         if first < self.recent.len() {
+            // The run's whole turn, summed from `k` back to its first kink.
+            let turn = self
+                .recent
+                .range(first..)
+                .rev()
+                .fold(k.turn(), |sum, l| sum + l.turn());
             let v = acc_t / (2.0 * (0.5 * turn.min(std::f64::consts::PI)).sin());
             for l in self.recent.range(first..) {
                 end[l.j] = end[l.j].min(v);
@@ -1268,52 +1466,76 @@ pub fn plan_alone(b: &mut CommandBlock, machine: &Machine, feed: f64) {
 /// [`shared::profile`], make every block able to slow to its end speed; the
 /// interpolator accelerates as its limits allow by itself (no forward pass).
 pub fn plan<B: Plannable>(blocks: &mut [B], machine: &Machine, period_ns: u64) {
+    plan_and(blocks, machine, period_ns, |_, _| {});
+}
+
+/// [`plan`], handing every block to `done` (with its index) as soon as it is final, in
+/// the backward pass: from the last block to the first. What looks at every planned
+/// block (`cnc check` validates them) then finds it still in the cache, instead of
+/// going over the whole list again.
+pub fn plan_and<B: Plannable>(
+    blocks: &mut [B],
+    machine: &Machine,
+    period_ns: u64,
+    mut done: impl FnMut(usize, &B),
+) {
     let period_s = period_ns as f64 * 1e-9;
     let n = blocks.len();
     // Junction speed limits (mm/s) at the end of each block, each found as soon as the
     // block after it has its shape (a junction needs only its two blocks').
-    let mut end = vec![0.0f64; n];
-    let mut before: Option<Shape> = None;
+    let mut end = crate::pages::filled(n, 0.0f64);
+    // The shapes of the block before and of this one (where they are motions), taking
+    // turns (`i % 2`), each worked out where it stays: a shape is 248 bytes, and making
+    // one and handing it on were copies a block.
+    let mut shapes = [Shape::NONE; 2];
+    let mut shaped = [false; 2];
     let mut close = CloseKinks::new(period_s);
     let mut s = 0.0f64;
     let straight_limits = StraightLimits::new(machine);
+    let fixed = PlanLimits::new(machine);
+    // A junction's load, worked out where it stays (160 bytes) when it has one.
+    let mut load = Load::ZERO;
     for i in 0..n {
         let b = &mut blocks[i];
-        let shp = b.is_motion().then(|| {
+        shaped[i % 2] = b.is_motion();
+        if shaped[i % 2] {
+            let shp = &mut shapes[i % 2];
             let feed = b.feed_mm_per_min();
-            let (length, shp) = {
-                let g = b.geometry();
-                let length = match g {
-                    Geometry::Straight(d) => path::norm(d),
-                    Geometry::Curve(c) => path::length(c),
-                };
-                let fast = match (g, &straight_limits) {
-                    (Geometry::Straight(d), Some(lim)) => shape_straight(d, lim, feed / 60.0),
-                    _ => None,
-                };
-                let shp = fast.unwrap_or_else(|| shape(g, machine, period_s, feed / 60.0));
-                (length, shp)
+            let g = b.geometry();
+            let length = match g {
+                Geometry::Straight(d) => path::norm(d),
+                Geometry::Curve(c) => path::length(c),
             };
+            let fast = match (g, &straight_limits) {
+                (Geometry::Straight(d), Some(lim)) => {
+                    shape_straight_into(d, length, lim, feed / 60.0, shp)
+                }
+                _ => false,
+            };
+            if !fast {
+                *shp = shape(g, machine, period_s, feed / 60.0);
+            }
             let limits = Jerk {
                 acc: shp.acc,
                 jerk: shp.jerk,
             };
             b.set_caps(length, feed.min(shp.v_cap * 60.0), limits);
             s += length;
-            shp
-        });
+        }
         if let Some(j) = i.checked_sub(1) {
-            if let (Some(sa), Some(sb)) = (&before, &shp) {
+            if shaped[j % 2] && shaped[i % 2] {
+                let (sa, sb) = (&shapes[j % 2], &shapes[i % 2]);
                 let (b, nb) = (&blocks[j], &blocks[i]);
                 let rapid_change = (b.flags() ^ nb.flags()) & FLAG_RAPID != 0;
                 let stop = b.flags() & FLAG_STOP_AT_END != 0;
                 if !(rapid_change || stop) {
-                    let (v, kink) = junction_speed(sa, sb, machine, period_s);
+                    let at = Junction::of(sa, sb, &fixed, period_s, &mut load);
+                    let (v, kink) = junction_speed(sa, sb, &at, machine, &fixed, period_s);
                     end[j] = v
                         .min(b.feed_mm_per_min() / 60.0)
                         .min(nb.feed_mm_per_min() / 60.0);
                     // What the junction takes at that speed, the blocks' profiles leave.
-                    if let Some(left) = junction_leaves(sa, sb, end[j], machine, period_s) {
+                    if let Some(left) = junction_leaves(sa, sb, end[j], &at, &fixed, period_s) {
                         keep_within(&mut blocks[j], left);
                         keep_within(&mut blocks[i], left);
                     }
@@ -1324,7 +1546,7 @@ pub fn plan<B: Plannable>(blocks: &mut [B], machine: &Machine, period_ns: u64) {
                         {
                             // The run's direction change, at most `acc` on the path and on
                             // each axis: what it leaves, whatever the tangents.
-                            let (limits, _) = limits_of(machine);
+                            let limits = fixed.acc;
                             let path = limits[PATH];
                             let left = Jerk {
                                 acc: limits[..PATH]
@@ -1345,12 +1567,12 @@ pub fn plan<B: Plannable>(blocks: &mut [B], machine: &Machine, period_ns: u64) {
                 close.stop();
             }
         }
-        before = shp;
     }
     // Backward pass: every block must be able to slow to its end speed. A block's end
     // speed is final once the block after it has been passed, so its feeds are set here.
     for i in (0..n).rev() {
         if !blocks[i].is_motion() {
+            done(i, &blocks[i]);
             continue;
         }
         let len = blocks[i].length_mm();
@@ -1369,6 +1591,7 @@ pub fn plan<B: Plannable>(blocks: &mut [B], machine: &Machine, period_ns: u64) {
             entry.min(blocks[i].limits().reachable_speed(end[i], len))
         };
         blocks[i].set_feeds(start * 60.0, end[i] * 60.0);
+        done(i, &blocks[i]);
         if i > 0 {
             end[i - 1] = start;
         }

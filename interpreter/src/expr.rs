@@ -502,29 +502,57 @@ const EXACT_POW10: [f64; 23] = [
 /// below 2^53 over an exact power of ten is one correctly rounded division, the same
 /// value `str::parse` gives; `None` for any other (then `str::parse` reads the text).
 fn exact_decimal(mantissa: u64, decimals: usize, digits: usize, points: usize) -> Option<f64> {
-    (digits > 0 && points <= 1 && mantissa < 1 << 53 && decimals < EXACT_POW10.len())
+    is_exact_decimal(mantissa, decimals, digits, points)
         .then(|| mantissa as f64 / EXACT_POW10[decimals])
+}
+
+/// Whether [`exact_decimal`] has a value for these.
+fn is_exact_decimal(mantissa: u64, decimals: usize, digits: usize, points: usize) -> bool {
+    digits > 0 && points <= 1 && mantissa < 1 << 53 && decimals < EXACT_POW10.len()
 }
 
 /// A number at the start of `bytes` (digits and points, no sign), read as [`number`]
 /// reads the same characters, with how many bytes it takes; `None` where [`number`]
 /// would need `str::parse` or report an error.
 pub(crate) fn plain_number(bytes: &[u8]) -> Option<(f64, usize)> {
-    let (mut mantissa, mut decimals, mut digits, mut points) = (0u64, 0usize, 0usize, 0usize);
-    let mut len = 0;
-    for &b in bytes {
-        match b {
-            b'0'..=b'9' => {
-                digits += 1;
-                decimals += usize::from(points > 0);
-                mantissa = mantissa
-                    .saturating_mul(10)
-                    .saturating_add(u64::from(b - b'0'));
-            }
-            b'.' => points += 1,
-            _ => break,
+    // The digits from `at` on, into `mantissa` and `digits`; where they end. Nineteen
+    // digits stay below 2^64: only past them can the integer saturate (and then it is
+    // too large to be exact anyway), so only there is the saturating arithmetic needed.
+    fn gather(bytes: &[u8], mut at: usize, mantissa: &mut u64, digits: &mut usize) -> usize {
+        while let Some(d) = bytes
+            .get(at)
+            .map(|b| b.wrapping_sub(b'0'))
+            .filter(|d| *d < 10)
+        {
+            *digits += 1;
+            *mantissa = if *digits <= 19 {
+                *mantissa * 10 + u64::from(d)
+            } else {
+                mantissa.saturating_mul(10).saturating_add(u64::from(d))
+            };
+            at += 1;
         }
-        len += 1;
+        at
+    }
+    let (mut mantissa, mut digits) = (0u64, 0usize);
+    let whole = gather(bytes, 0, &mut mantissa, &mut digits);
+    let (whole_digits, whole_value) = (digits, mantissa);
+    let (len, points) = match bytes.get(whole) {
+        Some(b'.') => (gather(bytes, whole + 1, &mut mantissa, &mut digits), 1),
+        _ => (whole, 0),
+    };
+    // A second point: [`number`] would read on and find it no number it can take.
+    if bytes.get(len) == Some(&b'.') {
+        return None;
+    }
+    let decimals = digits - whole_digits;
+    // Only zeros after the point (`Y125.000`, as CAM writes many numbers): the quotient
+    // is the whole part, exactly (below 2^53, as the mantissa is), which the division
+    // gives too: it is left out.
+    if is_exact_decimal(mantissa, decimals, digits, points)
+        && bytes[whole..len].iter().all(|&b| b == b'0' || b == b'.')
+    {
+        return Some((whole_value as f64, len));
     }
     exact_decimal(mantissa, decimals, digits, points).map(|v| (v, len))
 }
@@ -660,6 +688,17 @@ mod tests {
             "",
             "123456789.123456789",
             "0.00000000000000000000001",
+            "1234567890123456789",
+            "12345678901234567890",
+            "123456789012345678901234",
+            "0000000000000000000000000012.5",
+            "125.000",
+            "5.",
+            ".000",
+            "0.0",
+            "9007199254740991.0",
+            "900719925474099.10",
+            "12.0000000000000000000000",
             "12x",
             "3.5 ",
         ] {

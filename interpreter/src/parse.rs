@@ -574,6 +574,19 @@ pub struct Flow {
     pub subs: HashMap<String, usize>,
 }
 
+impl Flow {
+    /// `link` of line `i` (`None` past the list's end: a program without O-words has
+    /// an empty list).
+    pub fn link(&self, i: usize) -> Option<usize> {
+        self.link.get(i).copied().flatten()
+    }
+
+    /// `closes_do` of line `i` (`false` past the list's end).
+    pub fn closes_do(&self, i: usize) -> bool {
+        self.closes_do.get(i).copied().unwrap_or(false)
+    }
+}
+
 /// Matches the O-words of a whole program (one per line, `None` for other lines) into
 /// blocks, as LinuxCNC requires: labels match, blocks nest, a label opens one block only.
 pub fn flow(o_words: &[Option<Box<OWord>>]) -> (Flow, Vec<Diagnostic>) {
@@ -585,9 +598,16 @@ pub fn flow(o_words: &[Option<Box<OWord>>]) -> (Flow, Vec<Diagnostic>) {
         had_else: bool,
     }
     let n = o_words.len();
+    // A program without O-words (most CAM output) has no links: its lists stay empty
+    // (read as `None` and `false` past their ends) instead of 17 bytes a line to write.
+    let n_linked = if o_words.iter().any(Option::is_some) {
+        n
+    } else {
+        0
+    };
     let mut f = Flow {
-        link: vec![None; n],
-        closes_do: vec![false; n],
+        link: crate::pages::filled(n_linked, None),
+        closes_do: vec![false; n_linked],
         subs: HashMap::new(),
     };
     let mut errors = Vec::new();

@@ -95,21 +95,21 @@ pub fn check_with(
 ) -> Result<(program::Program, Vec<Block>), Vec<Diagnostic>> {
     let prog = program::interpret_with(text, opts)?;
     let mut blocks = blocks::build(&prog.moves, machine);
-    blocks::plan(&mut blocks, machine, period_ns);
-    // Nothing leaves this process unless a receiver would accept it.
-    let bad: Vec<Diagnostic> = blocks
-        .iter()
-        .enumerate()
-        .filter_map(|(seq, b)| {
-            b.validate(seq as u64).err().map(|e| Diagnostic {
+    // Nothing leaves this process unless a receiver would accept it: every block is
+    // validated as soon as the plan is done with it (last to first).
+    let mut bad = Vec::new();
+    blocks::plan_and(&mut blocks, machine, period_ns, |seq, b| {
+        if let Err(e) = b.validate(seq as u64) {
+            bad.push(Diagnostic {
                 file: None,
                 line: b.source_line(),
                 col: 1,
                 rule: "internal",
                 message: e.to_string(),
-            })
-        })
-        .collect();
+            });
+        }
+    });
+    bad.reverse();
     if bad.is_empty() {
         Ok((prog, blocks))
     } else {

@@ -306,44 +306,62 @@ pub fn interpret_with(text: &str, opts: &Options) -> Result<Program, Vec<Diagnos
     let mut params = Params::default();
     let mut prog = Program::default();
     let mut errors = Vec::new();
-    let mut lines: Vec<&str> = text.lines().collect();
+    // A program without O-words (most CAM output) runs its lines in order, each once:
+    // they are split off the text as they are read, without a list of them (16 bytes
+    // a line). Any other is listed, for its flow to jump about in.
+    let listed = subfile::may_have_o_words(text);
+    let mut lines = if listed { lines_of(text) } else { Vec::new() };
+    let mut in_order = (!listed).then(|| LineSplitter::new(text));
+    let own_lines = if listed {
+        lines.len()
+    } else {
+        line_count(text)
+    };
     let mut o_words = subfile::o_words_of(text, &lines, 1);
     let (mut flow, flow_errors) = flow(&o_words);
     errors.extend(flow_errors);
     // Subroutine files join the program after its own lines.
     let (files, missing) = subfile::load(&o_words, &opts.subroutine_dirs);
-    let own_lines = lines.len();
     // About a move a line in the programs that are long (CAM output): one allocation,
-    // not a list copied each time it doubles; what is not used is never touched.
+    // not a list copied each time it doubles (mapped at once, see `pages`).
     prog.moves.reserve(own_lines);
     crate::pages::prefer_huge_pages(&prog.moves);
     let mut units = subfile::Units::default();
     for f in &files {
         let start = lines.len();
-        let file_lines: Vec<&str> = f.text.lines().collect();
+        let file_lines = lines_of(&f.text);
         let file_o_words = subfile::o_words_of(&f.text, &file_lines, 1);
         units.append(&f.path, start, &file_o_words, &mut flow, &mut errors);
         lines.extend(file_lines);
+        // A list without O-words is empty: filled up to the file's first line.
+        o_words.resize_with(start, || None);
         o_words.extend(file_o_words);
     }
-    let mut run = Runner::new(o_words, flow, missing);
+    // Files come only with O-words (their calls), so only a listed program has any.
+    let all_lines = if listed { lines.len() } else { own_lines };
+    let mut run = Runner::new(o_words, all_lines, flow, missing);
     let last_line = own_lines as u32;
     let mut pc = 0;
     let mut reader = LineReader::default();
     // The program ends at its own last line; the files after it run only when called.
-    while pc < lines.len() && pc != own_lines {
+    while pc < all_lines && pc != own_lines {
         let line = pc as u32 + 1;
         if st.ended {
             break; // LinuxCNC ignores everything after M2/M30.
         }
         let here = pc;
         pc += 1;
+        // Without O-words nothing jumps: line `here` is the next one split off.
+        let raw = match &mut in_order {
+            Some(split) => split.next().unwrap_or_default(),
+            None => lines[here],
+        };
         if let Err(d) = run.count_line(here) {
             errors.push(d);
             break;
         }
-        if lines[here].len() > MAX_LINE_BYTES {
-            let col = lines[here]
+        if raw.len() > MAX_LINE_BYTES {
+            let col = raw
                 .char_indices()
                 .take_while(|(b, _)| *b < MAX_LINE_BYTES)
                 .count();
@@ -359,7 +377,7 @@ pub fn interpret_with(text: &str, opts: &Options) -> Result<Program, Vec<Diagnos
             pc = run.unreadable(here);
             continue;
         }
-        let parsed = match reader.read(lines[here], line, &params) {
+        let parsed = match reader.read(raw, line, &params) {
             Ok(l) => l,
             Err(d) => {
                 errors.push(d);
@@ -449,9 +467,117 @@ pub fn interpret_with(text: &str, opts: &Options) -> Result<Program, Vec<Diagnos
     }
 }
 
+/// The lines of `text`, as `str::lines` gives them (split at `\n`, a `\r` before it
+/// dropped, no empty line after a final `\n`), in a list sized once ([`LineSplitter`]).
+/// `str::lines` looks for each line's end with a search set up afresh for every line,
+/// and the list it is collected into doubles and copies as it grows: for 100 000 short
+/// lines of CAM output, a seventh of `cnc check`'s instructions.
+fn lines_of(text: &str) -> Vec<&str> {
+    let mut lines = Vec::with_capacity(line_count(text));
+    crate::pages::prefer_huge_pages(&lines);
+    lines.extend(LineSplitter::new(text));
+    lines
+}
+
+/// How many lines [`lines_of`] finds in `text`: one a `\n`, and the last one without.
+fn line_count(text: &str) -> usize {
+    newlines(text.as_bytes()) + usize::from(!text.is_empty() && !text.ends_with('\n'))
+}
+
+/// The lines of a text one after the other, as `str::lines` gives them. The text is
+/// looked at eight bytes at a time, as one 64-bit word whose `\n` bytes come out as a
+/// bit mask ([`newline_mask`]), so a line's end is found without a look at each byte.
+struct LineSplitter<'a> {
+    text: &'a str,
+    /// Where the next line starts.
+    at: usize,
+}
+
+impl<'a> LineSplitter<'a> {
+    fn new(text: &'a str) -> Self {
+        LineSplitter { text, at: 0 }
+    }
+}
+
+impl<'a> Iterator for LineSplitter<'a> {
+    type Item = &'a str;
+
+    fn next(&mut self) -> Option<&'a str> {
+        let bytes = self.text.as_bytes();
+        if self.at >= bytes.len() {
+            return None;
+        }
+        let mut end = self.at;
+        let newline = loop {
+            let Some(word) = bytes.get(end..end + 8) else {
+                break bytes[end..]
+                    .iter()
+                    .position(|&b| b == b'\n')
+                    .map(|i| end + i);
+            };
+            let mask = newline_mask(word.try_into().expect("8 bytes"));
+            if mask != 0 {
+                break Some(end + mask.trailing_zeros() as usize / 8);
+            }
+            end += 8;
+        };
+        // `\n` and `\r` are ASCII: slicing at them keeps the text's characters whole.
+        let line = match newline {
+            Some(nl) => {
+                let line = &self.text[self.at..nl];
+                self.at = nl + 1;
+                line.strip_suffix('\r').unwrap_or(line)
+            }
+            // The last line, when the text does not end with `\n`, keeps a final `\r`.
+            None => {
+                let line = &self.text[self.at..];
+                self.at = bytes.len();
+                line
+            }
+        };
+        Some(line)
+    }
+}
+
+/// The high bit of each byte of `word` (little-endian) that is `\n`, the others zero.
+/// Exact for every byte: each is compared on its own low seven bits, with no carry into
+/// the next (the usual "has a zero byte" test flags some bytes after a zero as zeros).
+fn newline_mask(word: [u8; 8]) -> u64 {
+    const LOW7: u64 = 0x7f7f_7f7f_7f7f_7f7f;
+    let x = u64::from_le_bytes(word) ^ 0x0a0a_0a0a_0a0a_0a0a;
+    // A byte's high bit ends up set where its low seven bits carry into it (they are not
+    // all zero) or it was set itself: where the byte is not zero.
+    !(((x & LOW7) + LOW7) | x | LOW7)
+}
+
+/// How many `\n` bytes `bytes` holds: [`newline_mask`]s added up a byte lane each
+/// (the mask's bit moved to the lane's lowest), 255 words at most before a lane could
+/// overflow, then the eight lanes summed.
+fn newlines(bytes: &[u8]) -> usize {
+    const LANES_PER_SUM: usize = 255 * 8;
+    let whole = bytes.len() / 8 * 8;
+    let mut total = bytes[whole..].iter().filter(|&&b| b == b'\n').count();
+    for block in bytes[..whole].chunks(LANES_PER_SUM) {
+        let lanes = block.chunks_exact(8).fold(0u64, |sum, word| {
+            sum + (newline_mask(word.try_into().expect("8 bytes")) >> 7)
+        });
+        // Eight counts of at most 255, as four of at most 510, summed in the top 16 bits.
+        const EVEN: u64 = 0x00ff_00ff_00ff_00ff;
+        let fours = (lanes & EVEN) + ((lanes >> 8) & EVEN);
+        total += (fours.wrapping_mul(0x0001_0001_0001_0001) >> 48) as usize;
+    }
+    total
+}
+
 fn gcode(w: &Word) -> Option<u32> {
-    let tenths = (w.value * 10.0).round();
-    ((tenths - w.value * 10.0).abs() < 1e-6 && tenths >= 0.0).then_some(tenths as u32)
+    // A whole number of tenths (`G1`, `G64`, `G5.2`: nearly every code) is its own
+    // rounding, so the `round` below (a call into libm) would give it back unchanged.
+    let t = w.value * 10.0;
+    if (0.0..4e9).contains(&t) && f64::from(t as u32) == t {
+        return Some(t as u32);
+    }
+    let tenths = t.round();
+    ((tenths - t).abs() < 1e-6 && tenths >= 0.0).then_some(tenths as u32)
 }
 
 /// The G-codes of a line that start or shape motion, by kind.

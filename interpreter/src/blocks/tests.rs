@@ -218,6 +218,61 @@ proptest::proptest! {
     }
 }
 
+/// A junction's load as bits, to compare two exactly.
+fn load_bits(l: &Load) -> Vec<u64> {
+    [l.turn, l.kappa, l.jump, l.acc_kappa3, l.dk]
+        .iter()
+        .flatten()
+        .map(|x| x.to_bits())
+        .collect()
+}
+
+proptest::proptest! {
+    #![proptest_config(proptest::prelude::ProptestConfig::with_cases(2000))]
+    /// `Load::of` between lines gives the bits the general form works out, for any
+    /// tangents, accelerations (good and bad) and periods; and between a line and an arc
+    /// it is the general form.
+    #[test]
+    fn line_junction_load_is_the_general_load(
+        da in proptest::array::uniform3(component()),
+        db in proptest::array::uniform3(component()),
+        acc in proptest::array::uniform2(proptest::prop_oneof![number(), 1e-3..1e5f64]),
+        period_s in proptest::prop_oneof![proptest::strategy::Just(1e-3), number()],
+        arc in proptest::bool::ANY,
+    ) {
+        let unit = |d: [f64; 3]| {
+            let n = path::norm(d);
+            d.map(|x| x / n)
+        };
+        let line = |d: [f64; 3], acc: f64| Shape {
+            v_cap: 100.0,
+            acc,
+            jerk: 1e4,
+            t_start: unit(d),
+            t_end: unit(d),
+            k_start: [0.0; 3],
+            k_end: [-0.0, 0.0, -0.0],
+            dk_start: [0.0; 3],
+            dk_end: [0.0; 3],
+            surface_ratio: None,
+            m_start: None,
+            m_end: None,
+        };
+        let a = line(da, acc[0]);
+        let mut b = line(db, acc[1]);
+        if arc {
+            b.k_start = [0.0, 0.1, 0.0];
+        }
+        let turn = sub(b.t_start, a.t_end);
+        let turn = [0, 1, 2].map(|i| turn[i].abs() / period_s);
+        let turn = [turn[0], turn[1], turn[2], path::norm(sub(b.t_start, a.t_end)) / period_s];
+        proptest::prop_assert_eq!(
+            load_bits(&Load::of(&a, &b, period_s)),
+            load_bits(&Load::general(&a, &b, turn, period_s))
+        );
+    }
+}
+
 #[test]
 fn straight_limits_refuse_a_machine_they_cannot_shortcut() {
     let mut machine = Machine::default();
@@ -492,5 +547,20 @@ proptest::proptest! {
         for b in std::iter::once(curve_block(3, &curve, Helix::NONE, 900.0)).chain(arcs) {
             proptest::prop_assert_eq!(samples_bits(&samples(&b)), samples_bits(&samples_as_before(&b)));
         }
+    }
+}
+
+proptest::proptest! {
+    #![proptest_config(proptest::prelude::ProptestConfig::with_cases(5000))]
+    /// `min_cbrt` is `v.min(x.cbrt())` bit for bit, close to the root and far from it.
+    #[test]
+    fn min_cbrt_is_the_minimum_with_the_cube_root(
+        v in proptest::prop_oneof![number(), 1e-120..1e-90f64, 1e100..1e110f64],
+        x in proptest::prop_oneof![number(), 1e-310..1e-300f64, 1e300..f64::MAX],
+        near in proptest::prop_oneof![proptest::strategy::Just(None), proptest::strategy::Strategy::prop_map(-1e-5..1e-5f64, Some)],
+    ) {
+        // Close to the root too: x within a few millionths of v³.
+        let x = near.map_or(x, |e| v * v * v * (1.0 + e));
+        proptest::prop_assert_eq!(min_cbrt(v, x).to_bits(), v.min(x.cbrt()).to_bits(), "{} {}", v, x);
     }
 }

@@ -32,6 +32,8 @@ const MAX_LINES_AGAIN: usize = 5_000_000;
 /// calls and repeat loops in progress.
 pub(super) struct Runner {
     o_words: Vec<Option<Box<OWord>>>,
+    /// The program's lines, its subroutine files' included.
+    lines: usize,
     flow: Flow,
     calls: Vec<Call>,
     /// (repeat line, turns left) of the repeat loops being run.
@@ -46,9 +48,15 @@ pub(super) struct Runner {
 }
 
 impl Runner {
-    pub(super) fn new(o_words: Vec<Option<Box<OWord>>>, flow: Flow, missing: Missing) -> Self {
+    pub(super) fn new(
+        o_words: Vec<Option<Box<OWord>>>,
+        lines: usize,
+        flow: Flow,
+        missing: Missing,
+    ) -> Self {
         Runner {
             o_words,
+            lines,
             flow,
             calls: Vec::new(),
             repeats: Vec::new(),
@@ -77,7 +85,7 @@ impl Runner {
     /// has run too many lines again (an endless loop, or one far too long to check).
     pub(super) fn count_line(&mut self, here: usize) -> Result<(), Diagnostic> {
         self.lines_run += 1;
-        if self.lines_run <= self.o_words.len().saturating_add(MAX_LINES_AGAIN) {
+        if self.lines_run <= self.lines.saturating_add(MAX_LINES_AGAIN) {
             return Ok(());
         }
         Err(Diagnostic {
@@ -96,7 +104,7 @@ impl Runner {
         let mut pc = here + 1;
         // A line that cannot be read counts as false / zero turns, so that a
         // broken condition ends its loop instead of spinning.
-        match (&self.o_words[here], self.flow.link[here]) {
+        match (o_word(&self.o_words, here), self.flow.link(here)) {
             (Some(o), Some(to)) if o.kind == OKind::ElseIf && self.branch != Some(here) => {
                 pc = endif_of(&self.o_words, &self.flow.link, here).map_or(to, |e| e + 1);
             }
@@ -106,7 +114,7 @@ impl Runner {
                 self.branch = Some(to);
             }
             (Some(o), Some(to))
-                if matches!(o.kind, OKind::While | OKind::Repeat) && !self.flow.closes_do[here] =>
+                if matches!(o.kind, OKind::While | OKind::Repeat) && !self.flow.closes_do(here) =>
             {
                 pc = to + 1;
             }
@@ -126,7 +134,7 @@ impl Runner {
     ) -> Option<usize> {
         let line = here as u32 + 1;
         let mut pc = here + 1;
-        let link = self.flow.link[here];
+        let link = self.flow.link(here);
         let cond = o.args.first().is_some_and(|v| *v != 0.0);
         let mut back = false;
         match o.kind {
@@ -197,7 +205,7 @@ impl Runner {
                 }
             }
             OKind::Else | OKind::EndIf | OKind::Do | OKind::ProgramNumber => {}
-            OKind::While if self.flow.closes_do[here] => {
+            OKind::While if self.flow.closes_do(here) => {
                 if cond {
                     pc = link.map_or(pc, |d| d + 1);
                     back = true;
@@ -233,7 +241,7 @@ impl Runner {
             }
             OKind::Break | OKind::Continue => {
                 if let Some(head) = link {
-                    let end = self.flow.link[head].unwrap_or(here);
+                    let end = self.flow.link(head).unwrap_or(here);
                     // Repeat loops inside the loop left or restarted are done with
                     // (LinuxCNC lets break and continue reach out of them).
                     let floor = self.calls.last().map_or(0, |c| c.repeats);
@@ -250,7 +258,7 @@ impl Runner {
                     } else {
                         // `continue` goes to the loop's test: a while's head, a do's
                         // closing while.
-                        let is_while = !self.flow.closes_do[end];
+                        let is_while = !self.flow.closes_do(end);
                         pc = if is_while { head } else { end };
                         back = true;
                     }
@@ -276,6 +284,11 @@ impl Runner {
     }
 }
 
+/// The O-word of line `i` (a program without any has an empty list).
+fn o_word(o_words: &[Option<Box<OWord>>], i: usize) -> Option<&OWord> {
+    o_words.get(i).and_then(|o| o.as_deref())
+}
+
 /// The `endif` of the `if` block whose branch line is `at`.
 fn endif_of(
     o_words: &[Option<Box<OWord>>],
@@ -288,10 +301,7 @@ fn endif_of(
         if next <= at {
             return None;
         }
-        if o_words[next]
-            .as_ref()
-            .is_some_and(|o| o.kind == OKind::EndIf)
-        {
+        if o_word(o_words, next).is_some_and(|o| o.kind == OKind::EndIf) {
             return Some(next);
         }
         at = next;

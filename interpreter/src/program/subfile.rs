@@ -24,15 +24,16 @@ pub(super) struct SubFile {
 }
 
 /// The O-words of `lines`, the lines of `text`: `None` for a line without one (or one
-/// that cannot be read: running the line reports that). Boxed: a list of a word a line
-/// would be 56 bytes a line, nearly all of them `None`, for the kernel to hand over
-/// page by page.
+/// that cannot be read: running the line reports that); an empty list for a text
+/// without any. Boxed: a list of a word a line would be 56 bytes a line, nearly all of
+/// them `None`, for the kernel to hand over page by page.
 pub(super) fn o_words_of(text: &str, lines: &[&str], first_line: u32) -> Vec<Option<Box<OWord>>> {
     // A text without an `o` anywhere (most CAM output) has none: one pass over its
     // bytes (a fold without an early exit, which the compiler vectorises) instead of a
-    // look at each line, and a list of zeros the allocator gets zeroed.
-    if !text.bytes().fold(false, |o, b| o | (b | 0x20 == b'o')) {
-        return vec![None; lines.len()];
+    // look at each line, and no list at all (the flow, the subroutine files and the
+    // runner then have nothing to look through).
+    if !may_have_o_words(text) {
+        return Vec::new();
     }
     lines
         .iter()
@@ -43,6 +44,12 @@ pub(super) fn o_words_of(text: &str, lines: &[&str], first_line: u32) -> Vec<Opt
                 .map(Box::new)
         })
         .collect()
+}
+
+/// Whether `text` has an `o` or `O` anywhere, which an O-word needs: one pass over its
+/// bytes (a fold without an early exit, which the compiler vectorises).
+pub(super) fn may_have_o_words(text: &str) -> bool {
+    text.bytes().fold(false, |o, b| o | (b | 0x20 == b'o'))
 }
 
 /// Labels called and defined nowhere, with why no file supplied them.
@@ -179,6 +186,10 @@ impl Units {
             d.file = Some(path.to_string());
             d
         }));
+        // The lists of a program (or file) without O-words are empty: filled up to the
+        // file's first line, so that its links stand at its lines.
+        joined.link.resize(start, None);
+        joined.closes_do.resize(start, false);
         joined
             .link
             .extend(f.link.into_iter().map(|l| l.map(|i| i + start)));

@@ -165,3 +165,118 @@ fn g6_2_errors_name_the_rule() {
     let e = errors("F100\nG6.2 X0 Y0 R1 K0 P2\n");
     assert!(e[0].2.contains("PS1005"), "{e:?}");
 }
+
+proptest::proptest! {
+    /// `lines_of` gives what `str::lines` gives, on texts of short lines of letters,
+    /// blanks, `\r` and `\n` (alone, doubled, at either end), and non-ASCII characters.
+    #[test]
+    fn lines_of_is_str_lines(text in "([a-z \\r\\né€]{0,20}\\n?){0,12}[\\r\\n]{0,2}") {
+        let ours = lines_of(&text);
+        let std: Vec<&str> = text.lines().collect();
+        proptest::prop_assert_eq!(line_count(&text), std.len());
+        proptest::prop_assert_eq!(ours, std);
+    }
+}
+
+#[test]
+fn lines_of_ends_and_blanks() {
+    for text in [
+        "",
+        "\n",
+        "\r\n",
+        "a",
+        "a\r",
+        "a\n\r",
+        "a\r\r\n",
+        "\n\nb\r\n",
+        "x\ry\n",
+    ] {
+        assert_eq!(lines_of(text), text.lines().collect::<Vec<_>>(), "{text:?}");
+    }
+    let long = "G1 X1.5 Y-2 Z0.25\r\n".repeat(40) + "M2";
+    assert_eq!(lines_of(&long), long.lines().collect::<Vec<_>>());
+    // Read in order (no O-words) or listed (an O-word), a program's lines are the same:
+    // CR LF endings, a blank line, a last line without its end.
+    let plain = "G1 X1 F100\r\n\r\nG1 X2\r\nG1 X3";
+    let with_o = format!("{plain}\r\no1 if [0]\r\no1 endif");
+    let (a, b) = (moves(plain), moves(&with_o));
+    // The same moves, to the program's end on its own last line.
+    assert_eq!(a[..a.len() - 1], b[..b.len() - 1]);
+    assert_eq!(a[a.len() - 1], Move::End { line: 4 });
+    assert_eq!(
+        errors("G1 X1 F100\r\n\nG1 E2\r"),
+        errors("G1 X1 F100\r\n\nG1 E2\r\n(o)")
+    );
+}
+
+#[test]
+fn newline_mask_is_exact() {
+    // Every byte value at every place, with `\n` and neighbours that could carry.
+    for b in 0..=255u8 {
+        for at in 0..8 {
+            let mut w = [b'\n', 0x0b, 0x09, 0xff, 0x00, 0x8a, b'\n', 0x0b];
+            w[at] = b;
+            let expect = w.iter().enumerate().fold(0u64, |m, (i, &x)| {
+                m | if x == b'\n' { 0x80 << (8 * i) } else { 0 }
+            });
+            assert_eq!(newline_mask(w), expect, "{w:?}");
+        }
+    }
+}
+
+#[test]
+fn newlines_counts_every_one() {
+    // Past the 255 words a lane may count before it is summed, with every lane full.
+    for n in [0, 1, 7, 8, 9, 2039, 2040, 2041, 5000] {
+        let all = vec![b'\n'; n];
+        assert_eq!(newlines(&all), n);
+        let some: Vec<u8> = (0..n)
+            .map(|i| if i % 3 == 0 { b'\n' } else { b'x' })
+            .collect();
+        assert_eq!(newlines(&some), n.div_ceil(3));
+    }
+}
+
+/// `gcode` as it was: every value, whole tenths or not, gives the same code.
+#[test]
+fn gcode_whole_tenths_as_rounded() {
+    let before = |v: f64| {
+        let tenths = (v * 10.0).round();
+        ((tenths - v * 10.0).abs() < 1e-6 && tenths >= 0.0).then_some(tenths as u32)
+    };
+    let values = [
+        0.0,
+        -0.0,
+        1.0,
+        5.2,
+        5.3,
+        6.2,
+        64.0,
+        61.1,
+        0.1,
+        0.25,
+        1.00000001,
+        2.9999999,
+        -1.0,
+        -0.04,
+        4e8,
+        4.2e8,
+        1e300,
+        f64::NAN,
+        f64::INFINITY,
+        f64::NEG_INFINITY,
+        429496729.5,
+        429496729.6,
+    ];
+    for v in values
+        .into_iter()
+        .chain((0..20_000).map(|i| i as f64 * 0.013 - 7.0))
+    {
+        let w = Word {
+            letter: 'G',
+            value: v,
+            col: 1,
+        };
+        assert_eq!(gcode(&w), before(v), "{v}");
+    }
+}
