@@ -656,13 +656,7 @@ fn shape_straight_into(
         jerk: jerk.max(lim.jerk_floor),
         t_start: t,
         t_end: t,
-        k_start: [0.0; 3],
-        k_end: [0.0; 3],
-        dk_start: [0.0; 3],
-        dk_end: [0.0; 3],
-        surface_ratio: None,
-        m_start: None,
-        m_end: None,
+        ..Shape::NONE
     };
     true
 }
@@ -1275,8 +1269,9 @@ fn junction_leaves(
     if !(kinked || jumps) || v <= 0.0 {
         return None;
     }
-    // Worked out here only past a corner, where the speed is not zero unless the
-    // feeds are: the same numbers as `Junction::of` would have.
+    // `Junction::of` leaves the load out only at a corner (whose speed is zero: not
+    // reached) and where the tangents are not numbers (a NaN cosine); then it is worked
+    // out here, the same numbers it would have.
     let worked_out;
     let load = match at.load {
         Some(l) => l,

@@ -377,10 +377,10 @@ pub fn analyse(blocks: &[CommandBlock], t: &Traces) -> Contour {
     });
     let chord = chords
         .iter()
-        .map(|&((_, _, um), i)| Worst {
+        .map(|&((_, at, um), i)| Worst {
             um,
             cycle: t.fb_cycle[i],
-            line: segs[seg_of[i].unwrap_or(0)].b.source_line,
+            line: segs[at].b.source_line,
         })
         .fold(None, |w: Option<Worst>, c| {
             Some(w.filter(|w| w.um >= c.um).unwrap_or(c))
