@@ -22,10 +22,22 @@ const PERIOD_NS: u64 = 1_000_000;
 
 fn bench(c: &mut Criterion) {
     let machine = Machine::default();
-    let programs = [
-        ("plain_g1", programs::plain_g1(LINES)),
-        ("mixed", programs::mixed(LINES)),
+    let mut programs = vec![
+        ("plain_g1".to_string(), programs::plain_g1(LINES)),
+        ("mixed".to_string(), programs::mixed(LINES)),
     ];
+    // Programs of one's own beside the generated ones (as for `rs274`), named by their
+    // file stems: `CHECK_BENCH_FILES=a.ngc:b.ngc`.
+    if let Ok(files) = std::env::var("CHECK_BENCH_FILES") {
+        for f in files.split(':').filter(|f| !f.is_empty()) {
+            let path = std::path::Path::new(f);
+            let text = std::fs::read_to_string(path).unwrap_or_else(|e| panic!("{f}: {e}"));
+            let name = path
+                .file_stem()
+                .map_or(f.into(), |s| s.to_string_lossy().into());
+            programs.push((name, text));
+        }
+    }
     if let Ok(dir) = std::env::var("CHECK_BENCH_WRITE") {
         for (name, text) in &programs {
             let path = std::path::Path::new(&dir).join(format!("{name}.ngc"));
