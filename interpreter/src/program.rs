@@ -28,6 +28,7 @@ mod feed;
 mod flow;
 mod linuxcnc;
 mod subfile;
+mod usage;
 
 use crate::parse::{flow, Diagnostic, LineReader, OKind, Params, Word};
 pub use dialect::Dialect;
@@ -895,8 +896,23 @@ fn motion(
         st.motion = m;
     }
     let has_axis = AXES.iter().any(|a| lw.get(*a).is_some());
-    if has_axis && codes.dwell.is_none() {
-        let target = target(st, lw, unit);
+    // The motion the line makes, as LinuxCNC decides it (see `usage`).
+    let here = match codes.motion {
+        Some((_, m)) => Some(m),
+        None if has_axis || (matches!(st.motion, Motion::Arc { .. }) && lw.has_any("IJK")) => {
+            Some(st.motion)
+        }
+        None => None,
+    };
+    // Axis words with no motion to make are refused below, for what they are.
+    if !(has_axis && matches!(here, Some(Motion::None | Motion::FanucNurbs))) {
+        usage::check(lw, codes, here)?;
+    }
+    // An arc without axis words ends where it starts: a full circle (or `P` of them) in
+    // the centre form, refused by `arc` in the radius form or with neither.
+    let arc_in_place = !has_axis && matches!(here, Some(Motion::Arc { .. }));
+    if (has_axis || arc_in_place) && codes.dwell.is_none() {
+        let mut target = target(st, lw, unit);
         let col = motion_word.map_or_else(|| lw.first_col(), |m| m.col);
         if !matches!(st.motion, Motion::Cubic) {
             st.g5_tangent = None;
@@ -916,7 +932,13 @@ fn motion(
             }
             Motion::Arc { ccw } => {
                 need_feed(st, lw, col)?;
-                moves.push(arc::arc(st, lw, target, ccw, unit, col)?);
+                let m = arc::arc(st, lw, target, ccw, unit, col)?;
+                // The arc may end a rounding off the programmed end (see `arc`): the
+                // next move starts where it ends.
+                if let Move::Arc { to, .. } = m {
+                    target = to;
+                }
+                moves.push(m);
             }
             Motion::Cubic | Motion::Quadratic => {
                 need_feed(st, lw, col)?;
@@ -925,10 +947,6 @@ fn motion(
             }
         }
         st.pos = target;
-    } else if let Some((w, Motion::Arc { .. } | Motion::Linear | Motion::Rapid)) = codes.motion {
-        if lw.has_any("IJKR") {
-            return Err(lw.err("arc", w.col, "arc without any axis word for its end point"));
-        }
     } else if let Some((w, Motion::Cubic | Motion::Quadratic)) = codes.motion {
         return Err(lw.err(
             "spline",

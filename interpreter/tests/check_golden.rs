@@ -197,6 +197,11 @@ M2
 /// speeds with the default machine (its axes are stronger than its path): plain_g1,
 /// g5_curva_delfino and g5_curva_mazatrol changed; the machining times of the demo,
 /// the peers and the examples are the same to the millisecond.
+///
+/// g5_curva_stella renewed for argument words that nothing on their line uses
+/// (`program::usage`, as LinuxCNC refuses them): after its `G2.2` (refused) its control
+/// points are lines of their own, and their `P` weights are now refused too (17
+/// diagnostics, the first still the `G2.2`). No plan changed.
 const GOLDEN_BLOCKS: &[(&str, usize, u64)] = &[
     ("plain_g1", 99999, 0x2314c695b1663686),
     ("mixed", 694, 0xfb6127445041df11),
@@ -215,7 +220,7 @@ const GOLDEN_BLOCKS: &[(&str, usize, u64)] = &[
     ("g5_curva_chitarra.ngc", 33, 0xba57395aaa68a676),
     ("g5_curva_delfino.ngc", 71, 0x252d4ec1e2309954),
     ("g5_curva_mazatrol.ngc", 26, 0xa4740e4f6652f9ef),
-    ("g5_curva_stella.ngc", 2, 0x4cb2c1dad9f8b7a5),
+    ("g5_curva_stella.ngc", 17, 0xe4673450da4ffb27),
     ("g5_leto-xy.ngc", 16, 0x19904b7e8ec54792),
     ("g5_nurbs-xy.ngc", 8, 0x257189ea529a0e75),
     ("g5_nurbs-yz.ngc", 8, 0xebc67b9319f82455),
@@ -302,10 +307,25 @@ fn mutated_sources() -> Vec<String> {
 /// What replaces a byte (or is put after it).
 const EDITS: &[u8] = b" 0.9-+#[]()XGFPe;/\tO";
 
+/// Renewed for argument words that nothing on their line uses (`program::usage`): of
+/// the 46 863 mutated programs, 1 723 now give other diagnostics (compared case by case
+/// with `GOLDEN_DUMP` on both builds): 362 read before are refused, 310 of them for a
+/// `P`, `I`, `J` or `R` that no code uses (`P21 G90`), the others for a `G2` or `G3`
+/// without axis words, now an arc where it stands, which lacks a centre or a feed (all
+/// of which LinuxCNC refuses too); the rest name such words on lines that went on
+/// without them before (mostly the control points of a `G5.2` whose opening line was
+/// broken).
 #[test]
 fn diagnostics_are_as_they_were() {
     let mut h = Hash::new();
     let mut cases = 0u64;
+    // `GOLDEN_DUMP=FILE`: every case and what it gave, a line each, to diff two builds
+    // by when the fingerprint changes on purpose.
+    let mut dump = std::env::var("GOLDEN_DUMP").ok().map(|path| {
+        std::io::BufWriter::new(
+            std::fs::File::create(&path).unwrap_or_else(|e| panic!("{path}: {e}")),
+        )
+    });
     for text in mutated_sources() {
         let src = text.as_bytes();
         for i in 0..src.len() {
@@ -318,14 +338,26 @@ fn diagnostics_are_as_they_were() {
             for v in variants {
                 let text = String::from_utf8_lossy(&v);
                 cases += 1;
-                match program::interpret(&text) {
+                let result = program::interpret(&text);
+                match &result {
                     Ok(p) => h.str(&format!("{:?} {:?}", p.moves, p.messages)),
                     Err(diags) => diags.iter().for_each(|d| h.diagnostic(d)),
+                }
+                if let Some(out) = &mut dump {
+                    use std::io::Write as _;
+                    let got = match &result {
+                        Ok(p) => format!("ok: {} moves", p.moves.len()),
+                        Err(diags) => format!(
+                            "{:?}",
+                            diags.iter().map(|d| d.to_string()).collect::<Vec<_>>()
+                        ),
+                    };
+                    writeln!(out, "{text:?} => {got}").unwrap();
                 }
             }
         }
     }
-    const GOLDEN: (u64, u64) = (46863, 0xc4c837aeab815075);
+    const GOLDEN: (u64, u64) = (46863, 0x47db9b96f01a5e68);
     if printing() {
         println!("diagnostics: ({cases}, {:#018x})", h.0);
         return;

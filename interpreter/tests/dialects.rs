@@ -733,3 +733,142 @@ fn errors_in_subroutine_files_name_the_file_and_its_line() {
         "{e:?}"
     );
 }
+
+/// Argument words that no code of their line uses are refused, as LinuxCNC's rs274ngc
+/// refuses them (`check_other_codes`): `G1 X20 I5` is a slip for `G2`, not a line.
+/// Messages and columns checked with `rs274 -g` (2.9), which names the same words.
+#[test]
+fn words_nothing_uses_are_refused_where_linuxcnc_refuses_them() {
+    let head = "G21 G17 F100\nG1 X1\n";
+    let first = |body: &str| {
+        let e = errors(&format!("{head}{body}\nM2\n"));
+        (e[0].0, e[0].1, e[0].2.clone())
+    };
+    // rs274: "I word with no G2, G3, G5, G5.1, G10, G33.1, G76, or G87 to use it"
+    assert_eq!(
+        first("G1 X20 I5"),
+        (
+            3,
+            8,
+            "word: I word with no G2, G3, G5 or G5.1 to use it".into()
+        )
+    );
+    // A modal straight line takes no centre either (rs274: the same).
+    assert_eq!(first("G1 X2\nJ1").0, 4);
+    assert_eq!(
+        first("G0 X2 K1").2,
+        "word: K word with no G2 or G3 to use it"
+    );
+    // rs274: "R word with no g code that uses it"
+    assert_eq!(
+        first("G0 X2 R1"),
+        (3, 7, "word: R word with no G2 or G3 to use it".into())
+    );
+    assert!(first("G1 X2 P1")
+        .2
+        .starts_with("word: P word with no G2, G3, G4, G5 or G64"));
+    assert_eq!(
+        first("G1 X2 Q1").2,
+        "word: Q word with no G5 or G64 (G05.1 in Fanuc programs) to use it"
+    );
+    // G5.1 takes I and J only; L belongs to an open G5.2.
+    assert_eq!(first("G5.1 X2 Y1 I1 J1 Q1").1, 18);
+    assert_eq!(first("G1 X2 L3").2, "word: L word with no G5.2 to use it");
+    // Words on a line without any motion: nothing uses them (rs274: the same).
+    assert_eq!(first("P21 G90").1, 1);
+    assert_eq!(first("G80 R1").1, 5);
+    // Axis words with no motion are refused for that, not for the words beside them.
+    assert!(errors("G80\nX1 R2\nM2\n")[0]
+        .2
+        .starts_with("modal: axis words without an active motion"),);
+    // A bare G2 is an arc with neither a centre nor a radius (rs274: "R i j k words all
+    // missing for arc").
+    assert_eq!(first("G2").2, "arc: arc needs R or a centre (I and J)");
+    // Every word where something uses it.
+    let fine = "G21 G17 F100\nG1 X1\nG4 P0.5\nG64 P0.01 Q0.01\nG2 X3 Y0 R1\nG3 X1 Y0 I-1 J0 P2\n\
+                G18 G2 X1 Z0 I1 K0\nG17 G5 X2 Y1 I0.5 J0 P0.5 Q0.5\nG5.1 X3 Y1 I0.5 J0\nM2\n";
+    assert!(interpret(fine).is_ok(), "{:?}", interpret(fine).err());
+}
+
+/// An arc without axis words ends where it starts: in the centre form, `P` full circles
+/// round the centre (LinuxCNC reads `G2 I5` so, and a lone `I5 J0` in arc mode too, as
+/// another circle); in the radius form it is refused, a full circle having no centre
+/// from `R`.
+#[test]
+fn an_arc_without_axis_words_is_a_full_circle_where_it_stands() {
+    let m = moves("G21 G17 F100\nG1 X1 Y2 Z3\nG2 I5\nJ-2 P2\nG18 G3 K1\nM2\n");
+    let arcs: Vec<_> = m
+        .iter()
+        .filter_map(|m| match m {
+            Move::Arc {
+                line,
+                from,
+                to,
+                center,
+                ccw,
+                turns,
+                ..
+            } => Some((*line, *from, *to, *center, *ccw, *turns)),
+            _ => None,
+        })
+        .collect();
+    let p = [1.0, 2.0, 3.0];
+    assert_eq!(
+        arcs,
+        [
+            (3, p, p, [6.0, 2.0, 3.0], false, 1),
+            (4, p, p, [1.0, 0.0, 3.0], false, 2),
+            (5, p, p, [1.0, 2.0, 4.0], true, 1),
+        ]
+    );
+    let e = errors("G21 G17 F100\nG1 X1\nG2 R5\nM2\n");
+    assert_eq!(e[0].0, 3);
+    assert!(
+        e[0].2.contains("full circle needs the centre form"),
+        "{e:?}"
+    );
+}
+
+/// A full circle whose end is its start but for the last digit (`X10.000001` after
+/// `X10`) is the programmed circle: its centre stays where `I J` put it (as `rs274`
+/// prints it), the arc ends on it at the end's angle. The exact circle through both
+/// points has its centre on the bisector of a 1.4 nm chord, which passes 3.5 mm from
+/// the programmed centre: that would be another circle.
+#[test]
+fn a_full_circle_off_by_a_rounding_keeps_its_centre() {
+    let m = moves("G21 G17 F100\nG0 X10 Y0\nG2 X10.000001 Y0.000001 I-5 J0 P2\nG1 X20\nM2\n");
+    let (from, to, center, turns) = m
+        .iter()
+        .find_map(|m| match m {
+            Move::Arc {
+                from,
+                to,
+                center,
+                turns,
+                ..
+            } => Some((*from, *to, *center, *turns)),
+            _ => None,
+        })
+        .expect("an arc");
+    assert_eq!(center, [5.0, 0.0, 0.0]);
+    assert_eq!(turns, 2);
+    // On the circle, and within the rounding of the programmed end.
+    assert!((dist(to, center) - 5.0).abs() < 1e-12, "{to:?}");
+    assert!(dist(to, [10.000001, 0.000001, 0.0]) < 1.5e-6, "{to:?}");
+    assert_eq!(from, [10.0, 0.0, 0.0]);
+    // The next move starts where the arc ends.
+    let next = m.iter().find_map(|m| match m {
+        Move::Line {
+            from, rapid: false, ..
+        } => Some(*from),
+        _ => None,
+    });
+    assert_eq!(next, Some(to));
+    // Arcs of ordinary chords still pass exactly through both programmed ends.
+    let m = moves("G21 G17 F100\nG2 X10 Y0.0005 I5 J0\nM2\n");
+    let Move::Arc { to, center, .. } = m[0] else {
+        panic!("{m:?}")
+    };
+    assert_eq!(to, [10.0, 0.0005, 0.0]);
+    assert!((dist(to, center) - dist([0.0; 3], center)).abs() < 1e-12);
+}

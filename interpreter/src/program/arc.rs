@@ -46,6 +46,8 @@ pub(super) fn arc(
     let chord = (da * da + db * db).sqrt();
     let mut center = [0.0; 3];
     center[n] = from[n];
+    // Where the arc ends: the programmed end, but for a short chord (below).
+    let mut end = to;
     if let Some(rw) = lw.get('R') {
         if lw.get(OFFSETS[a]).is_some() || lw.get(OFFSETS[b]).is_some() {
             return Err(lw.err(
@@ -107,23 +109,38 @@ pub(super) fn arc(
                 format!("radius to the end of the arc ({r1:.4} mm) differs from the radius to its start ({r0:.4} mm)"),
             ));
         }
-        if chord < 1e-9 {
-            center[a] = ca;
-            center[b] = cb;
-        } else {
-            // Within tolerance: move the centre to the nearest point of the chord's
-            // bisector, so the exact circle passes through both programmed end points.
+        center[a] = ca;
+        center[b] = cb;
+        if chord >= 1e-9 {
+            // Within tolerance: the exact circle through both programmed end points has
+            // its centre on the chord's bisector; the nearest such centre is
+            // `(r0² − r1²)/2·chord` along the chord from the programmed one. Taken where
+            // that is within the radius tolerance (nearly every arc: a chord as long as
+            // the radius moves the centre by at most the radii's difference).
             let (ma, mb) = (from[a] + da / 2.0, from[b] + db / 2.0);
             let (na, nb) = (-db / chord, da / chord);
             let t = (ca - ma) * na + (cb - mb) * nb;
-            center[a] = ma + t * na;
-            center[b] = mb + t * nb;
+            let (pa, pb) = (ma + t * na, mb + t * nb);
+            let moved = (pa - ca).hypot(pb - cb);
+            if moved <= ARC_RADIUS_TOL_MM.max(ARC_RADIUS_TOL_REL * r0) {
+                center[a] = pa;
+                center[b] = pb;
+            } else {
+                // A short chord (a full circle whose end is its start but for the
+                // rounding of the numbers, a tiny arc on a large radius): the bisector
+                // is no guide, and the centre on it can be as far off as the radius (a
+                // different circle). The programmed circle is kept and the arc ends on
+                // it, at the programmed end's angle: `|r1 − r0|`, within the tolerance,
+                // from that end. LinuxCNC ends exactly there, on a spiral from r0 to r1.
+                end[a] = ca + (to[a] - ca) * r0 / r1;
+                end[b] = cb + (to[b] - cb) * r0 / r1;
+            }
         }
     }
     Ok(Move::Arc {
         line: lw.line,
         from,
-        to,
+        to: end,
         center,
         plane: st.plane,
         ccw,

@@ -1,0 +1,458 @@
+//! Differential test against LinuxCNC's own interpreter: random programs of straight
+//! moves and arcs in all three planes, in millimetres and inches, absolute and
+//! incremental, with centre offsets absolute and incremental, the radius form both ways
+//! round and multi-turn helices, read by `rs274 -g` (Debian's `linuxcnc-uspace`) and by
+//! us, move by move. What `rs274` prints is the reference: the end point of every move,
+//! the centre, direction and turns of every arc.
+//!
+//! Ignored by default: `rs274` is not installed by the project (it is a 200 MB package
+//! with a real-time stack). Run it where it is installed:
+//!
+//! ```sh
+//! cargo test --release -p interpreter --test rs274_differential -- --ignored --nocapture
+//! RS274_PROGRAMS=2000 RS274_SEED=7 cargo test ...   # more programs, another seed
+//! ```
+//!
+//! `rs274` prints four decimals in the program's units at the time: the comparison's
+//! tolerance is half a unit in the last of them (1.27 µm in inches), plus what our arc
+//! centre may move to put both programmed end points on its circle.
+
+use interpreter::program::{interpret, Move, Plane};
+use std::fmt::Write as _;
+use std::process::Command;
+
+/// xorshift64*: the programs are the same for a seed wherever the test runs.
+struct Rng(u64);
+
+impl Rng {
+    fn next(&mut self) -> u64 {
+        self.0 ^= self.0 >> 12;
+        self.0 ^= self.0 << 25;
+        self.0 ^= self.0 >> 27;
+        self.0.wrapping_mul(0x2545_f491_4f6c_dd1d)
+    }
+    /// Uniform in [0, 1).
+    fn unit(&mut self) -> f64 {
+        (self.next() >> 11) as f64 / (1u64 << 53) as f64
+    }
+    fn range(&mut self, lo: f64, hi: f64) -> f64 {
+        lo + (hi - lo) * self.unit()
+    }
+    fn below(&mut self, n: u64) -> u64 {
+        self.next() % n
+    }
+    fn chance(&mut self, p: f64) -> bool {
+        self.unit() < p
+    }
+}
+
+const MM_PER_INCH: f64 = 25.4;
+
+/// The program's modal state as the generator writes it, and where the tool is (mm).
+struct Writer {
+    text: String,
+    n: u32,
+    inch: bool,
+    incremental: bool,
+    arc_absolute: bool,
+    plane: Plane,
+    pos: [f64; 3],
+}
+
+impl Writer {
+    fn scale(&self) -> f64 {
+        if self.inch {
+            MM_PER_INCH
+        } else {
+            1.0
+        }
+    }
+
+    /// A word's value for a length of `mm`, as written (six decimals in the program's
+    /// units), and the length in mm that the written value stands for.
+    fn length(&self, mm: f64) -> (String, f64) {
+        let s = format!("{:.6}", mm / self.scale());
+        let back = s.parse::<f64>().unwrap() * self.scale();
+        (s, back)
+    }
+
+    fn line(&mut self, words: &str) {
+        self.n += 1;
+        writeln!(self.text, "N{} {words}", self.n).unwrap();
+    }
+
+    /// The axis words for a move to `target` (mm) on the axes `which`, absolute or
+    /// incremental as the mode is; the tool's new position.
+    fn axes(&mut self, target: [f64; 3], which: [bool; 3]) -> String {
+        let mut words = String::new();
+        for axis in 0..3 {
+            if !which[axis] {
+                continue;
+            }
+            let (s, mm) = if self.incremental {
+                let (s, d) = self.length(target[axis] - self.pos[axis]);
+                (s, self.pos[axis] + d)
+            } else {
+                self.length(target[axis])
+            };
+            write!(words, " {}{s}", ['X', 'Y', 'Z'][axis]).unwrap();
+            self.pos[axis] = mm;
+        }
+        words
+    }
+}
+
+fn plane_axes(p: Plane) -> (usize, usize, usize) {
+    let (a, b) = p.axes();
+    (a, b, p.normal())
+}
+
+const OFFSET: [char; 3] = ['I', 'J', 'K'];
+
+/// One random program of `lines` moves and mode changes.
+fn program(rng: &mut Rng, lines: usize) -> String {
+    let mut w = Writer {
+        text: String::new(),
+        n: 0,
+        inch: false,
+        incremental: false,
+        arc_absolute: false,
+        plane: Plane::XY,
+        pos: [0.0; 3],
+    };
+    w.line("G21 G17 G90 G91.1 G94 F600");
+    w.line("G0 X0 Y0 Z0");
+    for _ in 0..lines {
+        match rng.below(20) {
+            0 => {
+                w.plane = [Plane::XY, Plane::ZX, Plane::YZ][rng.below(3) as usize];
+                let g = match w.plane {
+                    Plane::XY => "G17",
+                    Plane::ZX => "G18",
+                    Plane::YZ => "G19",
+                };
+                w.line(g);
+            }
+            1 => {
+                w.inch = rng.chance(0.5);
+                w.line(if w.inch { "G20" } else { "G21" });
+            }
+            2 => {
+                w.incremental = rng.chance(0.5);
+                w.line(if w.incremental { "G91" } else { "G90" });
+            }
+            3 => {
+                w.arc_absolute = rng.chance(0.5);
+                w.line(if w.arc_absolute { "G90.1" } else { "G91.1" });
+            }
+            4..=11 => {
+                let rapid = rng.below(20) < 6;
+                let mut which = [rng.chance(0.7), rng.chance(0.7), rng.chance(0.4)];
+                if which == [false; 3] {
+                    which[0] = true;
+                }
+                let target = [
+                    rng.range(-60.0, 60.0),
+                    rng.range(-60.0, 60.0),
+                    rng.range(-20.0, 20.0),
+                ];
+                let words = w.axes(target, which);
+                let g = if rapid { "G0" } else { "G1" };
+                let f = if !rapid && rng.chance(0.2) {
+                    format!(" F{:.1}", rng.range(50.0, 3000.0))
+                } else {
+                    String::new()
+                };
+                w.line(&format!("{g}{words}{f}"));
+            }
+            12..=16 => {
+                // Centre form: a centre at a random offset, the end on its circle.
+                let (a, b, n) = plane_axes(w.plane);
+                let ccw = rng.chance(0.5);
+                let r = rng.range(0.5, 30.0);
+                let start_angle = rng.range(0.0, std::f64::consts::TAU);
+                let (ca, cb) = (
+                    w.pos[a] - r * start_angle.cos(),
+                    w.pos[b] - r * start_angle.sin(),
+                );
+                let full = rng.chance(0.1);
+                let end_angle = if full {
+                    start_angle
+                } else {
+                    rng.range(0.0, std::f64::consts::TAU)
+                };
+                let mut target = w.pos;
+                if !full {
+                    target[a] = ca + r * end_angle.cos();
+                    target[b] = cb + r * end_angle.sin();
+                }
+                let helix = rng.chance(0.3);
+                if helix {
+                    target[n] = w.pos[n] + rng.range(-10.0, 10.0);
+                }
+                let from = w.pos;
+                let mut which = [false; 3];
+                which[a] = !full || rng.chance(0.5);
+                which[b] = !full;
+                which[n] = helix;
+                let words = w.axes(target, which);
+                let (ia, ib) = if w.arc_absolute {
+                    (ca, cb)
+                } else {
+                    (ca - from[a], cb - from[b])
+                };
+                let (ia, _) = w.length(ia);
+                let (ib, _) = w.length(ib);
+                let p = if full || (helix && rng.chance(0.5)) {
+                    format!(" P{}", 1 + rng.below(3))
+                } else {
+                    String::new()
+                };
+                let g = if ccw { "G3" } else { "G2" };
+                w.line(&format!(
+                    "{g}{words} {}{ia} {}{ib}{p}",
+                    OFFSET[a], OFFSET[b]
+                ));
+            }
+            _ => {
+                // Radius form: an end within reach, the short or (R < 0) the long way.
+                let (a, b, n) = plane_axes(w.plane);
+                let mut target = w.pos;
+                let chord = rng.range(1.0, 40.0);
+                let dir = rng.range(0.0, std::f64::consts::TAU);
+                target[a] += chord * dir.cos();
+                target[b] += chord * dir.sin();
+                if rng.chance(0.3) {
+                    target[n] += rng.range(-5.0, 5.0);
+                }
+                let which = [true; 3];
+                let from = w.pos;
+                let words = w.axes(target, which);
+                // The chord as written, so that R is never short of reaching.
+                let written = ((w.pos[a] - from[a]).powi(2) + (w.pos[b] - from[b]).powi(2)).sqrt();
+                let r = written / 2.0 * rng.range(1.01, 3.0);
+                let (r, _) = w.length(if rng.chance(0.3) { -r } else { r });
+                let g = if rng.chance(0.5) { "G3" } else { "G2" };
+                w.line(&format!("{g}{words} R{r}"));
+            }
+        }
+    }
+    w.line("M2");
+    w.text
+}
+
+/// A motion as both sides give it, in mm: the end point, and for an arc its plane,
+/// centre (in-plane coordinates), direction and turns.
+#[derive(Debug, Clone, PartialEq)]
+enum Motion {
+    Line {
+        rapid: bool,
+        to: [f64; 3],
+    },
+    Arc {
+        to: [f64; 3],
+        plane: Plane,
+        center: [f64; 2],
+        ccw: bool,
+        turns: u32,
+    },
+}
+
+/// The motions `rs274 -g` prints for `file`, or its error message.
+fn rs274(file: &std::path::Path) -> Result<Vec<Motion>, String> {
+    let out = Command::new("rs274")
+        .arg("-g")
+        .arg(file)
+        .output()
+        .expect("rs274 runs");
+    let text = String::from_utf8_lossy(&out.stdout);
+    let errors = String::from_utf8_lossy(&out.stderr);
+    if !out.status.success() {
+        return Err(format!("{}{errors}", text.lines().last().unwrap_or("")));
+    }
+    let mut scale = 1.0;
+    let mut plane = Plane::XY;
+    let mut motions = Vec::new();
+    // Where the tool is, as printed (in mm).
+    let mut at = [0.0; 3];
+    for line in text.lines() {
+        let Some(call) = line.split_whitespace().nth(2) else {
+            continue;
+        };
+        let rest: String = line
+            .split_whitespace()
+            .skip(2)
+            .collect::<Vec<_>>()
+            .join(" ");
+        let args = |s: &str| -> Vec<f64> {
+            let inner = &s[s.find('(').unwrap() + 1..s.rfind(')').unwrap()];
+            inner
+                .split(',')
+                .map(|v| v.trim().parse::<f64>().unwrap())
+                .collect()
+        };
+        if call.starts_with("USE_LENGTH_UNITS(") {
+            scale = if call.contains("INCHES") {
+                MM_PER_INCH
+            } else {
+                1.0
+            };
+        } else if call.starts_with("SELECT_PLANE(") {
+            plane = match call {
+                c if c.contains("XY") => Plane::XY,
+                c if c.contains("XZ") => Plane::ZX,
+                _ => Plane::YZ,
+            };
+        } else if call.starts_with("STRAIGHT_TRAVERSE(") || call.starts_with("STRAIGHT_FEED(") {
+            let v = args(&rest);
+            let to = [v[0] * scale, v[1] * scale, v[2] * scale];
+            // A move to where the tool is moves nothing: we make no block of it.
+            if to != at {
+                motions.push(Motion::Line {
+                    rapid: call.starts_with("STRAIGHT_TRAVERSE"),
+                    to,
+                });
+            }
+            at = to;
+        } else if call.starts_with("ARC_FEED(") {
+            let v = args(&rest);
+            let (a, b, n) = plane_axes(plane);
+            let mut to = [0.0; 3];
+            to[a] = v[0] * scale;
+            to[b] = v[1] * scale;
+            to[n] = v[5] * scale;
+            let rotation = v[4] as i64;
+            at = to;
+            motions.push(Motion::Arc {
+                to,
+                plane,
+                center: [v[2] * scale, v[3] * scale],
+                ccw: rotation > 0,
+                turns: rotation.unsigned_abs() as u32,
+            });
+        }
+    }
+    Ok(motions)
+}
+
+/// Our motions for the same program.
+fn ours(text: &str) -> Result<Vec<Motion>, String> {
+    let prog = interpret(text).map_err(|d| format!("{:?}", d.first()))?;
+    Ok(prog
+        .moves
+        .iter()
+        .filter_map(|m| match m {
+            Move::Line { to, rapid, .. } => Some(Motion::Line {
+                rapid: *rapid,
+                to: *to,
+            }),
+            Move::Arc {
+                to,
+                center,
+                plane,
+                ccw,
+                turns,
+                ..
+            } => {
+                let (a, b, _) = plane_axes(*plane);
+                Some(Motion::Arc {
+                    to: *to,
+                    plane: *plane,
+                    center: [center[a], center[b]],
+                    ccw: *ccw,
+                    turns: *turns,
+                })
+            }
+            _ => None,
+        })
+        .collect())
+}
+
+fn close(a: &[f64], b: &[f64], tol: f64) -> bool {
+    a.iter().zip(b).all(|(x, y)| (x - y).abs() <= tol)
+}
+
+/// Where `ours` and `theirs` differ beyond the printing's rounding, if they do.
+fn first_difference(ours: &[Motion], theirs: &[Motion]) -> Option<String> {
+    // Four decimals of an inch, and the arc centre moved onto the chord's bisector.
+    const TOL: f64 = 0.5e-4 * MM_PER_INCH + 1e-4;
+    for (i, (o, t)) in ours.iter().zip(theirs).enumerate() {
+        let same = match (o, t) {
+            (Motion::Line { rapid: r0, to: a }, Motion::Line { rapid: r1, to: b }) => {
+                r0 == r1 && close(a, b, TOL)
+            }
+            (
+                Motion::Arc {
+                    to: a,
+                    plane: p0,
+                    center: c0,
+                    ccw: d0,
+                    turns: n0,
+                },
+                Motion::Arc {
+                    to: b,
+                    plane: p1,
+                    center: c1,
+                    ccw: d1,
+                    turns: n1,
+                },
+            ) => close(a, b, TOL) && p0 == p1 && close(c0, c1, TOL) && d0 == d1 && n0 == n1,
+            _ => false,
+        };
+        if !same {
+            return Some(format!("motion {i}: ours {o:?}, rs274 {t:?}"));
+        }
+    }
+    (ours.len() != theirs.len())
+        .then(|| format!("{} motions ours, {} rs274", ours.len(), theirs.len()))
+}
+
+fn env_or(name: &str, default: u64) -> u64 {
+    std::env::var(name)
+        .ok()
+        .and_then(|v| v.parse().ok())
+        .unwrap_or(default)
+}
+
+#[test]
+#[ignore = "needs LinuxCNC's rs274 (Debian's linuxcnc-uspace), which the project does not install"]
+fn random_programs_move_as_linuxcnc_moves_them() {
+    let programs = env_or("RS274_PROGRAMS", 300);
+    let seed = env_or("RS274_SEED", 1);
+    let dir = std::env::temp_dir().join(format!("rs274-diff-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let mut failures = Vec::new();
+    let mut motions = 0;
+    for k in 0..programs {
+        let mut rng = Rng(0x9e37_79b9_7f4a_7c15 ^ (seed << 32) ^ (k + 1));
+        let text = program(&mut rng, 40);
+        let file = dir.join(format!("p{k}.ngc"));
+        std::fs::write(&file, &text).unwrap();
+        let verdict = match (ours(&text), rs274(&file)) {
+            (Ok(o), Ok(t)) => {
+                motions += t.len();
+                first_difference(&o, &t)
+            }
+            (Err(o), Err(t)) => {
+                // Both refuse it: the generator wrote something out of tolerance.
+                eprintln!("p{k}: both refuse: ours {o}; rs274 {}", t.trim());
+                None
+            }
+            (Err(o), Ok(_)) => Some(format!("we refuse what rs274 reads: {o}")),
+            (Ok(_), Err(t)) => Some(format!("rs274 refuses what we read: {}", t.trim())),
+        };
+        match verdict {
+            Some(why) => failures.push(format!("{}: {why}", file.display())),
+            None => std::fs::remove_file(&file).unwrap(),
+        }
+    }
+    eprintln!("{programs} programs, {motions} motions compared with rs274");
+    assert!(
+        failures.is_empty(),
+        "{} of {programs} programs differ (kept in {}):\n{}",
+        failures.len(),
+        dir.display(),
+        failures[..failures.len().min(10)].join("\n")
+    );
+    std::fs::remove_dir_all(&dir).ok();
+}
