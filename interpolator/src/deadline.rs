@@ -344,6 +344,19 @@ impl DeadlineReport {
             }
         }
         line(&mut s, "summary", &self.summary);
+        for cause in MissCause::ALL {
+            let seen = self
+                .misses_by_cause
+                .iter()
+                .any(|(id, n)| id == cause.id() && *n > 0);
+            if seen {
+                line(
+                    &mut s,
+                    "cause",
+                    &format!("{}: {}", cause.words(), cause.explanation()),
+                );
+            }
+        }
         line(&mut s, "floor", &self.vs_floor);
         s.push_str(&format!(
             "\n{:<16}{:>10}{:>10}{:>10}{:>10}{:>10}{:>10}{:>10}\n",
@@ -615,6 +628,11 @@ mod tests {
         assert!(text.contains("every miss (20 recorded)"));
         assert!(text.contains("long compute"));
         assert!(text.contains("preempted mid-compute") && text.contains("preempt (µs)"));
+        assert!(
+            text.contains("cause         preempted mid-compute: the compute phase lost its CPU")
+        );
+        assert!(text.contains("cause         long compute: the interpolator thread itself"));
+        assert!(!text.contains("cause         late wake-up"));
         // The JSON carries both the CPU time and the time off the CPU.
         let json = serde_json::to_value(&r).unwrap();
         assert_eq!(json["miss_list"][0]["cpu_ns"], 30_000);

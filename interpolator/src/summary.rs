@@ -4,7 +4,7 @@
 use crate::engine::{axis_name, Engine, Fault, Tick};
 use crate::rt::cycle::Config;
 use crate::rt::sched::SchedReport;
-use crate::timing::{Miss, Percentiles, Timing};
+use crate::timing::{Miss, MissCause, Percentiles, Timing};
 use serde::{Deserialize, Serialize};
 
 /// Path figures accumulated from the set-points, cycle by cycle.
@@ -194,6 +194,10 @@ pub struct Summary {
     /// Every miss up to the first [`REPORT_MISSES`], in cycle order (all of them are in
     /// `deadline-misses.json`).
     pub miss_list: Vec<MissEntry>,
+    /// Misses per cause id, every miss counted (as `deadline-misses.json`'s, in the order
+    /// of [`crate::timing::MissCause::ALL`]); empty under the simulated clock.
+    #[serde(default)]
+    pub misses_by_cause: Vec<(String, u64)>,
     pub path_length_mm: f64,
     pub time_s: f64,
     /// Feed moves only: cutting length over the time spent moving at feed.
@@ -254,6 +258,15 @@ impl Summary {
                     list.iter()
                         .take(REPORT_MISSES)
                         .map(|m| MissEntry::new(m, cfg.period_ns))
+                        .collect()
+                })
+                .unwrap_or_default(),
+            misses_by_cause: timing
+                .map(|(t, _)| {
+                    MissCause::ALL
+                        .iter()
+                        .zip(t.by_cause)
+                        .map(|(c, n)| (c.id().to_string(), n))
                         .collect()
                 })
                 .unwrap_or_default(),

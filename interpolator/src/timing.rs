@@ -231,9 +231,13 @@ pub enum MissCause {
     DownstreamLag,
     /// The compute phase was long by the wall clock, but the thread ran for only a small
     /// part of it: the OS took the CPU away in the middle (a task at the same or a higher
-    /// real-time priority on this CPU, RT throttling, interrupts, or the hypervisor where
-    /// the guest accounts stolen time). Not slow path evaluation: the machine's real-time
-    /// set-up (priorities, isolated CPUs) is what let the cycle down.
+    /// real-time priority on this CPU, threaded interrupt handlers, RT throttling, or the
+    /// hypervisor, whose stolen time the guest leaves out of the thread's CPU time when
+    /// built with CONFIG_PARAVIRT_TIME_ACCOUNTING, as the project's VMs are). Not slow
+    /// path evaluation: the machine's real-time set-up (priorities, isolated CPUs) is what
+    /// let the cycle down. Hard and soft interrupts that run on the thread's time are
+    /// charged to it unless the kernel has CONFIG_IRQ_TIME_ACCOUNTING (these VMs do not),
+    /// so those still count as compute.
     Preempted,
 }
 
@@ -257,6 +261,25 @@ impl MissCause {
             MissCause::PublishStall => "publish_stall",
             MissCause::DownstreamLag => "downstream_lag",
             MissCause::Preempted => "preempted",
+        }
+    }
+
+    /// What the cause means and where to look, for the text report.
+    pub fn explanation(self) -> &'static str {
+        match self {
+            MissCause::LateWake => {
+                "the OS woke the cycle late: scheduling latency of this machine (compare with `cnc latency-test`)"
+            }
+            MissCause::LongCompute => {
+                "the interpolator thread itself computed for most of the cycle: path stepping and evaluation are too slow for the period"
+            }
+            MissCause::PublishStall => "handing the set-point over to shared memory took most of the cycle",
+            MissCause::DownstreamLag => {
+                "the cycle was on time, but the drives (servo-sim) had not answered the set-point of two cycles before"
+            }
+            MissCause::Preempted => {
+                "the compute phase lost its CPU for most of the cycle (the thread's own CPU time was far below its wall time): not slow path evaluation but the machine's real-time set-up; check priorities, isolated CPUs and other real-time tasks on the interpolator's CPU"
+            }
         }
     }
 

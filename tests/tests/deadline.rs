@@ -122,6 +122,10 @@ fn check_agreement(dir: &Path, stdout: &str) -> Value {
         .map(|c| c[1].as_u64().unwrap())
         .sum();
     assert_eq!(by_cause, misses);
+    assert_eq!(
+        rep["misses_by_cause"], d["misses_by_cause"],
+        "report.json agrees"
+    );
     let ids: Vec<&str> = d["misses_by_cause"]
         .as_array()
         .unwrap()

@@ -4,8 +4,10 @@
 //! log-bucketed histograms of wake-up lateness, compute time and publish time, drawn on
 //! log-log axes with the period marked (and this machine's floor from `cnc latency-test`,
 //! when there is one), the percentiles, every miss on the time axis (marker shape and
-//! colour by cause), the runs of consecutive misses and a table of the misses, worst first,
-//! listing every one of them up to [`MAX_ROWS`]. Run directories older than that file have
+//! colour by cause: late wake-up, long compute, preempted mid-compute, publish stall,
+//! downstream lag), the runs of consecutive misses and a table of the misses, worst first,
+//! with how long each compute phase was off the CPU (what tells a preempted cycle from a
+//! slow one), listing every one of them up to [`MAX_ROWS`]. Run directories older than that file have
 //! only report.json's p50/p99/max and the first misses; then those are drawn as bars and
 //! the page says why there is no histogram. Under the simulated clock nothing was measured,
 //! and the page says that instead.
