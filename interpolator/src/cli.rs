@@ -30,15 +30,27 @@ pub struct Args {
     /// `real` (wall time) or `sim` (as fast as the drives answer, same set-points).
     #[arg(long, default_value_t = ClockMode::Real)]
     pub clock: ClockMode,
-    /// Test aid: every Nth cycle computes for 1.5 periods (a long compute, reported as a
-    /// miss of cause `long_compute`). Also taken from `CNC_INJECT_LONG_COMPUTE=N`, which
-    /// `cnc run` passes on to this process.
+    /// Test aid: every Nth cycle computes for 1.5 periods of its own CPU time (a long
+    /// compute, reported as a miss of cause `long_compute`). Also taken from
+    /// `CNC_INJECT_LONG_COMPUTE=N`, which `cnc run` passes on to this process.
     #[arg(long, hide = true)]
     pub inject_long_compute: Option<u64>,
+    /// Test aid: every Nth cycle is preempted in its compute phase for 1.5 periods by a
+    /// thread at a higher SCHED_FIFO priority on its CPU (reported as a miss of cause
+    /// `preempted`); needs SCHED_FIFO. Also taken from `CNC_INJECT_PREEMPTION=N`.
+    #[arg(long, hide = true)]
+    pub inject_preemption: Option<u64>,
 }
 
 /// The environment variable that injects long computes (see [`Args::inject_long_compute`]).
 pub const INJECT_ENV: &str = "CNC_INJECT_LONG_COMPUTE";
+/// The environment variable that injects preemptions (see [`Args::inject_preemption`]).
+pub const PREEMPT_ENV: &str = "CNC_INJECT_PREEMPTION";
+
+/// A test aid's count: the argument, else the environment variable.
+fn hook_arg(arg: Option<u64>, env: &str) -> Option<u64> {
+    arg.or_else(|| std::env::var(env).ok().and_then(|v| v.trim().parse().ok()))
+}
 
 /// `cnc latency-test`: this machine's wake-up jitter with the cycle's own sleep and
 /// scheduling, no work.
@@ -108,11 +120,8 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
         start_timeout: Duration::from_secs(20),
     };
     let hooks = cycle::Hooks {
-        long_compute_every: args.inject_long_compute.or_else(|| {
-            std::env::var(INJECT_ENV)
-                .ok()
-                .and_then(|v| v.trim().parse().ok())
-        }),
+        long_compute_every: hook_arg(args.inject_long_compute, INJECT_ENV),
+        preempt_every: hook_arg(args.inject_preemption, PREEMPT_ENV),
     };
     let summary = cycle::run_with::<iceoryx2::prelude::ipc::Service>(&cfg, hooks)?;
     match summary.fault {

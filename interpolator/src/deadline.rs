@@ -76,7 +76,8 @@ pub struct DeadlineReport {
     pub publish_ns: Option<Figure>,
     /// Every miss counted; equal to `report.json`'s `misses`.
     pub misses: Option<u64>,
-    /// Misses per cause id (`late_wake`, `long_compute`, `publish_stall`, `downstream_lag`).
+    /// Misses per cause id, in the order of [`MissCause::ALL`] (`late_wake`,
+    /// `long_compute`, `publish_stall`, `downstream_lag`, `preempted`).
     pub misses_by_cause: Vec<(String, u64)>,
     /// Misses whose record was lost (the drain fell a whole ring behind); `miss_list` has
     /// `misses − lost` entries.
@@ -343,6 +344,19 @@ impl DeadlineReport {
             }
         }
         line(&mut s, "summary", &self.summary);
+        for cause in MissCause::ALL {
+            let seen = self
+                .misses_by_cause
+                .iter()
+                .any(|(id, n)| id == cause.id() && *n > 0);
+            if seen {
+                line(
+                    &mut s,
+                    "cause",
+                    &format!("{}: {}", cause.words(), cause.explanation()),
+                );
+            }
+        }
         line(&mut s, "floor", &self.vs_floor);
         s.push_str(&format!(
             "\n{:<16}{:>10}{:>10}{:>10}{:>10}{:>10}{:>10}{:>10}\n",
@@ -394,7 +408,7 @@ impl DeadlineReport {
         ));
         if !self.miss_list.is_empty() {
             s.push_str(&format!(
-                "{:>10} {:>12} {:>6} {:>7}  {:<25} {:>10} {:>10} {:>10} {:>10} {:>4}\n",
+                "{:>10} {:>12} {:>6} {:>7}  {:<25} {:>10} {:>10} {:>12} {:>10} {:>10} {:>4}\n",
                 "cycle",
                 "time (s)",
                 "line",
@@ -402,6 +416,7 @@ impl DeadlineReport {
                 "cause",
                 "wake (µs)",
                 "comp (µs)",
+                "preempt (µs)",
                 "pub (µs)",
                 "late (µs)",
                 "lag"
@@ -409,7 +424,7 @@ impl DeadlineReport {
         }
         for m in &self.miss_list {
             s.push_str(&format!(
-                "{:>10} {:>12.6} {:>6} {:>7}  {:<25} {:>10.1} {:>10.1} {:>10.1} {:>10.1} {:>4}\n",
+                "{:>10} {:>12.6} {:>6} {:>7}  {:<25} {:>10.1} {:>10.1} {:>12.1} {:>10.1} {:>10.1} {:>4}\n",
                 m.cycle,
                 m.t_ns as f64 * 1e-9,
                 m.line,
@@ -417,6 +432,7 @@ impl DeadlineReport {
                 cause_words(&m.cause),
                 m.wake_late_ns as f64 / 1000.0,
                 m.compute_ns as f64 / 1000.0,
+                m.preempted_ns as f64 / 1000.0,
                 m.publish_ns as f64 / 1000.0,
                 m.overrun_ns as f64 / 1000.0,
                 m.unanswered
@@ -463,6 +479,7 @@ pub fn cause_words(id: &str) -> &str {
         "long_compute" | "compute" => MissCause::LongCompute.words(),
         "publish_stall" | "publish" => MissCause::PublishStall.words(),
         "downstream_lag" => MissCause::DownstreamLag.words(),
+        "preempted" => MissCause::Preempted.words(),
         other => other,
     }
 }
@@ -535,6 +552,7 @@ mod tests {
             late_ns: 0,
             unanswered: 0,
             cause: MissCause::LateWake,
+            cpu_ns: None,
         }
     }
 
@@ -562,7 +580,13 @@ mod tests {
     fn a_report_lists_every_miss_and_agrees_with_its_count() {
         let (mut t, log) = Timing::new(1_000_000, 64);
         for c in 0..1000u64 {
-            let compute = if c % 100 == 99 { 1_500_000 } else { 20_000 };
+            let compute = if c % 50 == 49 { 1_500_000 } else { 20_000 };
+            // Every other long cycle ran only 30 µs of its compute: preempted.
+            let cpu = if c % 100 == 49 {
+                30_000
+            } else {
+                compute + 5_000
+            };
             t.record(&CycleTimes {
                 cycle: c,
                 block_seq: c / 300,
@@ -571,6 +595,7 @@ mod tests {
                 compute_ns: compute,
                 publish_ns: 1_000,
                 unanswered: 0,
+                cpu_ns: Some(cpu),
             });
         }
         let list = log.finish();
@@ -583,17 +608,35 @@ mod tests {
         };
         let nowhere = std::env::temp_dir().join("cnc-no-such-latency-test.json");
         let r = DeadlineReport::measured(1_000_000, 1000, &sched, &t, &list, &nowhere);
-        assert_eq!(r.misses, Some(10));
-        assert_eq!(r.miss_list.len(), 10);
-        assert!(r.miss_list.iter().all(|m| m.cause == "long_compute"));
-        assert_eq!(r.miss_list[0].t_ns, 99_000_000);
-        assert!(r
-            .summary
-            .starts_with("10 deadline misses in 1000 cycles (1.000 %): 10 long compute"));
+        assert_eq!(r.misses, Some(20));
+        assert_eq!(r.miss_list.len(), 20);
+        for m in &r.miss_list {
+            let (cause, off) = if m.cycle % 100 == 49 {
+                ("preempted", 1_470_000)
+            } else {
+                ("long_compute", 0)
+            };
+            assert_eq!((m.cause.as_str(), m.preempted_ns), (cause, off), "{m:?}");
+        }
+        assert_eq!(r.miss_list[0].t_ns, 49_000_000);
+        assert_eq!(r.misses_by_cause.last(), Some(&("preempted".into(), 10)));
+        assert!(r.summary.starts_with(
+            "20 deadline misses in 1000 cycles (2.000 %): 10 long compute, 10 preempted mid-compute"
+        ));
         assert!(r.vs_floor.starts_with("no latency test measured"));
         let text = r.text();
-        assert!(text.contains("every miss (10 recorded)"));
+        assert!(text.contains("every miss (20 recorded)"));
         assert!(text.contains("long compute"));
+        assert!(text.contains("preempted mid-compute") && text.contains("preempt (µs)"));
+        assert!(
+            text.contains("cause         preempted mid-compute: the compute phase lost its CPU")
+        );
+        assert!(text.contains("cause         long compute: the interpolator thread itself"));
+        assert!(!text.contains("cause         late wake-up"));
+        // The JSON carries both the CPU time and the time off the CPU.
+        let json = serde_json::to_value(&r).unwrap();
+        assert_eq!(json["miss_list"][0]["cpu_ns"], 30_000);
+        assert_eq!(json["miss_list"][0]["preempted_ns"], 1_470_000);
         let n = r
             .compute_ns
             .as_ref()

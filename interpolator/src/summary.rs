@@ -4,7 +4,7 @@
 use crate::engine::{axis_name, Engine, Fault, Tick};
 use crate::rt::cycle::Config;
 use crate::rt::sched::SchedReport;
-use crate::timing::{Miss, Percentiles, Timing};
+use crate::timing::{Miss, MissCause, Percentiles, Timing};
 use serde::{Deserialize, Serialize};
 
 /// Path figures accumulated from the set-points, cycle by cycle.
@@ -55,7 +55,8 @@ pub struct MissEntry {
     /// Sequence number of the block being run.
     #[serde(default)]
     pub block_seq: u64,
-    /// `late_wake`, `long_compute`, `publish_stall` or `downstream_lag`.
+    /// `late_wake`, `long_compute`, `preempted`, `publish_stall` or `downstream_lag` (the
+    /// rule: [`crate::timing::MissCause`]).
     pub cause: String,
     pub wake_late_ns: u64,
     pub compute_ns: u64,
@@ -66,6 +67,16 @@ pub struct MissEntry {
     /// Set-points sent and not yet answered by the drives when the cycle woke.
     #[serde(default)]
     pub unanswered: u64,
+    /// The interpolator thread's own CPU time from the end of the previous cycle's compute
+    /// to the end of this one's (it sleeps in between); null when it could not be read,
+    /// and in files older than it.
+    #[serde(default)]
+    pub cpu_ns: Option<u64>,
+    /// How long the compute phase was off the CPU, at least: `compute_ns − cpu_ns` when
+    /// positive, else 0. The cause is `preempted` when this is the largest part of the
+    /// cycle.
+    #[serde(default)]
+    pub preempted_ns: u64,
 }
 
 /// How many misses `report.json` lists in full; `deadline-misses.json` has them all.
@@ -84,6 +95,8 @@ impl MissEntry {
             publish_ns: m.publish_ns,
             overrun_ns: m.late_ns,
             unanswered: m.unanswered,
+            cpu_ns: m.cpu_ns,
+            preempted_ns: m.preempted_ns(),
         }
     }
 }
@@ -181,6 +194,10 @@ pub struct Summary {
     /// Every miss up to the first [`REPORT_MISSES`], in cycle order (all of them are in
     /// `deadline-misses.json`).
     pub miss_list: Vec<MissEntry>,
+    /// Misses per cause id, every miss counted (as `deadline-misses.json`'s, in the order
+    /// of [`crate::timing::MissCause::ALL`]); empty under the simulated clock.
+    #[serde(default)]
+    pub misses_by_cause: Vec<(String, u64)>,
     pub path_length_mm: f64,
     pub time_s: f64,
     /// Feed moves only: cutting length over the time spent moving at feed.
@@ -241,6 +258,15 @@ impl Summary {
                     list.iter()
                         .take(REPORT_MISSES)
                         .map(|m| MissEntry::new(m, cfg.period_ns))
+                        .collect()
+                })
+                .unwrap_or_default(),
+            misses_by_cause: timing
+                .map(|(t, _)| {
+                    MissCause::ALL
+                        .iter()
+                        .zip(t.by_cause)
+                        .map(|(c, n)| (c.id().to_string(), n))
                         .collect()
                 })
                 .unwrap_or_default(),

@@ -1,5 +1,6 @@
 //! Cycle timing: a log-bucketed histogram per measured quantity (wake-up lateness, compute
-//! time, publish time) and every deadline miss.
+//! time, publish time) and every deadline miss, with its cause (the rule is at
+//! [`MissCause`]: the thread's own CPU time tells a slow compute from a preempted one).
 //!
 //! Inside the cycle, [`Timing::record`] does O(1) work on storage allocated before the loop:
 //! three histogram increments and, for a miss, one push of a small [`Miss`] record into a
@@ -194,27 +195,62 @@ impl Histogram {
 }
 
 /// What made a cycle miss its deadline.
+///
+/// The rule. A cycle *finishes late* when its time from release to the set-point being
+/// out, `wake_late + compute + publish`, exceeds the period; that time is cut into four
+/// parts, and the cause is the largest part (on a tie, the first in this order):
+///
+/// 1. the wake-up lateness: [`MissCause::LateWake`];
+/// 2. the compute phase *on* the CPU, `compute − off`: [`MissCause::LongCompute`];
+/// 3. the compute phase *off* the CPU, `off = compute − cpu` (0 when negative or when the
+///    thread's CPU time could not be read): [`MissCause::Preempted`];
+/// 4. the publish: [`MissCause::PublishStall`].
+///
+/// `cpu` is the interpolator thread's own CPU time (CLOCK_THREAD_CPUTIME_ID) from the end
+/// of the previous cycle's compute to the end of this one's: one read a cycle, since the
+/// thread sleeps between cycles and sleeping takes no CPU time. That window holds this
+/// cycle's whole compute phase plus the previous cycle's publish and this cycle's wake-up,
+/// so `cpu` is never less than the compute phase's own CPU time and `off` is never more
+/// than the time the compute phase really spent off the CPU: a cycle is called preempted
+/// only on evidence, and only when that time strictly exceeds the time it ran.
+///
+/// A cycle that finishes in time but whose drives lag is [`MissCause::DownstreamLag`].
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum MissCause {
     /// The OS woke the loop late (scheduling latency, preemption before the cycle ran);
     /// the wake-up lateness was the largest part of the cycle.
     LateWake,
-    /// Stepping and evaluating the path took too long (or was preempted while doing it).
+    /// Stepping and evaluating the path took too long: the thread itself was running for
+    /// the largest part of the cycle.
     LongCompute,
     /// Handing the set-point to shared memory took too long.
     PublishStall,
     /// The cycle itself was on time, but the drives had not answered the set-point sent
     /// two cycles earlier: the servo-sim is not consuming set-points in time.
     DownstreamLag,
+    /// The compute phase was long by the wall clock, but the thread ran for only a small
+    /// part of it: the OS took the CPU away in the middle (a task at the same or a higher
+    /// real-time priority on this CPU, threaded interrupt handlers, RT throttling, or the
+    /// hypervisor, whose stolen time the guest leaves out of the thread's CPU time when
+    /// built with CONFIG_PARAVIRT_TIME_ACCOUNTING, as the project's VMs are). Not slow
+    /// path evaluation: the machine's real-time set-up (priorities, isolated CPUs) is what
+    /// let the cycle down. Hard and soft interrupts that run on the thread's time are
+    /// charged to it unless the kernel has CONFIG_IRQ_TIME_ACCOUNTING (these VMs do not),
+    /// so those still count as compute.
+    Preempted,
 }
 
 impl MissCause {
-    pub const ALL: [MissCause; 4] = [
+    /// Every cause, in the order of [`Timing::by_cause`] and of the report's
+    /// `misses_by_cause`. `Preempted` came last and stays last, so every older cause keeps
+    /// its place in those lists.
+    pub const ALL: [MissCause; 5] = [
         MissCause::LateWake,
         MissCause::LongCompute,
         MissCause::PublishStall,
         MissCause::DownstreamLag,
+        MissCause::Preempted,
     ];
 
     /// The name in the JSON files.
@@ -224,6 +260,26 @@ impl MissCause {
             MissCause::LongCompute => "long_compute",
             MissCause::PublishStall => "publish_stall",
             MissCause::DownstreamLag => "downstream_lag",
+            MissCause::Preempted => "preempted",
+        }
+    }
+
+    /// What the cause means and where to look, for the text report.
+    pub fn explanation(self) -> &'static str {
+        match self {
+            MissCause::LateWake => {
+                "the OS woke the cycle late: scheduling latency of this machine (compare with `cnc latency-test`)"
+            }
+            MissCause::LongCompute => {
+                "the interpolator thread itself computed for most of the cycle: path stepping and evaluation are too slow for the period"
+            }
+            MissCause::PublishStall => "handing the set-point over to shared memory took most of the cycle",
+            MissCause::DownstreamLag => {
+                "the cycle was on time, but the drives (servo-sim) had not answered the set-point of two cycles before"
+            }
+            MissCause::Preempted => {
+                "the compute phase lost its CPU for most of the cycle (the thread's own CPU time was far below its wall time): not slow path evaluation but the machine's real-time set-up; check priorities, isolated CPUs and other real-time tasks on the interpolator's CPU"
+            }
         }
     }
 
@@ -234,6 +290,7 @@ impl MissCause {
             MissCause::LongCompute => "long compute",
             MissCause::PublishStall => "publish stall",
             MissCause::DownstreamLag => "downstream not consuming",
+            MissCause::Preempted => "preempted mid-compute",
         }
     }
 }
@@ -254,6 +311,23 @@ pub struct CycleTimes {
     pub publish_ns: u64,
     /// Set-points already sent that the drives had not answered when the cycle woke.
     pub unanswered: u64,
+    /// The thread's CPU time from the end of the previous cycle's compute to the end of
+    /// this one's (see [`MissCause`]); `None` when it could not be read.
+    pub cpu_ns: Option<u64>,
+}
+
+impl CycleTimes {
+    /// How long the compute phase was off the CPU, at least (see [`MissCause`]).
+    #[inline]
+    pub fn preempted_ns(&self) -> u64 {
+        off_cpu_ns(self.compute_ns, self.cpu_ns)
+    }
+}
+
+/// Wall compute minus the thread's CPU time, 0 when that is negative or unknown.
+#[inline]
+fn off_cpu_ns(compute_ns: u64, cpu_ns: Option<u64>) -> u64 {
+    cpu_ns.map_or(0, |cpu| compute_ns.saturating_sub(cpu))
 }
 
 /// One deadline miss. Small and `Copy`: it travels through the ring as is.
@@ -272,6 +346,15 @@ pub struct Miss {
     /// Set-points sent and not answered when the cycle woke.
     pub unanswered: u64,
     pub cause: MissCause,
+    /// The thread's CPU time over the cycle, as in [`CycleTimes::cpu_ns`].
+    pub cpu_ns: Option<u64>,
+}
+
+impl Miss {
+    /// How long the compute phase was off the CPU, at least (see [`MissCause`]).
+    pub fn preempted_ns(&self) -> u64 {
+        off_cpu_ns(self.compute_ns, self.cpu_ns)
+    }
 }
 
 /// Capacity of the miss ring between the cycle and the [`MissLog`] thread.
@@ -286,7 +369,7 @@ pub struct Timing {
     /// Every miss, counted.
     pub misses: u64,
     /// Misses by cause, in the order of [`MissCause::ALL`].
-    pub by_cause: [u64; 4],
+    pub by_cause: [u64; MissCause::ALL.len()],
     /// Misses whose record could not be queued (the drain was a whole ring behind).
     pub lost: u64,
     ring: rtrb::Producer<Miss>,
@@ -304,7 +387,7 @@ impl Timing {
                 compute: Histogram::new(),
                 publish: Histogram::new(),
                 misses: 0,
-                by_cause: [0; 4],
+                by_cause: [0; MissCause::ALL.len()],
                 lost: 0,
                 ring: producer,
             },
@@ -317,18 +400,27 @@ impl Timing {
         )
     }
 
-    /// What made a cycle with these times late, if it was.
+    /// What made a cycle with these times late, if it was, and by how much (the rule is
+    /// at [`MissCause`]).
     #[inline]
     pub fn classify(&self, t: &CycleTimes) -> Option<(MissCause, u64)> {
         let used = t.wake_late_ns + t.compute_ns + t.publish_ns;
         if used > self.period_ns {
-            let cause = if t.wake_late_ns >= t.compute_ns && t.wake_late_ns >= t.publish_ns {
-                MissCause::LateWake
-            } else if t.compute_ns >= t.publish_ns {
-                MissCause::LongCompute
-            } else {
-                MissCause::PublishStall
-            };
+            let off = t.preempted_ns();
+            let parts = [
+                (t.wake_late_ns, MissCause::LateWake),
+                (t.compute_ns - off, MissCause::LongCompute),
+                (off, MissCause::Preempted),
+                (t.publish_ns, MissCause::PublishStall),
+            ];
+            // Strictly larger replaces: a tie stays with the earlier part.
+            let (_, cause) = parts.into_iter().fold((0, MissCause::LateWake), |best, p| {
+                if p.0 > best.0 {
+                    p
+                } else {
+                    best
+                }
+            });
             Some((cause, used - self.period_ns))
         } else if t.unanswered >= DOWNSTREAM_LAG_CYCLES {
             let overdue = (t.unanswered - (DOWNSTREAM_LAG_CYCLES - 1)) * self.period_ns;
@@ -360,6 +452,7 @@ impl Timing {
                 late_ns,
                 unanswered: t.unanswered,
                 cause,
+                cpu_ns: t.cpu_ns,
             };
             if self.ring.push(miss).is_err() {
                 self.lost += 1;
@@ -486,7 +579,76 @@ mod tests {
             compute_ns: compute,
             publish_ns: publish,
             unanswered,
+            cpu_ns: None,
         }
+    }
+
+    /// A cycle of the 1 ms loop with the thread's CPU time known.
+    fn with_cpu(wake: u64, compute: u64, cpu: u64, publish: u64) -> CycleTimes {
+        CycleTimes {
+            cpu_ns: Some(cpu),
+            ..times(1, wake, compute, publish, 0)
+        }
+    }
+
+    #[test]
+    fn the_largest_part_names_the_cause_with_compute_cut_on_and_off_the_cpu() {
+        let (t, _log) = Timing::new(1_000_000, 4);
+        let cause = |c: CycleTimes| t.classify(&c).map(|(cause, _)| cause);
+        use MissCause::*;
+        // Preempted: 1.5 ms of wall compute, of which the thread ran 60 µs.
+        let c = with_cpu(10_000, 1_500_000, 60_000, 5_000);
+        assert_eq!(t.classify(&c), Some((Preempted, 515_000)));
+        assert_eq!(c.preempted_ns(), 1_440_000);
+        // The same cycle without a CPU reading blames nothing on preemption.
+        assert_eq!(cause(CycleTimes { cpu_ns: None, ..c }), Some(LongCompute));
+        // The thread ran the whole compute: the window of its CPU time is wider than the
+        // compute phase (it holds the previous publish too), so off is 0, not negative.
+        let c = with_cpu(10_000, 1_500_000, 1_520_000, 5_000);
+        assert_eq!((cause(c), c.preempted_ns()), (Some(LongCompute), 0));
+        // On against off: a tie stays a long compute; 1 ns more off makes it preempted.
+        assert_eq!(cause(with_cpu(0, 1_200_000, 600_000, 0)), Some(LongCompute));
+        assert_eq!(cause(with_cpu(0, 1_200_000, 599_999, 0)), Some(Preempted));
+        // Off against a late wake-up: a tie is the late wake-up's.
+        assert_eq!(cause(with_cpu(700_000, 700_000, 0, 0)), Some(LateWake));
+        assert_eq!(cause(with_cpu(699_999, 700_000, 0, 0)), Some(Preempted));
+        // Off against the publish: a tie is the preemption's.
+        assert_eq!(cause(with_cpu(0, 600_000, 0, 600_000)), Some(Preempted));
+        assert_eq!(cause(with_cpu(0, 600_000, 0, 600_001)), Some(PublishStall));
+        // However preempted, a cycle that finishes by its deadline is no miss ...
+        assert_eq!(cause(with_cpu(0, 999_000, 1_000, 1_000)), None);
+        assert_eq!(cause(with_cpu(0, 999_001, 1_000, 1_000)), Some(Preempted));
+        // ... unless its drives lag, which preemption does not change.
+        let lag = CycleTimes {
+            unanswered: 2,
+            ..with_cpu(10_000, 900_000, 1_000, 1_000)
+        };
+        assert_eq!(t.classify(&lag), Some((DownstreamLag, 1_010_000)));
+    }
+
+    #[test]
+    fn a_preempted_miss_is_counted_and_keeps_its_cpu_time() {
+        let (mut t, log) = Timing::new(1_000_000, 4);
+        t.record(&with_cpu(10_000, 1_500_000, 60_000, 5_000));
+        t.record(&with_cpu(10_000, 1_500_000, 1_500_000, 5_000));
+        assert_eq!(t.by_cause, [0, 1, 0, 0, 1]);
+        let list = log.finish();
+        assert_eq!(list[0].cause, MissCause::Preempted);
+        assert_eq!(list[0].cpu_ns, Some(60_000));
+        assert_eq!(list[0].preempted_ns(), 1_440_000);
+        assert_eq!(list[1].cause, MissCause::LongCompute);
+        assert_eq!(list[1].preempted_ns(), 0);
+        let ids: Vec<_> = MissCause::ALL.iter().map(|c| c.id()).collect();
+        assert_eq!(
+            ids,
+            [
+                "late_wake",
+                "long_compute",
+                "publish_stall",
+                "downstream_lag",
+                "preempted"
+            ]
+        );
     }
 
     #[test]
@@ -498,7 +660,7 @@ mod tests {
         t.record(&times(10, 10_000, 20_000, 990_000, 0));
         t.record(&times(11, 10_000, 20_000, 1_000, 3));
         assert_eq!(t.misses, 4);
-        assert_eq!(t.by_cause, [1, 1, 1, 1]);
+        assert_eq!(t.by_cause, [1, 1, 1, 1, 0]);
         let list = log.finish();
         let causes: Vec<_> = list.iter().map(|m| (m.cycle, m.cause)).collect();
         assert_eq!(

@@ -1,12 +1,15 @@
-//! The cycle's own work never allocates: engine tick, timing record (histograms and the
-//! miss ring), feed statistics and the trace push, over more than 100 000 cycles and many
-//! block changes, counted by a global allocator that counts only on the measuring thread
-//! (the trace writer and the miss log's drain thread allocate freely, off the cycle).
+//! The cycle's own work never allocates: engine tick, the read of the thread's CPU time,
+//! timing record (histograms, the miss ring, every miss cause), feed statistics and the
+//! trace push, over more than 100 000 cycles and many block changes, counted by a global
+//! allocator that counts only on the measuring thread (the trace writer, the miss log's
+//! drain thread and the preemptor test aid allocate freely, off the cycle).
 
 use interpolator::engine::{BlockSource, Engine, Fault, Limits, TickState};
+use interpolator::rt::preempt::Preemptor;
 use interpolator::summary::{FaultRecord, FeedStats};
 use interpolator::timing::{CycleTimes, MissCause, Timing, MISS_RING};
 use shared::alloc_count::{arm, count, Counting};
+use shared::clock::thread_cpu_ns;
 use shared::protocol::{BlockKind, CommandBlock};
 use shared::trace::TraceWriter;
 
@@ -90,10 +93,30 @@ fn cycle_work_does_not_allocate() {
         s.push_str(&format!("{},{}", r.0, r.1[0]));
     })
     .unwrap();
+    // The preemption test aid's kick runs inside the cycle too; the preemptor needs
+    // SCHED_FIFO (root), and without it that part is left out.
+    // SAFETY: a plain syscall.
+    let cpu = usize::try_from(unsafe { libc::sched_getcpu() }).unwrap_or(0);
+    let preemptor = Preemptor::start(cpu, 1, 10_000)
+        .map_err(|why| println!("preemptor kicks not counted: {why}"))
+        .ok();
+    let mut cpu_mark = thread_cpu_ns();
     arm(true);
     let mut cycles = 0u64;
     loop {
+        if let Some(p) = &preemptor {
+            if cycles % 100 == 50 {
+                p.kick();
+            }
+        }
         let t = engine.tick(&mut src).unwrap();
+        // The thread's CPU time, read and differenced as the loop does.
+        let cpu_now = thread_cpu_ns();
+        let cpu_ns = match (cpu_mark, cpu_now) {
+            (Some(from), Some(to)) => Some(to.saturating_sub(from)),
+            _ => None,
+        };
+        cpu_mark = cpu_now;
         feed.add(&t, 1_000_000);
         // Every 100th cycle is a miss, of each cause in turn, so the miss ring and its
         // drain are exercised too.
@@ -105,13 +128,15 @@ fn cycle_work_does_not_allocate() {
             compute_ns: 5_000,
             publish_ns: 1_000,
             unanswered: 0,
+            cpu_ns,
         };
         if cycles.is_multiple_of(100) {
-            match (cycles / 100) % 4 {
+            match (cycles / 100) % 5 {
                 0 => times.wake_late_ns = 1_200_000,
-                1 => times.compute_ns = 2_000_000,
+                1 => (times.compute_ns, times.cpu_ns) = (2_000_000, Some(2_000_000)),
                 2 => times.publish_ns = 1_100_000,
-                _ => times.unanswered = 3,
+                3 => times.unanswered = 3,
+                _ => (times.compute_ns, times.cpu_ns) = (2_000_000, Some(30_000)),
             }
         }
         timing.record(&times);
@@ -135,6 +160,7 @@ fn cycle_work_does_not_allocate() {
     }
     arm(false);
     let allocs = count();
+    drop(preemptor);
     assert_eq!(trace.dropped(), 0);
     trace.finish().unwrap();
     let _ = std::fs::remove_file(&path);
@@ -151,7 +177,8 @@ fn cycle_work_does_not_allocate() {
             MissCause::LongCompute,
             MissCause::PublishStall,
             MissCause::DownstreamLag,
-        ][((m.cycle / 100) % 4) as usize];
+            MissCause::Preempted,
+        ][((m.cycle / 100) % 5) as usize];
         assert_eq!((m.cycle % 100, m.cause), (0, want));
     }
 }

@@ -122,12 +122,13 @@ fn miss_list() -> Vec<serde_json::Value> {
         "long_compute",
         "publish_stall",
         "downstream_lag",
+        "preempted",
     ];
     (0..MISSES)
         .map(|i| {
             let cycle = i * 3571 + 17;
             serde_json::json!({"cycle": cycle, "t_ns": cycle * 1_000_000, "line": 3,
-                "block_seq": 1, "cause": causes[(i % 4) as usize],
+                "block_seq": 1, "cause": causes[(i % 5) as usize],
                 "wake_late_ns": 1_200_000, "compute_ns": 5_000, "publish_ns": 9_000,
                 "overrun_ns": 200_000 + i * 1000, "unanswered": 0})
         })

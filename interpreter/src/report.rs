@@ -108,6 +108,10 @@ pub struct Report {
     pub measured_max_scallop_at_mm: Option<[f64; 3]>,
     pub sched: Option<interpolator::rt::sched::SchedReport>,
     pub miss_list: Vec<interpolator::summary::MissEntry>,
+    /// Misses per cause id (`late_wake`, `long_compute`, `publish_stall`,
+    /// `downstream_lag`, `preempted`), every miss counted, not only those listed.
+    #[serde(default)]
+    pub misses_by_cause: Vec<(String, u64)>,
     pub processes: Vec<Process>,
     /// Times the interpolator ran out of blocks mid-program and waited at a stop.
     #[serde(default)]
@@ -254,6 +258,7 @@ pub fn assemble(
         measured_max_scallop_at_mm: scallop.map(|s| s.at_mm),
         sched: i.map(|s| s.sched.clone()),
         miss_list: i.map(|s| s.miss_list.clone()).unwrap_or_default(),
+        misses_by_cause: i.map(|s| s.misses_by_cause.clone()).unwrap_or_default(),
         processes,
         starvations: i.map_or(0, |s| s.starvations),
         feed_fluctuation_max: i.map_or(0.0, |s| s.feed_fluctuation_max),

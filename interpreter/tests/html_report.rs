@@ -253,7 +253,7 @@ fn misses_are_listed_exactly() {
     let run = circle_run("misses");
     let mut rep = report(&run);
     rep["clock"] = "real".into();
-    rep["misses"] = 4.into();
+    rep["misses"] = 5.into();
     for k in ["wake_late_ns", "compute_ns", "publish_ns"] {
         rep[k] = serde_json::json!({"p50": 20000, "p99": 90000, "max": 1500000});
     }
@@ -261,10 +261,16 @@ fn misses_are_listed_exactly() {
         serde_json::json!({"cycle": cycle, "line": 3, "cause": cause, "wake_late_ns": 1_200_000,
             "compute_ns": 5_000, "publish_ns": 9_000, "overrun_ns": overrun})
     };
+    let mut preempted = miss(900, "preempted", 600_000);
+    preempted["wake_late_ns"] = 20_000.into();
+    preempted["compute_ns"] = 1_581_000.into();
+    preempted["cpu_ns"] = 42_000.into();
+    preempted["preempted_ns"] = 1_539_000.into();
     let list = serde_json::json!([
         miss(100, "late_wake", 250_000),
         miss(700, "long_compute", 40_000),
         miss(701, "downstream_lag", 1_010_000),
+        preempted,
         miss(1200, "publish_stall", 1_000_000)
     ]);
     rep["miss_list"] = list.clone();
@@ -284,10 +290,10 @@ fn misses_are_listed_exactly() {
     d["measured"] = true.into();
     d["clock"] = "real".into();
     d["not_measured"] = Value::Null;
-    d["misses"] = 4.into();
+    d["misses"] = 5.into();
     d["miss_list"] = list;
     d["runs"] = serde_json::json!([{"start_cycle": 700, "length": 2}]);
-    d["summary"] = "4 deadline misses in 1300 cycles".into();
+    d["summary"] = "5 deadline misses in 1300 cycles".into();
     d["vs_floor"] = "no latency test measured on this machine".into();
     fs::write(run.join("deadline-misses.json"), d.to_string()).unwrap();
 
@@ -307,24 +313,33 @@ fn misses_are_listed_exactly() {
     let rows = miss_rows(&page);
     // Worst first, each with its source line and cause in words.
     let cycles: Vec<u64> = rows.iter().map(|r| r.0).collect();
-    assert_eq!(cycles, [701, 1200, 100, 700]);
+    assert_eq!(cycles, [701, 1200, 900, 100, 700]);
     let mut sorted = rows.clone();
     sorted.sort();
     assert_eq!(sorted, deadline_misses(&run));
     assert_eq!(rows[0].1, "downstream not consuming");
     assert_eq!(rows[1].1, "publish stall");
-    assert_eq!(rows[2].1, "late wake-up");
-    assert_eq!(rows[3].1, "long compute");
+    assert_eq!(rows[2].1, "preempted mid-compute");
+    assert_eq!(rows[3].1, "late wake-up");
+    assert_eq!(rows[4].1, "long compute");
+    // The preempted miss shows how long its compute was off the CPU, and the plot's
+    // legend names the cause.
+    let table = &page[page.find("id=\"miss-table\"").unwrap()..];
+    assert!(table.contains("<th>off the CPU (µs)</th>"));
+    assert!(table.contains("<td>1581.0</td><td>1539.0</td>"));
+    let plot = &page[page.find("id=\"miss-plot\"").unwrap()..];
+    assert!(plot[..plot.find("</svg>").unwrap()].contains(">preempted mid-compute</text>"));
     assert!(page.contains("G3 X10 Y0 I-10 J0 F3000"));
     assert!(page.contains("period 1000 µs"));
-    assert!(cell(&page, "misses").contains('4'));
+    assert!(cell(&page, "misses").contains('5'));
 
     // An older run directory without deadline-misses.json: report.json's figures.
     fs::remove_file(run.join("deadline-misses.json")).unwrap();
     let page = html::render(&run).unwrap();
     assert!(page.contains("id=\"pct-plot\""));
     assert!(!page.contains("id=\"wake-hist\""));
-    assert_eq!(miss_rows(&page).len(), 4);
+    assert_eq!(miss_rows(&page).len(), 5);
+    assert!(page.contains("<td>1581.0</td><td>1539.0</td>"));
     assert!(page.contains("no deadline-misses.json"));
 }
 

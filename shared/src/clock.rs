@@ -12,6 +12,23 @@ pub fn now_ns() -> u64 {
     ts.tv_sec as u64 * 1_000_000_000 + ts.tv_nsec as u64
 }
 
+/// The calling thread's own CPU time (user and system) on CLOCK_THREAD_CPUTIME_ID, in ns;
+/// `None` if the kernel refuses the clock (then nothing can be said about preemption).
+///
+/// Unlike CLOCK_MONOTONIC this clock has no vDSO fast path: every read is a system call.
+/// Measured on the 2-vCPU VM (a C loop of 10 000 reads, 200 batches, SCHED_FIFO 80):
+/// 0.52 µs a read, against 0.023 µs for [`now_ns`]; so the cycle reads it once.
+#[inline]
+pub fn thread_cpu_ns() -> Option<u64> {
+    let mut ts = libc::timespec {
+        tv_sec: 0,
+        tv_nsec: 0,
+    };
+    // SAFETY: `ts` is a valid, writable timespec.
+    let r = unsafe { libc::clock_gettime(libc::CLOCK_THREAD_CPUTIME_ID, &mut ts) };
+    (r == 0).then(|| ts.tv_sec as u64 * 1_000_000_000 + ts.tv_nsec as u64)
+}
+
 /// Sleeps until the absolute CLOCK_MONOTONIC time `t_ns` (returns at once if it is past).
 #[inline]
 pub fn sleep_until_ns(t_ns: u64) {
@@ -99,5 +116,34 @@ pub fn spin_then_block(
                 (timeout_ns - waited).min(1_000_000),
             ));
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn thread_cpu_time_counts_running_not_sleeping() {
+        let start = thread_cpu_ns().unwrap();
+        std::thread::sleep(core::time::Duration::from_millis(50));
+        let slept = thread_cpu_ns().unwrap() - start;
+        // A sleep costs microseconds of CPU, whatever else the machine does.
+        assert!(slept < 10_000_000, "{slept} ns of CPU in a 50 ms sleep");
+        // Spinning does count (bounded by wall time, in case the clock stands still).
+        // The wall interval is read around the CPU one, so it holds it.
+        let (wall0, cpu0) = (now_ns(), thread_cpu_ns().unwrap());
+        while thread_cpu_ns().unwrap() < cpu0 + 5_000_000 && now_ns() < wall0 + 10_000_000_000 {
+            core::hint::spin_loop();
+        }
+        let (cpu, wall) = (thread_cpu_ns().unwrap() - cpu0, now_ns() - wall0);
+        assert!(
+            cpu >= 5_000_000,
+            "{cpu} ns of CPU after {wall} ns of spinning"
+        );
+        assert!(
+            wall >= cpu,
+            "the thread cannot run longer than the wall clock"
+        );
     }
 }

@@ -2,7 +2,10 @@
 //! CLOCK_MONOTONIC, never accumulated), and in each cycle it runs the fixed sequence
 //! inputs (feedback) → faults → command (engine tick) → outputs (set-point, wake-up,
 //! status) → measurement. Nothing in the loop allocates, locks, logs or formats; the
-//! set-point trace goes to a wait-free ring drained by a writer thread.
+//! set-point trace goes to a wait-free ring drained by a writer thread. Besides the wall
+//! clock it reads the thread's own CPU time once a cycle, at the end of the compute phase,
+//! so that a compute phase the OS interrupted is told from a slow one (see
+//! [`crate::timing::MissCause`]).
 //!
 //! Under the simulated clock ([`ClockMode::Sim`]) the loop does not sleep: cycle k+1
 //! starts as soon as the drives' feedback for cycle k is in, and a block that is late
@@ -17,13 +20,14 @@
 
 use crate::deadline::DeadlineReport;
 use crate::engine::{BlockSource, Engine, Fault, Limits, TickState};
+use crate::rt::preempt::Preemptor;
 use crate::rt::sched::{self, SchedMode, SchedReport};
 use crate::rt::watch::PeerWatch;
 use crate::summary::{FaultInfo, FaultRecord, FeedStats, Summary};
 use crate::timing::{CycleTimes, Timing, MISS_RING};
 use iceoryx2::port::subscriber::Subscriber;
 use iceoryx2::prelude::*;
-use shared::clock::{now_ns, sleep_until_ns, spin_then_block, ClockMode};
+use shared::clock::{now_ns, sleep_until_ns, spin_then_block, thread_cpu_ns, ClockMode};
 use shared::ipc::{self, err, IpcError};
 use shared::protocol::{
     CommandBlock, Feedback, RunState, Services, Setpoint, Status, PROTOCOL_VERSION, SETPOINT_LAST,
@@ -51,10 +55,36 @@ pub struct Config {
 /// Test aids that change what a cycle does; none in normal runs.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
 pub struct Hooks {
-    /// Every Nth cycle (N, 2N, …) spins in its compute phase until 1.5 periods after it
-    /// woke: a long compute that must be reported as exactly those misses, with cause
-    /// `long_compute` (`cnc run --inject-long-compute N`).
+    /// Every Nth cycle (N, 2N, …) spins in its compute phase for 1.5 periods of its own
+    /// CPU time: a long compute that must be reported as exactly those misses, with cause
+    /// `long_compute` (`cnc run --inject-long-compute N`). CPU time, not wall time: were
+    /// the spin preempted, it would run on for longer rather than end early, so the cycle
+    /// stays a long compute by the thread's own measure.
     pub long_compute_every: Option<u64>,
+    /// Every Nth cycle (N, 2N, …) wakes a thread pinned to its CPU at a higher SCHED_FIFO
+    /// priority from the middle of its compute phase, which holds the CPU for 1.5 periods
+    /// ([`Preemptor`]): a real preemption, which must be reported as `preempted`
+    /// (`cnc run --inject-preemption N`). Needs SCHED_FIFO and a pinned cycle; without
+    /// them a warning says so and nothing is injected.
+    pub preempt_every: Option<u64>,
+}
+
+/// Spins until this thread has run `ns` more of its own CPU time (of the wall clock's,
+/// should its CPU clock fail).
+fn burn_cpu_ns(ns: u64) {
+    match thread_cpu_ns() {
+        Some(start) => {
+            while thread_cpu_ns().is_some_and(|t| t < start + ns) {
+                core::hint::spin_loop();
+            }
+        }
+        None => {
+            let until = now_ns() + ns;
+            while now_ns() < until {
+                core::hint::spin_loop();
+            }
+        }
+    }
 }
 
 /// Under the simulated clock: how long to spin for an answer before sleeping on the
@@ -303,7 +333,23 @@ pub fn run_with<S: Service>(cfg: &Config, hooks: Hooks) -> Result<Summary, RunEr
     let mut feed = FeedStats::starting_at(engine.position());
     // Spinning at SCHED_FIFO invites RT throttling: the simulated clock runs plain.
     let sched_mode = if sim { SchedMode::Other } else { cfg.sched };
-    let sched_report: SchedReport = sched::setup(sched_mode, cfg.rt_priority);
+    let mut sched_report: SchedReport = sched::setup(sched_mode, cfg.rt_priority);
+    let preempt_every = hooks.preempt_every.filter(|n| *n > 0 && !sim);
+    let preemptor = preempt_every.and_then(|_| {
+        let started = match sched_report.cpu {
+            Some(cpu) if sched_report.policy == "fifo" => {
+                Preemptor::start(cpu, sched_report.priority, cfg.period_ns * 3 / 2)
+            }
+            _ => Err("the cycle is not pinned at SCHED_FIFO".into()),
+        };
+        started
+            .map_err(|why| {
+                sched_report
+                    .warnings
+                    .push(format!("test aid: no preemption injected: {why}"));
+            })
+            .ok()
+    });
     for w in &sched_report.warnings {
         tracing::warn!("{w}");
     }
@@ -315,6 +361,9 @@ pub fn run_with<S: Service>(cfg: &Config, hooks: Hooks) -> Result<Summary, RunEr
     // Under the simulated clock: once the drives are gone or silent, stop waiting for them.
     let mut servo_lost = false;
     let lag_limit = feedback_lag_limit(cfg.period_ns);
+    // The thread's CPU time at the end of the last compute phase (or now, before the
+    // first): each cycle's CPU time is counted from there.
+    let mut cpu_mark = if sim { None } else { thread_cpu_ns() };
     let t0 = now_ns() + cfg.period_ns;
     let mut cycle: u64 = 0;
     loop {
@@ -375,6 +424,11 @@ pub fn run_with<S: Service>(cfg: &Config, hooks: Hooks) -> Result<Summary, RunEr
         if let Some(f) = fault {
             begin_stop(f, &mut engine);
         }
+        if let (Some(p), Some(n)) = (&preemptor, preempt_every) {
+            if cycle > 0 && cycle.is_multiple_of(n) {
+                p.kick();
+            }
+        }
         let tick = match engine.tick(&mut src) {
             Err(f) => {
                 // A bad block: nothing moved; stop from where the last cycle left off.
@@ -386,13 +440,20 @@ pub fn run_with<S: Service>(cfg: &Config, hooks: Hooks) -> Result<Summary, RunEr
         };
         if let Some(n) = inject_every {
             if cycle > 0 && cycle.is_multiple_of(n) {
-                let until = wake + cfg.period_ns * 3 / 2;
-                while now_ns() < until {
-                    core::hint::spin_loop();
-                }
+                burn_cpu_ns(cfg.period_ns * 3 / 2);
             }
         }
         let computed = now_ns();
+        // Read after `computed`, so the CPU time's window holds the whole compute phase and
+        // what is counted off the CPU is never more than the truth; its own 0.5 µs lands
+        // in the publish phase. One system call a cycle, and none under the simulated
+        // clock, which measures nothing.
+        let cpu_now = if sim { None } else { thread_cpu_ns() };
+        let cpu_ns = match (cpu_mark, cpu_now) {
+            (Some(from), Some(to)) => Some(to.saturating_sub(from)),
+            _ => None,
+        };
+        cpu_mark = cpu_now;
         let (sp, state) = match tick {
             Ok(t) => {
                 feed.add(&t, cfg.period_ns);
@@ -460,6 +521,7 @@ pub fn run_with<S: Service>(cfg: &Config, hooks: Hooks) -> Result<Summary, RunEr
                 compute_ns: computed - wake,
                 publish_ns: finished - computed,
                 unanswered,
+                cpu_ns,
             });
         }
         trace.push(SetpointRec {
@@ -486,6 +548,7 @@ pub fn run_with<S: Service>(cfg: &Config, hooks: Hooks) -> Result<Summary, RunEr
         blocks.dynamic_config().number_of_publishers() == 0
     });
     drop(watch);
+    drop(preemptor);
     let dropped = trace.dropped();
     trace.finish()?;
     let misses = miss_log.finish();

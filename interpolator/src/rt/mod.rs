@@ -2,5 +2,6 @@
 
 pub mod cycle;
 pub mod latency;
+pub mod preempt;
 pub mod sched;
 pub mod watch;

@@ -32,6 +32,8 @@ pub struct Miss {
     pub compute_ns: f64,
     pub publish_ns: f64,
     pub overrun_ns: f64,
+    /// How long the compute phase was off the CPU; 0 in reports older than that figure.
+    pub preempted_ns: f64,
 }
 
 /// Scheduling in force, from `report.json`'s `sched`.
@@ -582,6 +584,10 @@ fn load_report(path: &Path, problems: &mut Vec<String>) -> Option<Report> {
                             compute_ns: m.get("compute_ns")?.as_f64()?,
                             publish_ns: m.get("publish_ns")?.as_f64()?,
                             overrun_ns: m.get("overrun_ns")?.as_f64()?,
+                            preempted_ns: m
+                                .get("preempted_ns")
+                                .and_then(Value::as_f64)
+                                .unwrap_or(0.0),
                         })
                     })
                     .collect::<Option<Vec<_>>>()

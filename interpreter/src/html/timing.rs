@@ -4,8 +4,10 @@
 //! log-bucketed histograms of wake-up lateness, compute time and publish time, drawn on
 //! log-log axes with the period marked (and this machine's floor from `cnc latency-test`,
 //! when there is one), the percentiles, every miss on the time axis (marker shape and
-//! colour by cause), the runs of consecutive misses and a table of the misses, worst first,
-//! listing every one of them up to [`MAX_ROWS`]. Run directories older than that file have
+//! colour by cause: late wake-up, long compute, preempted mid-compute, publish stall,
+//! downstream lag), the runs of consecutive misses and a table of the misses, worst first,
+//! with how long each compute phase was off the CPU (what tells a preempted cycle from a
+//! slow one), listing every one of them up to [`MAX_ROWS`]. Run directories older than that file have
 //! only report.json's p50/p99/max and the first misses; then those are drawn as bars and
 //! the page says why there is no histogram. Under the simulated clock nothing was measured,
 //! and the page says that instead.
@@ -44,6 +46,11 @@ fn cause(c: &str) -> (&'static str, &'static str, &'static str) {
             "cross",
             "downstream not consuming (the drives answered late)",
         ),
+        "preempted" => (
+            "#0e7c86",
+            "diamond",
+            "preempted mid-compute (the OS took the CPU away while the path was computed: the machine's real-time set-up, not the path evaluation)",
+        ),
         _ => ("#555555", "cross", "other"),
     }
 }
@@ -63,6 +70,11 @@ fn marker(out: &mut String, shape: &str, x: f64, y: f64, col: &str) {
         "triangle" => write!(
             out,
             r#"<path d="M{x:.1} {:.1}l4.5 8h-9z" fill="{col}"/>"#,
+            y - 5.0
+        ),
+        "diamond" => write!(
+            out,
+            r#"<path d="M{x:.1} {:.1}l5 5l-5 5l-5 -5z" fill="none" stroke="{col}" stroke-width="1.6"/>"#,
             y - 5.0
         ),
         _ => write!(
@@ -150,6 +162,7 @@ fn measured(run: &Run, d: &DeadlineReport, out: &mut String) {
             compute_ns: m.compute_ns as f64,
             publish_ns: m.publish_ns as f64,
             overrun_ns: m.overrun_ns as f64,
+            preempted_ns: m.preempted_ns as f64,
         })
         .collect();
     if d.lost > 0 {
@@ -423,6 +436,7 @@ fn misses(run: &Run, list: &[Miss], count: Option<u64>, out: &mut String) {
     for name in [
         "late_wake",
         "long_compute",
+        "preempted",
         "publish_stall",
         "downstream_lag",
     ] {
@@ -459,12 +473,12 @@ fn misses(run: &Run, list: &[Miss], count: Option<u64>, out: &mut String) {
     };
     let _ = write!(
         out,
-        "<h3>Misses</h3><p class=\"note\">{listed} Late by: finish minus deadline (downstream: how long the drives' answer is overdue).</p><table class=\"data\" id=\"miss-table\"><tr><th>cycle</th><th>time (s)</th><th>line</th><th>source</th><th>cause</th><th>wake-up late (µs)</th><th>compute (µs)</th><th>publish (µs)</th><th>late by (µs)</th></tr>"
+        "<h3>Misses</h3><p class=\"note\">{listed} Late by: finish minus deadline (downstream: how long the drives' answer is overdue). Off the CPU: the part of the compute time the interpolator's thread was not running (compute time minus the thread's own CPU time); when that is the largest part of the cycle, the cause is a preemption, not slow path evaluation.</p><table class=\"data\" id=\"miss-table\"><tr><th>cycle</th><th>time (s)</th><th>line</th><th>source</th><th>cause</th><th>wake-up late (µs)</th><th>compute (µs)</th><th>off the CPU (µs)</th><th>publish (µs)</th><th>late by (µs)</th></tr>"
     );
     for m in worst {
         let _ = write!(
             out,
-            "<tr><td>{}</td><td>{:.3}</td><td>{}</td><td><code>{}</code></td><td>{}</td><td>{:.1}</td><td>{:.1}</td><td>{:.1}</td><td>{:.1}</td></tr>",
+            "<tr><td>{}</td><td>{:.3}</td><td>{}</td><td><code>{}</code></td><td>{}</td><td>{:.1}</td><td>{:.1}</td><td>{:.1}</td><td>{:.1}</td><td>{:.1}</td></tr>",
             m.cycle,
             m.cycle as f64 * period,
             m.line,
@@ -472,6 +486,7 @@ fn misses(run: &Run, list: &[Miss], count: Option<u64>, out: &mut String) {
             esc(cause_words(&m.cause)),
             m.wake_late_ns / 1000.0,
             m.compute_ns / 1000.0,
+            m.preempted_ns / 1000.0,
             m.publish_ns / 1000.0,
             m.overrun_ns / 1000.0
         );
