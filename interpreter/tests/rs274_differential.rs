@@ -2,8 +2,11 @@
 //! moves and arcs in all three planes, in millimetres and inches, absolute and
 //! incremental, with centre offsets absolute and incremental, the radius form both ways
 //! round and multi-turn helices, read by `rs274 -g` (Debian's `linuxcnc-uspace`) and by
-//! us, move by move. What `rs274` prints is the reference: the end point of every move,
-//! the centre, direction and turns of every arc.
+//! us, move by move, with feeds in `G94` and inverse time (`G93`). What `rs274` prints is
+//! the reference: the end point and feed of every move, the centre, direction and turns
+//! of every arc. One program in four has a line LinuxCNC refuses (a word nothing uses,
+//! an arc end off its circle or beyond its radius's reach, a `G93` move without `F`):
+//! we must refuse the program at the same line.
 //!
 //! Ignored by default: `rs274` is not installed by the project (it is a 200 MB package
 //! with a real-time stack). Run it where it is installed:
@@ -58,6 +61,10 @@ struct Writer {
     arc_absolute: bool,
     plane: Plane,
     pos: [f64; 3],
+    /// `G93`: every feed move carries its own `F`, the inverse of its time in minutes.
+    inverse: bool,
+    /// Back in `G94` the feed is forgotten (LinuxCNC): the next feed move needs an `F`.
+    need_feed: bool,
 }
 
 impl Writer {
@@ -75,6 +82,18 @@ impl Writer {
         let s = format!("{:.6}", mm / self.scale());
         let back = s.parse::<f64>().unwrap() * self.scale();
         (s, back)
+    }
+
+    /// The `F` word of a feed move, where it needs or draws one.
+    fn feed(&mut self, rng: &mut Rng) -> String {
+        if self.inverse {
+            format!(" F{:.3}", rng.range(0.5, 20.0))
+        } else if self.need_feed || rng.chance(0.2) {
+            self.need_feed = false;
+            format!(" F{:.1}", rng.range(50.0, 3000.0))
+        } else {
+            String::new()
+        }
     }
 
     fn line(&mut self, words: &str) {
@@ -120,11 +139,21 @@ fn program(rng: &mut Rng, lines: usize) -> String {
         arc_absolute: false,
         plane: Plane::XY,
         pos: [0.0; 3],
+        inverse: false,
+        need_feed: false,
     };
+    // One program in four gets one line LinuxCNC refuses, somewhere: both must refuse
+    // the program at that line.
+    let mut bad_line = rng.chance(0.25).then(|| rng.below(lines as u64) as usize);
     w.line("G21 G17 G90 G91.1 G94 F600");
     w.line("G0 X0 Y0 Z0");
-    for _ in 0..lines {
-        match rng.below(20) {
+    for k in 0..lines {
+        if bad_line == Some(k) {
+            bad_line = None;
+            refused_line(rng, &mut w);
+            continue;
+        }
+        match rng.below(22) {
             0 => {
                 w.plane = [Plane::XY, Plane::ZX, Plane::YZ][rng.below(3) as usize];
                 let g = match w.plane {
@@ -159,11 +188,7 @@ fn program(rng: &mut Rng, lines: usize) -> String {
                 ];
                 let words = w.axes(target, which);
                 let g = if rapid { "G0" } else { "G1" };
-                let f = if !rapid && rng.chance(0.2) {
-                    format!(" F{:.1}", rng.range(50.0, 3000.0))
-                } else {
-                    String::new()
-                };
+                let f = if rapid { String::new() } else { w.feed(rng) };
                 w.line(&format!("{g}{words}{f}"));
             }
             12..=16 => {
@@ -210,10 +235,16 @@ fn program(rng: &mut Rng, lines: usize) -> String {
                     String::new()
                 };
                 let g = if ccw { "G3" } else { "G2" };
+                let f = w.feed(rng);
                 w.line(&format!(
-                    "{g}{words} {}{ia} {}{ib}{p}",
+                    "{g}{words} {}{ia} {}{ib}{p}{f}",
                     OFFSET[a], OFFSET[b]
                 ));
+            }
+            17 => {
+                w.inverse = !w.inverse;
+                w.need_feed = !w.inverse;
+                w.line(if w.inverse { "G93" } else { "G94" });
             }
             _ => {
                 // Radius form: an end within reach, the short or (R < 0) the long way.
@@ -234,12 +265,57 @@ fn program(rng: &mut Rng, lines: usize) -> String {
                 let r = written / 2.0 * rng.range(1.01, 3.0);
                 let (r, _) = w.length(if rng.chance(0.3) { -r } else { r });
                 let g = if rng.chance(0.5) { "G3" } else { "G2" };
-                w.line(&format!("{g}{words} R{r}"));
+                let f = w.feed(rng);
+                w.line(&format!("{g}{words} R{r}{f}"));
             }
         }
     }
     w.line("M2");
     w.text
+}
+
+/// A line LinuxCNC refuses: a word nothing uses, an arc whose end is off its circle or
+/// out of its radius's reach, a feed move without its `F` in `G93`.
+fn refused_line(rng: &mut Rng, w: &mut Writer) {
+    let (a, b, _) = plane_axes(w.plane);
+    let mut target = w.pos;
+    match rng.below(4) {
+        0 => {
+            let words = w.axes([rng.range(-60.0, 60.0), 0.0, 0.0], [true, false, false]);
+            let word = ["I1.5", "J-2", "R3", "P2", "Q1", "L3"][rng.below(6) as usize];
+            w.line(&format!("G1{words} {word}"));
+        }
+        1 => {
+            // The end 0.1 to 1 mm off the circle its centre gives: beyond 2 µm and 0.1 %.
+            let r = rng.range(1.0, 30.0);
+            let angle = rng.range(0.5, 3.0);
+            let off = r + rng.range(0.1, 1.0);
+            target[a] = w.pos[a] + r + off * angle.cos();
+            target[b] = w.pos[b] + off * angle.sin();
+            let (ia, _) = w.length(r);
+            let mut which = [false; 3];
+            which[a] = true;
+            which[b] = true;
+            let words = w.axes(target, which);
+            w.line(&format!("G2{words} {}{ia} {}0", OFFSET[a], OFFSET[b]));
+        }
+        2 => {
+            // R shorter than half the chord, by more than the tolerance.
+            target[a] += 20.0;
+            let mut which = [false; 3];
+            which[a] = true;
+            let words = w.axes(target, which);
+            w.line(&format!("G3{words} R{}", w.length(5.0).0));
+        }
+        _ => {
+            if !w.inverse {
+                w.line("G93");
+                w.inverse = true;
+            }
+            let words = w.axes([rng.range(-60.0, 60.0), 0.0, 0.0], [true, false, false]);
+            w.line(&format!("G1{words}"));
+        }
+    }
 }
 
 /// A motion as both sides give it, in mm: the end point, and for an arc its plane,
@@ -249,9 +325,12 @@ enum Motion {
     Line {
         rapid: bool,
         to: [f64; 3],
+        /// mm/min; none for a rapid.
+        feed: Option<f64>,
     },
     Arc {
         to: [f64; 3],
+        feed: f64,
         plane: Plane,
         center: [f64; 2],
         ccw: bool,
@@ -259,8 +338,9 @@ enum Motion {
     },
 }
 
-/// The motions `rs274 -g` prints for `file`, or its error message.
-fn rs274(file: &std::path::Path) -> Result<Vec<Motion>, String> {
+/// The motions `rs274 -g` prints for `file`, or the line (its `N` number) it refuses
+/// and why.
+fn rs274(file: &std::path::Path) -> Result<Vec<Motion>, (u32, String)> {
     let out = Command::new("rs274")
         .arg("-g")
         .arg(file)
@@ -269,9 +349,16 @@ fn rs274(file: &std::path::Path) -> Result<Vec<Motion>, String> {
     let text = String::from_utf8_lossy(&out.stdout);
     let errors = String::from_utf8_lossy(&out.stderr);
     if !out.status.success() {
-        return Err(format!("{}{errors}", text.lines().last().unwrap_or("")));
+        // The message, then the line it refuses, `N…` first.
+        let line = errors
+            .lines()
+            .find_map(|l| l.strip_prefix('N')?.split(' ').next()?.parse().ok())
+            .unwrap_or(0);
+        return Err((line, errors.trim().replace('\n', " / ")));
     }
     let mut scale = 1.0;
+    // The feed (mm/min): set in the units of its time, kept through a change of units.
+    let mut feed = 0.0;
     let mut plane = Plane::XY;
     let mut motions = Vec::new();
     // Where the tool is, as printed (in mm).
@@ -292,7 +379,9 @@ fn rs274(file: &std::path::Path) -> Result<Vec<Motion>, String> {
                 .map(|v| v.trim().parse::<f64>().unwrap())
                 .collect()
         };
-        if call.starts_with("USE_LENGTH_UNITS(") {
+        if call.starts_with("SET_FEED_RATE(") {
+            feed = args(&rest)[0] * scale;
+        } else if call.starts_with("USE_LENGTH_UNITS(") {
             scale = if call.contains("INCHES") {
                 MM_PER_INCH
             } else {
@@ -309,9 +398,11 @@ fn rs274(file: &std::path::Path) -> Result<Vec<Motion>, String> {
             let to = [v[0] * scale, v[1] * scale, v[2] * scale];
             // A move to where the tool is moves nothing: we make no block of it.
             if to != at {
+                let rapid = call.starts_with("STRAIGHT_TRAVERSE");
                 motions.push(Motion::Line {
-                    rapid: call.starts_with("STRAIGHT_TRAVERSE"),
+                    rapid,
                     to,
+                    feed: (!rapid).then_some(feed),
                 });
             }
             at = to;
@@ -326,6 +417,7 @@ fn rs274(file: &std::path::Path) -> Result<Vec<Motion>, String> {
             at = to;
             motions.push(Motion::Arc {
                 to,
+                feed,
                 plane,
                 center: [v[2] * scale, v[3] * scale],
                 ccw: rotation > 0,
@@ -336,16 +428,22 @@ fn rs274(file: &std::path::Path) -> Result<Vec<Motion>, String> {
     Ok(motions)
 }
 
-/// Our motions for the same program.
-fn ours(text: &str) -> Result<Vec<Motion>, String> {
-    let prog = interpret(text).map_err(|d| format!("{:?}", d.first()))?;
+/// Our motions for the same program, or the first line we refuse and why.
+fn ours(text: &str) -> Result<Vec<Motion>, (u32, String)> {
+    let prog = interpret(text).map_err(|d| {
+        let first = d.iter().min_by_key(|d| d.line).expect("a refusal says why");
+        (first.line, first.to_string())
+    })?;
     Ok(prog
         .moves
         .iter()
         .filter_map(|m| match m {
-            Move::Line { to, rapid, .. } => Some(Motion::Line {
+            Move::Line {
+                to, rapid, feed, ..
+            } => Some(Motion::Line {
                 rapid: *rapid,
                 to: *to,
+                feed: (!rapid).then_some(*feed),
             }),
             Move::Arc {
                 to,
@@ -353,11 +451,13 @@ fn ours(text: &str) -> Result<Vec<Motion>, String> {
                 plane,
                 ccw,
                 turns,
+                feed,
                 ..
             } => {
                 let (a, b, _) = plane_axes(*plane);
                 Some(Motion::Arc {
                     to: *to,
+                    feed: *feed,
                     plane: *plane,
                     center: [center[a], center[b]],
                     ccw: *ccw,
@@ -377,14 +477,41 @@ fn close(a: &[f64], b: &[f64], tol: f64) -> bool {
 fn first_difference(ours: &[Motion], theirs: &[Motion]) -> Option<String> {
     // Four decimals of an inch, and the arc centre moved onto the chord's bisector.
     const TOL: f64 = 0.5e-4 * MM_PER_INCH + 1e-4;
+    // Four decimals of a unit a minute, and our feed in G93 from the exact move length.
+    // LinuxCNC 2.9 sets no inverse-time feed below 0.1 units a minute (a guard against
+    // the zero feed of a zero-length move, linuxcnc#2410): a move of 0.0015 in at
+    // `F10.95` then takes 0.9 s, not the 5.5 s its `F` asks for. We give it its time.
+    let same_feed = |f0: f64, f1: f64| {
+        let floor = [0.1, 0.1 * MM_PER_INCH]
+            .iter()
+            .any(|m| (f1 - m).abs() < 1e-9);
+        (f0 - f1).abs() <= 1e-4 * f1.abs() + 0.5e-4 * MM_PER_INCH || (floor && f0 < f1)
+    };
     for (i, (o, t)) in ours.iter().zip(theirs).enumerate() {
         let same = match (o, t) {
-            (Motion::Line { rapid: r0, to: a }, Motion::Line { rapid: r1, to: b }) => {
-                r0 == r1 && close(a, b, TOL)
+            (
+                Motion::Line {
+                    rapid: r0,
+                    to: a,
+                    feed: f0,
+                },
+                Motion::Line {
+                    rapid: r1,
+                    to: b,
+                    feed: f1,
+                },
+            ) => {
+                r0 == r1
+                    && close(a, b, TOL)
+                    && match (f0, f1) {
+                        (Some(f0), Some(f1)) => same_feed(*f0, *f1),
+                        (f0, f1) => f0.is_none() && f1.is_none(),
+                    }
             }
             (
                 Motion::Arc {
                     to: a,
+                    feed: f0,
                     plane: p0,
                     center: c0,
                     ccw: d0,
@@ -392,6 +519,7 @@ fn first_difference(ours: &[Motion], theirs: &[Motion]) -> Option<String> {
                 },
                 Motion::Arc {
                     to: b,
+                    feed: f1,
                     plane: p1,
                     center: c1,
                     ccw: d1,
@@ -403,7 +531,12 @@ fn first_difference(ours: &[Motion], theirs: &[Motion]) -> Option<String> {
                 let (i, j, _) = plane_axes(*p1);
                 let r = (b[i] - c1[0]).hypot(b[j] - c1[1]);
                 let centre_tol = TOL + (2e-3f64).max(1e-3 * r);
-                close(a, b, TOL) && p0 == p1 && close(c0, c1, centre_tol) && d0 == d1 && n0 == n1
+                close(a, b, TOL)
+                    && same_feed(*f0, *f1)
+                    && p0 == p1
+                    && close(c0, c1, centre_tol)
+                    && d0 == d1
+                    && n0 == n1
             }
             _ => false,
         };
@@ -431,6 +564,7 @@ fn random_programs_move_as_linuxcnc_moves_them() {
     std::fs::create_dir_all(&dir).unwrap();
     let mut failures = Vec::new();
     let mut motions = 0;
+    let mut refused = 0;
     for k in 0..programs {
         let mut rng = Rng(0x9e37_79b9_7f4a_7c15 ^ (seed << 32) ^ (k + 1));
         let text = program(&mut rng, 40);
@@ -442,19 +576,26 @@ fn random_programs_move_as_linuxcnc_moves_them() {
                 first_difference(&o, &t)
             }
             (Err(o), Err(t)) => {
-                // Both refuse it: the generator wrote something out of tolerance.
-                eprintln!("p{k}: both refuse: ours {o}; rs274 {}", t.trim());
-                None
+                refused += 1;
+                (o.0 != t.0).then(|| {
+                    format!(
+                        "we refuse line {}: {}; rs274 line {}: {}",
+                        o.0, o.1, t.0, t.1
+                    )
+                })
             }
-            (Err(o), Ok(_)) => Some(format!("we refuse what rs274 reads: {o}")),
-            (Ok(_), Err(t)) => Some(format!("rs274 refuses what we read: {}", t.trim())),
+            (Err(o), Ok(_)) => Some(format!("we refuse what rs274 reads: line {}: {}", o.0, o.1)),
+            (Ok(_), Err(t)) => Some(format!("rs274 refuses what we read: line {}: {}", t.0, t.1)),
         };
         match verdict {
             Some(why) => failures.push(format!("{}: {why}", file.display())),
             None => std::fs::remove_file(&file).unwrap(),
         }
     }
-    eprintln!("{programs} programs, {motions} motions compared with rs274");
+    eprintln!(
+        "{programs} programs, {motions} motions compared with rs274; {refused} programs \
+         refused by both at the same line"
+    );
     assert!(
         failures.is_empty(),
         "{} of {programs} programs differ (kept in {}):\n{}",
