@@ -230,10 +230,6 @@ struct State {
     ended: bool,
 }
 
-/// Radius mismatch LinuxCNC accepts between the start and end of a centre-format arc.
-const ARC_RADIUS_TOL_MM: f64 = 0.002;
-const ARC_RADIUS_TOL_REL: f64 = 0.001;
-
 /// The longest line LinuxCNC reads, in bytes without the newline: its `fgets` buffer is
 /// `LINELEN` = 255 bytes, and a line that fills it (253 bytes and the newline) is
 /// refused as "Command too long" (checked with rs274 2.9: 252 pass, 253 fail).

@@ -314,7 +314,9 @@ const EDITS: &[u8] = b" 0.9-+#[]()XGFPe;/\tO";
 /// without axis words, now an arc where it stands, which lacks a centre or a feed (all
 /// of which LinuxCNC refuses too); the rest name such words on lines that went on
 /// without them before (mostly the control points of a `G5.2` whose opening line was
-/// broken).
+/// broken). And for LinuxCNC's own tolerance on a centre-form arc's two radii (0.02·√2
+/// mm, 0.002·√2 in, or 0.1 % of the larger; it was 2 µm or 0.1 %): 8 programs whose
+/// arc ends 9 µm off its circle are now read, as `rs274` reads them.
 #[test]
 fn diagnostics_are_as_they_were() {
     let mut h = Hash::new();
@@ -357,7 +359,7 @@ fn diagnostics_are_as_they_were() {
             }
         }
     }
-    const GOLDEN: (u64, u64) = (46863, 0x47db9b96f01a5e68);
+    const GOLDEN: (u64, u64) = (46863, 0x95ffd874bcff708c);
     if printing() {
         println!("diagnostics: ({cases}, {:#018x})", h.0);
         return;

@@ -21,7 +21,7 @@
 //! may be off by what ours may move to put both programmed end points on its circle
 //! (the radius tolerance).
 
-use interpreter::program::{interpret, Move, Plane};
+use interpreter::program::{interpret, Move, PathControl, Plane, SpindleDir};
 use std::fmt::Write as _;
 use std::process::Command;
 
@@ -153,7 +153,7 @@ fn program(rng: &mut Rng, lines: usize) -> String {
             refused_line(rng, &mut w);
             continue;
         }
-        match rng.below(22) {
+        match rng.below(25) {
             0 => {
                 w.plane = [Plane::XY, Plane::ZX, Plane::YZ][rng.below(3) as usize];
                 let g = match w.plane {
@@ -240,6 +240,30 @@ fn program(rng: &mut Rng, lines: usize) -> String {
                     "{g}{words} {}{ia} {}{ib}{p}{f}",
                     OFFSET[a], OFFSET[b]
                 ));
+            }
+            18 => {
+                let p = rng.range(0.0, 2.0);
+                w.line(&format!("G4 P{p:.3}"));
+            }
+            19 => {
+                let s = if rng.chance(0.7) {
+                    format!("S{:.0} ", rng.range(100.0, 24000.0))
+                } else {
+                    String::new()
+                };
+                let m = ["M3", "M4", "M5", ""][rng.below(4) as usize];
+                w.line(&format!("{s}{m}"));
+            }
+            20 => {
+                let tol = |rng: &mut Rng| w.length(rng.range(0.001, 0.5)).0;
+                let p = match rng.below(5) {
+                    0 => "G61".to_string(),
+                    1 => "G61.1".to_string(),
+                    2 => "G64".to_string(),
+                    3 => format!("G64 P{}", tol(rng)),
+                    _ => format!("G64 P{} Q{}", tol(rng), tol(rng)),
+                };
+                w.line(&p);
             }
             17 => {
                 w.inverse = !w.inverse;
@@ -328,6 +352,13 @@ enum Motion {
         /// mm/min; none for a rapid.
         feed: Option<f64>,
     },
+    /// `G4`: seconds.
+    Dwell(f64),
+    /// `G61` (0), `G61.1` (1), `G64` (2) with its tolerance (mm; 0 for none).
+    Path(u8, f64),
+    /// The spindle's direction (1 `M3`, -1 `M4`, 0 off) and speed (rpm), each time
+    /// either changes.
+    Spindle(i8, f64),
     Arc {
         to: [f64; 3],
         feed: f64,
@@ -363,7 +394,14 @@ fn rs274(file: &std::path::Path) -> Result<Vec<Motion>, (u32, String)> {
     let mut motions = Vec::new();
     // Where the tool is, as printed (in mm).
     let mut at = [0.0; 3];
+    let mut spindle = (0i8, 0.0f64);
+    let mut spindle_line = String::new();
     for line in text.lines() {
+        // Every line of ours has its `N`: `N.....` are the calls of the start and of the
+        // program end's reset (which stops the spindle), not of a line.
+        if line.split_whitespace().nth(1) == Some("N.....") {
+            continue;
+        }
         let Some(call) = line.split_whitespace().nth(2) else {
             continue;
         };
@@ -376,11 +414,32 @@ fn rs274(file: &std::path::Path) -> Result<Vec<Motion>, (u32, String)> {
             let inner = &s[s.find('(').unwrap() + 1..s.rfind(')').unwrap()];
             inner
                 .split(',')
-                .map(|v| v.trim().parse::<f64>().unwrap())
+                .filter_map(|v| v.trim().parse::<f64>().ok())
                 .collect()
         };
-        if call.starts_with("SET_FEED_RATE(") {
+        let spindle_was = spindle;
+        if call.starts_with("SET_G5X_OFFSET(") {
+            // `M2`'s reset (offsets, feed mode, the spindle stopped): the program's end,
+            // which is no change the program asked for (the generator writes no G54…).
+            break;
+        } else if call.starts_with("SET_FEED_RATE(") {
             feed = args(&rest)[0] * scale;
+        } else if call.starts_with("DWELL(") {
+            motions.push(Motion::Dwell(args(&rest)[0]));
+        } else if call.starts_with("SET_MOTION_CONTROL_MODE(") {
+            motions.push(match call {
+                c if c.contains("EXACT_PATH") => Motion::Path(0, 0.0),
+                c if c.contains("EXACT_STOP") => Motion::Path(1, 0.0),
+                _ => Motion::Path(2, args(&rest)[0] * scale),
+            });
+        } else if call.starts_with("SET_SPINDLE_SPEED(") {
+            spindle.1 = args(&rest)[1];
+        } else if call.starts_with("START_SPINDLE_CLOCKWISE(") {
+            spindle.0 = 1;
+        } else if call.starts_with("START_SPINDLE_COUNTERCLOCKWISE(") {
+            spindle.0 = -1;
+        } else if call.starts_with("STOP_SPINDLE_TURNING(") {
+            spindle.0 = 0;
         } else if call.starts_with("USE_LENGTH_UNITS(") {
             scale = if call.contains("INCHES") {
                 MM_PER_INCH
@@ -424,6 +483,15 @@ fn rs274(file: &std::path::Path) -> Result<Vec<Motion>, (u32, String)> {
                 turns: rotation.unsigned_abs() as u32,
             });
         }
+        if spindle != spindle_was {
+            // One change a line: `S1000 M3` sets the speed, then starts the spindle.
+            let n = line.split_whitespace().nth(1).unwrap_or("");
+            if spindle_line == n && matches!(motions.last(), Some(Motion::Spindle(..))) {
+                motions.pop();
+            }
+            spindle_line = n.to_string();
+            motions.push(Motion::Spindle(spindle.0, spindle.1));
+        }
     }
     Ok(motions)
 }
@@ -464,6 +532,22 @@ fn ours(text: &str) -> Result<Vec<Motion>, (u32, String)> {
                     turns: *turns,
                 })
             }
+            Move::Dwell { seconds, .. } => Some(Motion::Dwell(*seconds)),
+            Move::PathMode { control, .. } => Some(match control {
+                PathControl::ExactPath => Motion::Path(0, 0.0),
+                PathControl::ExactStop => Motion::Path(1, 0.0),
+                PathControl::Blend { tolerance_mm, .. } => {
+                    Motion::Path(2, tolerance_mm.unwrap_or(0.0))
+                }
+            }),
+            Move::Spindle { dir, rpm, .. } => Some(Motion::Spindle(
+                match dir {
+                    SpindleDir::Clockwise => 1,
+                    SpindleDir::CounterClockwise => -1,
+                    SpindleDir::Off => 0,
+                },
+                *rpm,
+            )),
             _ => None,
         })
         .collect())
@@ -487,6 +571,9 @@ fn first_difference(ours: &[Motion], theirs: &[Motion]) -> Option<String> {
             .any(|m| (f1 - m).abs() < 1e-9);
         (f0 - f1).abs() <= 1e-4 * f1.abs() + 0.5e-4 * MM_PER_INCH || (floor && f0 < f1)
     };
+    // How far an arc of ours has ended from the programmed end (on the programmed
+    // circle, see below): an axis the program does not name again stays that far off.
+    let mut carried = 0.0f64;
     for (i, (o, t)) in ours.iter().zip(theirs).enumerate() {
         let same = match (o, t) {
             (
@@ -502,7 +589,7 @@ fn first_difference(ours: &[Motion], theirs: &[Motion]) -> Option<String> {
                 },
             ) => {
                 r0 == r1
-                    && close(a, b, TOL)
+                    && close(a, b, TOL + carried)
                     && match (f0, f1) {
                         (Some(f0), Some(f1)) => same_feed(*f0, *f1),
                         (f0, f1) => f0.is_none() && f1.is_none(),
@@ -527,16 +614,32 @@ fn first_difference(ours: &[Motion], theirs: &[Motion]) -> Option<String> {
                 },
             ) => {
                 // Our centre may move onto the chord's bisector by as much as the radius
-                // may differ between the ends (`program::arc`): 2 µm, or 0.1 %.
+                // may differ between the ends (`program::arc`): 0.002·√2 in, or 0.1 %.
+                // Where it would move further, ours ends on the programmed circle
+                // instead, as far from the programmed end as the radii differ.
                 let (i, j, _) = plane_axes(*p1);
                 let r = (b[i] - c1[0]).hypot(b[j] - c1[1]);
-                let centre_tol = TOL + (2e-3f64).max(1e-3 * r);
-                close(a, b, TOL)
+                let centre_tol =
+                    TOL + (0.002 * std::f64::consts::SQRT_2 * MM_PER_INCH).max(1e-3 * r);
+                let ends_near = close(a, b, centre_tol + carried);
+                let off = a
+                    .iter()
+                    .zip(b)
+                    .fold(0.0f64, |m, (x, y)| m.max((x - y).abs()));
+                carried = carried.max(off - TOL);
+                ends_near
                     && same_feed(*f0, *f1)
                     && p0 == p1
                     && close(c0, c1, centre_tol)
                     && d0 == d1
                     && n0 == n1
+            }
+            (Motion::Dwell(a), Motion::Dwell(b)) => (a - b).abs() <= 0.5e-4,
+            (Motion::Path(k0, t0), Motion::Path(k1, t1)) => {
+                k0 == k1 && (t0 - t1).abs() <= 0.5e-6 * MM_PER_INCH
+            }
+            (Motion::Spindle(d0, s0), Motion::Spindle(d1, s1)) => {
+                d0 == d1 && (s0 - s1).abs() <= 0.5e-4
             }
             _ => false,
         };

@@ -1,7 +1,21 @@
 //! Circular and helical moves (G2, G3) in the three planes, centre and radius forms.
 
-use super::{LineWords, Move, State, ARC_RADIUS_TOL_MM, ARC_RADIUS_TOL_REL, OFFSETS};
+use super::{LineWords, Move, State, OFFSETS};
 use crate::parse::Diagnostic;
+use std::f64::consts::SQRT_2;
+
+/// How far the end of a centre-form arc may be off the circle its centre gives, as
+/// LinuxCNC's rs274ngc allows it (`interp_internal.hh`, `arc_data_ijk`): the radii at
+/// the start and the end may differ by this much in the program's units (mm here)...
+const CENTRE_TOL_MM: f64 = 0.02 * SQRT_2;
+/// ... or by this much in inches, in `G20`...
+const CENTRE_TOL_INCH: f64 = 0.002 * SQRT_2;
+/// ... or by a thousandth of the larger radius, up to a hundred times the above.
+const CENTRE_TOL_REL: f64 = 0.001;
+
+/// How much shorter than half the chord a radius-form arc's `R` may be (LinuxCNC's
+/// `RADIUS_TOLERANCE_INCH`, 0.00005 in, in mm for both units).
+const R_FORM_TOL_MM: f64 = 0.00005 * 25.4;
 
 /// Most full turns one arc may make (`P`). LinuxCNC sets no limit, but every turn
 /// becomes blocks: without one, `P99999999` would keep the checker busy for hours. Ten
@@ -61,7 +75,7 @@ pub(super) fn arc(
             return Err(lw.err("arc", rw.col, "R-form arc with its end at its start: a full circle needs the centre form (I, J, K)"));
         }
         let half = chord / 2.0;
-        if r.abs() < half - ARC_RADIUS_TOL_MM {
+        if r.abs() < half - R_FORM_TOL_MM {
             return Err(lw.err(
                 "arc",
                 rw.col,
@@ -103,7 +117,12 @@ pub(super) fn arc(
             return Err(lw.err("arc", col, "arc centre coincides with its start point"));
         }
         let diff = (r1 - r0).abs();
-        if diff > ARC_RADIUS_TOL_MM && diff > ARC_RADIUS_TOL_REL * r0 {
+        let tol = if st.inch {
+            CENTRE_TOL_INCH * 25.4
+        } else {
+            CENTRE_TOL_MM
+        };
+        if diff > 100.0 * tol || (diff > tol && diff > CENTRE_TOL_REL * r0.max(r1)) {
             return Err(lw.err("arc",
                 col,
                 format!("radius to the end of the arc ({r1:.4} mm) differs from the radius to its start ({r0:.4} mm)"),
@@ -116,13 +135,14 @@ pub(super) fn arc(
             // its centre on the chord's bisector; the nearest such centre is
             // `(r0² − r1²)/2·chord` along the chord from the programmed one. Taken where
             // that is within the radius tolerance (nearly every arc: a chord as long as
-            // the radius moves the centre by at most the radii's difference).
+            // the radius moves the centre by at most the radii's difference), which on a
+            // circle of 10 mm or less is 28 µm (72 µm in `G20`), else 0.1 %.
             let (ma, mb) = (from[a] + da / 2.0, from[b] + db / 2.0);
             let (na, nb) = (-db / chord, da / chord);
             let t = (ca - ma) * na + (cb - mb) * nb;
             let (pa, pb) = (ma + t * na, mb + t * nb);
             let moved = (pa - ca).hypot(pb - cb);
-            if moved <= ARC_RADIUS_TOL_MM.max(ARC_RADIUS_TOL_REL * r0) {
+            if moved <= tol.max(CENTRE_TOL_REL * r0) {
                 center[a] = pa;
                 center[b] = pb;
             } else {
