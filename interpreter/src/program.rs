@@ -646,7 +646,11 @@ fn execute(st: &mut State, lw: &LineWords, moves: &mut Vec<Move>) -> Result<(), 
     if lw.repeated || lw.letters & !KNOWN_LETTERS != 0 {
         check_letters(lw)?;
     }
-    let codes = g_codes(st, lw)?;
+    // Filled where it stays: returned inside a `Result`, its 100 bytes were copied
+    // field by field, then read back as wider words than were written, which the
+    // processor cannot forward from its stores (a stall of its own, every line).
+    let mut codes = LineCodes::default();
+    g_codes(st, lw, &mut codes)?;
     // G20/G21 on this line already apply to its own numbers.
     let unit = if st.inch { 25.4 } else { 1.0 };
 
@@ -765,9 +769,8 @@ fn check_letters(lw: &LineWords) -> Result<(), Diagnostic> {
     Ok(())
 }
 
-/// Reads the G-codes of a line: modal groups checked, modal state set, motion returned.
-fn g_codes<'a>(st: &mut State, lw: &'a LineWords) -> Result<LineCodes<'a>, Diagnostic> {
-    let mut c = LineCodes::default();
+/// Reads the G-codes of a line into `c`: modal groups checked, modal state set.
+fn g_codes<'a>(st: &mut State, lw: &'a LineWords, c: &mut LineCodes<'a>) -> Result<(), Diagnostic> {
     // The word of each modal group met so far (group 0, the non-modal codes, may repeat).
     let mut groups: [Option<&Word>; 15] = [None; 15];
     for w in lw.words.iter().filter(|w| w.letter == 'G') {
@@ -848,7 +851,7 @@ fn g_codes<'a>(st: &mut State, lw: &'a LineWords) -> Result<LineCodes<'a>, Diagn
             _ => {} // G49, G54..G59 (zero offsets), G96/G97: accepted, no effect yet
         }
     }
-    Ok(c)
+    Ok(())
 }
 
 fn path_control(lw: &LineWords, w: &Word, code: u32, unit: f64) -> Result<PathControl, Diagnostic> {
