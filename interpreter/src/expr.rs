@@ -511,6 +511,9 @@ fn exact_decimal(mantissa: u64, decimals: usize, digits: usize, points: usize) -
 /// would need `str::parse` or report an error, and for numbers of more than
 /// [`PLAIN_DIGITS`] digits (which [`number`] reads the same: the caller then reads the
 /// line the general way).
+// Inlined into the plain-word reader (its one caller there), the number's value and
+// length stay in registers instead of going through memory.
+#[inline]
 pub(crate) fn plain_number(bytes: &[u8]) -> Option<(f64, usize)> {
     let digit = |at: usize| {
         bytes
