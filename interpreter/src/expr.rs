@@ -502,60 +502,64 @@ const EXACT_POW10: [f64; 23] = [
 /// below 2^53 over an exact power of ten is one correctly rounded division, the same
 /// value `str::parse` gives; `None` for any other (then `str::parse` reads the text).
 fn exact_decimal(mantissa: u64, decimals: usize, digits: usize, points: usize) -> Option<f64> {
-    is_exact_decimal(mantissa, decimals, digits, points)
+    (digits > 0 && points <= 1 && mantissa < 1 << 53 && decimals < EXACT_POW10.len())
         .then(|| mantissa as f64 / EXACT_POW10[decimals])
-}
-
-/// Whether [`exact_decimal`] has a value for these.
-fn is_exact_decimal(mantissa: u64, decimals: usize, digits: usize, points: usize) -> bool {
-    digits > 0 && points <= 1 && mantissa < 1 << 53 && decimals < EXACT_POW10.len()
 }
 
 /// A number at the start of `bytes` (digits and points, no sign), read as [`number`]
 /// reads the same characters, with how many bytes it takes; `None` where [`number`]
-/// would need `str::parse` or report an error.
+/// would need `str::parse` or report an error, and for numbers of more than
+/// [`PLAIN_DIGITS`] digits (which [`number`] reads the same: the caller then reads the
+/// line the general way).
+// Inlined into the plain-word reader (its one caller there), the number's value and
+// length stay in registers instead of going through memory.
+#[inline]
 pub(crate) fn plain_number(bytes: &[u8]) -> Option<(f64, usize)> {
-    // The digits from `at` on, into `mantissa` and `digits`; where they end. Nineteen
-    // digits stay below 2^64: only past them can the integer saturate (and then it is
-    // too large to be exact anyway), so only there is the saturating arithmetic needed.
-    fn gather(bytes: &[u8], mut at: usize, mantissa: &mut u64, digits: &mut usize) -> usize {
-        while let Some(d) = bytes
+    let digit = |at: usize| {
+        bytes
             .get(at)
             .map(|b| b.wrapping_sub(b'0'))
             .filter(|d| *d < 10)
-        {
-            *digits += 1;
-            *mantissa = if *digits <= 19 {
-                *mantissa * 10 + u64::from(d)
-            } else {
-                mantissa.saturating_mul(10).saturating_add(u64::from(d))
-            };
+    };
+    // Digits into one integer; with at most `PLAIN_DIGITS` of them it cannot overflow,
+    // so each digit costs a multiply-add and no overflow check.
+    let mut mantissa = 0u64;
+    let mut at = 0;
+    while let Some(d) = digit(at) {
+        if at == PLAIN_DIGITS {
+            return None;
+        }
+        mantissa = mantissa * 10 + u64::from(d);
+        at += 1;
+    }
+    let whole = at;
+    let mut decimals = 0;
+    if bytes.get(at) == Some(&b'.') {
+        at += 1;
+        while let Some(d) = digit(at) {
+            if at > PLAIN_DIGITS {
+                return None;
+            }
+            mantissa = mantissa * 10 + u64::from(d);
             at += 1;
         }
-        at
+        decimals = at - whole - 1;
+        // A second point: [`number`] would read on and find it no number it can take.
+        if bytes.get(at) == Some(&b'.') {
+            return None;
+        }
     }
-    let (mut mantissa, mut digits) = (0u64, 0usize);
-    let whole = gather(bytes, 0, &mut mantissa, &mut digits);
-    let (whole_digits, whole_value) = (digits, mantissa);
-    let (len, points) = match bytes.get(whole) {
-        Some(b'.') => (gather(bytes, whole + 1, &mut mantissa, &mut digits), 1),
-        _ => (whole, 0),
-    };
-    // A second point: [`number`] would read on and find it no number it can take.
-    if bytes.get(len) == Some(&b'.') {
-        return None;
-    }
-    let decimals = digits - whole_digits;
-    // Only zeros after the point (`Y125.000`, as CAM writes many numbers): the quotient
-    // is the whole part, exactly (below 2^53, as the mantissa is), which the division
-    // gives too: it is left out.
-    if is_exact_decimal(mantissa, decimals, digits, points)
-        && bytes[whole..len].iter().all(|&b| b == b'0' || b == b'.')
-    {
-        return Some((whole_value as f64, len));
-    }
-    exact_decimal(mantissa, decimals, digits, points).map(|v| (v, len))
+    // A number needs a digit (a point alone is none); below 2^53 and over an exact power
+    // of ten (at most 19 decimals here), one correctly rounded division gives what
+    // `str::parse` gives. (Whole numbers and zeros after the point, `Y125.000`, divide
+    // exactly: the same bits as the integer itself.)
+    (whole + decimals > 0 && mantissa < 1 << 53)
+        .then(|| (mantissa as f64 / EXACT_POW10[decimals], at))
 }
+
+/// The most digits (the point not counted) [`plain_number`] reads: their integer stays
+/// below 10^19 < 2^64.
+const PLAIN_DIGITS: usize = 19;
 
 fn number(cur: &mut Cursor) -> Result<f64, Diagnostic> {
     let col = cur.col();
@@ -618,6 +622,27 @@ mod tests {
     fn fail(text: &str) -> (u32, String) {
         let e = real_value(&mut cursor(text), &Params::default()).unwrap_err();
         (e.col, e.message)
+    }
+
+    proptest::proptest! {
+        /// [`plain_number`] reads what [`number`] reads, to the bit, wherever it reads
+        /// anything: up to its digit limit and beyond, with zeros leading and trailing,
+        /// points anywhere, and what follows the number.
+        #[test]
+        fn plain_numbers_read_as_number_reads_them(
+            text in "0{0,12}[0-9]{0,12}\\.?[0-9]{0,12}0{0,12}[.0-9]{0,2}[ XE]?"
+        ) {
+            let run = text
+                .bytes()
+                .take_while(|b| b.is_ascii_digit() || *b == b'.')
+                .count();
+            if let Some((v, len)) = plain_number(text.as_bytes()) {
+                proptest::prop_assert_eq!(len, run);
+                let mut cur = cursor(&text[..run]);
+                proptest::prop_assert_eq!(number(&mut cur).map(f64::to_bits), Ok(v.to_bits()));
+                proptest::prop_assert_eq!(text[..run].parse::<f64>().map(f64::to_bits), Ok(v.to_bits()));
+            }
+        }
     }
 
     #[test]

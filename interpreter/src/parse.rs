@@ -440,13 +440,13 @@ fn plain_words(text: &str, words: &mut Vec<Word>) -> bool {
     // `char::is_whitespace` in ASCII, as `Cursor::fill` drops them.
     let blank = |c: u8| matches!(c, b' ' | b'\t'..=b'\r');
     let mut i = 0;
-    loop {
-        while i < b.len() && blank(b[i]) {
-            i += 1;
-        }
-        let Some(&first) = b.get(i) else {
-            return true;
-        };
+    while b.get(i).is_some_and(|&c| blank(c)) {
+        i += 1;
+    }
+    // Each word starts at a letter; the blanks after it are passed with it. Anything
+    // else where a word must start (a digit or point after blanks, which would belong
+    // to the number before, a sign, a `#`) is not a plain line.
+    while let Some(&first) = b.get(i) {
         let letter = first.to_ascii_uppercase();
         if !letter.is_ascii_uppercase() || letter == b'O' {
             return false;
@@ -454,27 +454,24 @@ fn plain_words(text: &str, words: &mut Vec<Word>) -> bool {
         // Every byte so far is ASCII: the column is the byte's.
         let col = i as u32 + 1;
         i += 1;
-        let negative = b.get(i) == Some(&b'-');
-        if matches!(b.get(i), Some(b'-' | b'+')) {
+        let sign = b.get(i).copied();
+        if matches!(sign, Some(b'-' | b'+')) {
             i += 1;
         }
         let Some((value, len)) = plain_number(&b[i..]) else {
             return false;
         };
         i += len;
-        // What follows (past blanks, which the general reader drops) must start the
-        // next word or end the line: a digit or point there would belong to this
-        // number, anything else is not a plain word.
-        let next = b[i..].iter().find(|c| !blank(**c));
-        if next.is_some_and(|c| !c.is_ascii_alphabetic()) {
-            return false;
+        while b.get(i).is_some_and(|&c| blank(c)) {
+            i += 1;
         }
         words.push(Word {
             letter: char::from(letter),
-            value: if negative { -value } else { value },
+            value: if sign == Some(b'-') { -value } else { value },
             col,
         });
     }
+    true
 }
 
 /// The label and keyword of an O-word whose `O` (at `col`) is consumed.
@@ -759,6 +756,21 @@ mod tests {
         #[test]
         fn plain_lines_read_as_the_general_reader_reads_them(
             text in "[GXYZOFNgxo0-9.+\\- \t#\\[\\]eE/]{0,24}"
+        ) {
+            let p = Params::default();
+            let fast = read_line(&text, 1, &p);
+            let general = read_line(&format!("{text}(c)"), 1, &p);
+            proptest::prop_assert_eq!(fast, general);
+        }
+    }
+
+    proptest::proptest! {
+        /// Lines of plain words, as CAM writes them and nearly so (long numbers,
+        /// leading and trailing zeros, blanks of every kind, lower case, a stray
+        /// character), read as the general reader reads them.
+        #[test]
+        fn plain_word_lines_read_as_the_general_reader_reads_them(
+            text in "([ \t\x0b\x0c\r]{0,2}[GXYZIJKFPgxyzo][+\\-]?[0-9]{0,22}\\.?[0-9]{0,22}[ .#]?){0,6}"
         ) {
             let p = Params::default();
             let fast = read_line(&text, 1, &p);

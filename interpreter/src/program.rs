@@ -241,17 +241,66 @@ const OFFSETS: [char; 3] = ['I', 'J', 'K'];
 struct LineWords<'a> {
     words: &'a [Word],
     line: u32,
+    /// The letters the line has words of, a bit each ([`letter_bit`]): most letters a
+    /// line is asked about it does not have, and those are answered without a look
+    /// through its words.
+    letters: u32,
+    /// A letter other than `G` and `M` has two words or more (an error `execute` names).
+    repeated: bool,
+}
+
+/// The bit of `letter` in [`LineWords::letters`]: `A` to `Z` are bits 0 to 25, anything
+/// else (no word has it) bit 31.
+const fn letter_bit(letter: char) -> u32 {
+    if letter.is_ascii_uppercase() {
+        1 << (letter as u32 - 'A' as u32)
+    } else {
+        1 << 31
+    }
+}
+
+/// The bits of all of `letters` ([`letter_bit`]).
+const fn letter_bits(letters: &str) -> u32 {
+    let b = letters.as_bytes();
+    let mut bits = 0;
+    let mut i = 0;
+    while i < b.len() {
+        bits |= letter_bit(b[i] as char);
+        i += 1;
+    }
+    bits
+}
+
+impl<'a> LineWords<'a> {
+    fn new(words: &'a [Word], line: u32) -> Self {
+        let mut letters = 0;
+        let mut repeated = false;
+        for w in words {
+            let bit = letter_bit(w.letter);
+            repeated |= letters & bit & !letter_bits("GM") != 0;
+            letters |= bit;
+        }
+        LineWords {
+            words,
+            line,
+            letters,
+            repeated,
+        }
+    }
 }
 
 impl LineWords<'_> {
     fn get(&self, letter: char) -> Option<&Word> {
+        if self.letters & letter_bit(letter) == 0 {
+            return None;
+        }
         self.words.iter().find(|w| w.letter == letter)
     }
     fn value(&self, letter: char) -> Option<f64> {
         self.get(letter).map(|w| w.value)
     }
     fn has_any(&self, letters: &str) -> bool {
-        self.words.iter().any(|w| letters.contains(w.letter))
+        self.letters & letter_bits(letters) != 0
     }
     fn first_col(&self) -> u32 {
         self.words.first().map_or(1, |w| w.col)
@@ -404,10 +453,7 @@ pub fn interpret_with(text: &str, opts: &Options) -> Result<Program, Vec<Diagnos
             }
             continue;
         }
-        let lw = LineWords {
-            words: &parsed.words,
-            line,
-        };
+        let lw = LineWords::new(&parsed.words, line);
         let before = prog.moves.len();
         if let Err(d) = execute(&mut st, &lw, &mut prog.moves) {
             errors.push(d);
@@ -591,30 +637,17 @@ struct LineCodes<'a> {
 }
 
 fn execute(st: &mut State, lw: &LineWords, moves: &mut Vec<Move>) -> Result<(), Diagnostic> {
-    // One value per letter (G and M may repeat, for different groups).
-    for (i, w) in lw.words.iter().enumerate() {
-        if w.letter != 'G' && w.letter != 'M' && lw.words[..i].iter().any(|o| o.letter == w.letter)
-        {
-            return Err(lw.err(
-                "word",
-                w.col,
-                format!("{} word appears twice on one line", w.letter),
-            ));
-        }
-        match w.letter {
-            'G' | 'M' | 'X' | 'Y' | 'Z' | 'I' | 'J' | 'K' | 'R' | 'F' | 'P' | 'L' | 'N' | 'S'
-            | 'T' | 'Q' => {}
-            'A' | 'B' | 'C' | 'U' | 'V' | 'W' => {
-                return Err(lw.err(
-                    "word",
-                    w.col,
-                    format!("{} axis: this machine has only X, Y and Z", w.letter),
-                ))
-            }
-            c => return Err(lw.err("word", w.col, format!("{c} word is not supported"))),
-        }
+    // One value per letter (G and M may repeat, for different groups), of the letters
+    // this stack knows. Most lines pass both checks, which the letters the line has
+    // answer at once; any other is looked through for the first word that fails.
+    if lw.repeated || lw.letters & !KNOWN_LETTERS != 0 {
+        check_letters(lw)?;
     }
-    let codes = g_codes(st, lw)?;
+    // Filled where it stays: returned inside a `Result`, its 100 bytes were copied
+    // field by field, then read back as wider words than were written, which the
+    // processor cannot forward from its stores (a stall of its own, every line).
+    let mut codes = LineCodes::default();
+    g_codes(st, lw, &mut codes)?;
     // G20/G21 on this line already apply to its own numbers.
     let unit = if st.inch { 25.4 } else { 1.0 };
 
@@ -702,9 +735,39 @@ fn execute(st: &mut State, lw: &LineWords, moves: &mut Vec<Move>) -> Result<(), 
     Ok(())
 }
 
-/// Reads the G-codes of a line: modal groups checked, modal state set, motion returned.
-fn g_codes<'a>(st: &mut State, lw: &'a LineWords) -> Result<LineCodes<'a>, Diagnostic> {
-    let mut c = LineCodes::default();
+/// The letters of the words [`check_letters`] lets pass.
+const KNOWN_LETTERS: u32 = letter_bits("GMXYZIJKRFPLNSTQ");
+
+/// The first word of a letter met before on its line (`G` and `M` aside), or of a letter
+/// this stack does not know, as an error.
+fn check_letters(lw: &LineWords) -> Result<(), Diagnostic> {
+    for (i, w) in lw.words.iter().enumerate() {
+        if w.letter != 'G' && w.letter != 'M' && lw.words[..i].iter().any(|o| o.letter == w.letter)
+        {
+            return Err(lw.err(
+                "word",
+                w.col,
+                format!("{} word appears twice on one line", w.letter),
+            ));
+        }
+        match w.letter {
+            'G' | 'M' | 'X' | 'Y' | 'Z' | 'I' | 'J' | 'K' | 'R' | 'F' | 'P' | 'L' | 'N' | 'S'
+            | 'T' | 'Q' => {}
+            'A' | 'B' | 'C' | 'U' | 'V' | 'W' => {
+                return Err(lw.err(
+                    "word",
+                    w.col,
+                    format!("{} axis: this machine has only X, Y and Z", w.letter),
+                ))
+            }
+            c => return Err(lw.err("word", w.col, format!("{c} word is not supported"))),
+        }
+    }
+    Ok(())
+}
+
+/// Reads the G-codes of a line into `c`: modal groups checked, modal state set.
+fn g_codes<'a>(st: &mut State, lw: &'a LineWords, c: &mut LineCodes<'a>) -> Result<(), Diagnostic> {
     // The word of each modal group met so far (group 0, the non-modal codes, may repeat).
     let mut groups: [Option<&Word>; 15] = [None; 15];
     for w in lw.words.iter().filter(|w| w.letter == 'G') {
@@ -785,7 +848,7 @@ fn g_codes<'a>(st: &mut State, lw: &'a LineWords) -> Result<LineCodes<'a>, Diagn
             _ => {} // G49, G54..G59 (zero offsets), G96/G97: accepted, no effect yet
         }
     }
-    Ok(c)
+    Ok(())
 }
 
 fn path_control(lw: &LineWords, w: &Word, code: u32, unit: f64) -> Result<PathControl, Diagnostic> {

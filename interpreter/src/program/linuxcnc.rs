@@ -188,11 +188,15 @@ pub(super) fn nurbs_line(
             ));
         }
         let p = st.pos;
+        // Room for the points a curve of this order usually has, so that the list is
+        // not grown (copied) point by point.
+        let mut ctrl = Vec::with_capacity(2 * order);
+        ctrl.push([p[0], p[1], p[2], w0]);
         st.nurbs = Some(NurbsOpen {
             line: lw.line,
             col: w.col,
             order,
-            ctrl: vec![[p[0], p[1], p[2], w0]],
+            ctrl,
         });
         if !has_point {
             return Ok(());

@@ -280,3 +280,33 @@ fn gcode_whole_tenths_as_rounded() {
         assert_eq!(gcode(&w), before(v), "{v}");
     }
 }
+
+proptest::proptest! {
+    /// [`LineWords`] answers from the letters a line has: each word found as a look
+    /// through the words finds it, and the two checks of `execute` (a letter twice, a
+    /// letter not known) pass exactly where [`check_letters`] passes.
+    #[test]
+    fn line_letters_answer_as_the_words_do(
+        letters in proptest::collection::vec(
+            proptest::sample::select(b"ABCDEFGHIJKLMNOPQRSTUVWXYZ%e".to_vec()),
+            0..8,
+        )
+    ) {
+        let words: Vec<Word> = letters
+            .iter()
+            .enumerate()
+            .map(|(i, &l)| Word { letter: char::from(l), value: i as f64, col: i as u32 + 1 })
+            .collect();
+        let lw = LineWords::new(&words, 1);
+        for letter in ('A'..='Z').chain(['%', 'e', 'é']) {
+            let found = words.iter().find(|w| w.letter == letter);
+            proptest::prop_assert_eq!(lw.get(letter), found);
+        }
+        for set in ["XYZ", "IJKR", "XYZK", "XYZIJQ", "GM"] {
+            let any = words.iter().any(|w| set.contains(w.letter));
+            proptest::prop_assert_eq!(lw.has_any(set), any);
+        }
+        let quick = !lw.repeated && lw.letters & !KNOWN_LETTERS == 0;
+        proptest::prop_assert_eq!(quick, check_letters(&lw).is_ok());
+    }
+}
