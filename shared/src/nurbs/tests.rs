@@ -40,6 +40,41 @@ prop_compose! {
     }
 }
 
+/// The central differences' step in span `s`: a share of the span's own width. A share
+/// of the whole domain's (up to 480 times a 0.05 span) made the differences' own error,
+/// not the derivatives', break the tolerance on a short span whose weights fall steeply
+/// (`differences_on_a_short_steep_span`).
+fn difference_step(c: &SplitCurve, s: usize) -> f64 {
+    1e-5 * (c.knots[s + 1] - c.knots[s])
+}
+
+/// How far central differences of step `h` about `u` (inside one span) are from the
+/// evaluated first and second derivatives: the largest miss over the tolerance, 1e-4 of
+/// the derivatives' size (at least 1); right derivatives stay below 1.
+fn difference_error(c: &SplitCurve, u: f64, h: f64) -> f64 {
+    let e = eval(c.degree, &c.knots, &c.ctrl, u);
+    let (m, pl) = (
+        eval(c.degree, &c.knots, &c.ctrl, u - h),
+        eval(c.degree, &c.knots, &c.ctrl, u + h),
+    );
+    let scale1 =
+        e.d1.iter()
+            .chain(m.d1.iter())
+            .fold(1.0f64, |a, b| a.max(b.abs()));
+    let scale2 =
+        e.d2.iter()
+            .chain(m.d2.iter())
+            .fold(1.0f64, |a, b| a.max(b.abs()));
+    // The larger, or NaN if either is (which `f64::max` would drop).
+    let worse = |a: f64, b: f64| if b > a || b.is_nan() { b } else { a };
+    (0..3).fold(0.0f64, |worst, k| {
+        let fd1 = (pl.p[k] - m.p[k]) / (2.0 * h);
+        let fd2 = (pl.d1[k] - m.d1[k]) / (2.0 * h);
+        let worst = worse(worst, (fd1 - e.d1[k]).abs() / (1e-4 * scale1));
+        worse(worst, (fd2 - e.d2[k]).abs() / (1e-4 * scale2))
+    })
+}
+
 proptest! {
     #[test]
     fn eval_matches_cox_de_boor(c in random_curve(), t in 0.0f64..=1.0) {
@@ -85,18 +120,10 @@ proptest! {
         let u = lo + t * (hi - lo);
         // Stay inside one span: differences across a knot see the lower continuity.
         let s = find_span(c.degree, &c.knots, c.ctrl.len(), u);
-        let h = 1e-5 * (hi - lo);
+        let h = difference_step(&c, s);
         prop_assume!(u - h > c.knots[s] && u + h < c.knots[s + 1]);
-        let e = eval(c.degree, &c.knots, &c.ctrl, u);
-        let (m, pl) = (eval(c.degree, &c.knots, &c.ctrl, u - h), eval(c.degree, &c.knots, &c.ctrl, u + h));
-        let scale1 = e.d1.iter().chain(m.d1.iter()).fold(1.0f64, |a, b| a.max(b.abs()));
-        let scale2 = e.d2.iter().chain(m.d2.iter()).fold(1.0f64, |a, b| a.max(b.abs()));
-        for k in 0..3 {
-            let fd1 = (pl.p[k] - m.p[k]) / (2.0 * h);
-            let fd2 = (pl.d1[k] - m.d1[k]) / (2.0 * h);
-            prop_assert!((fd1 - e.d1[k]).abs() < 1e-4 * scale1, "d1[{k}] {fd1} vs {}", e.d1[k]);
-            prop_assert!((fd2 - e.d2[k]).abs() < 1e-4 * scale2, "d2[{k}] {fd2} vs {}", e.d2[k]);
-        }
+        let err = difference_error(&c, u, h);
+        prop_assert!(err < 1.0, "p = {} u = {u}: {err} times the tolerance", c.degree);
     }
 
     #[test]
@@ -116,6 +143,34 @@ proptest! {
         let got = eval(piece.degree, &piece.knots, &piece.ctrl, u).p;
         prop_assert!(dist(got, want) < 1e-8 * 100.0, "{got:?} vs {want:?}");
     }
+}
+
+/// A curve `random_curve` can draw: degree 1, a 0.05 span between spans of 1.9 whose
+/// weights fall from 4.9 to 0.2. Near the span's light end the derivatives change so fast
+/// that central differences with a step of 1e-5 of the whole domain (20.95) miss them by
+/// 110 times the tolerance, though they are right; a step of 1e-5 of the span's width
+/// finds them (6e-4 of it).
+#[test]
+fn differences_on_a_short_steep_span() {
+    let mut knots = vec![0.0, 0.0, 1.9, 3.8, 5.7, 7.6, 9.5, 9.55, 11.45, 13.35, 15.25];
+    knots.extend([17.15, 19.05, 20.95, 20.95]);
+    let mut ctrl = vec![[0.0, 0.0, 0.0, 1.0]; 13];
+    ctrl[5] = [-100.0, -100.0, -100.0, 4.9];
+    ctrl[6] = [99.0, 99.0, 99.0, 0.2];
+    let c = SplitCurve {
+        degree: 1,
+        knots,
+        ctrl,
+    };
+    assert!(validate(c.degree, &c.knots, &c.ctrl, usize::MAX).is_ok());
+    let (a, b) = (c.knots[6], c.knots[7]);
+    let domain_step = 1e-5 * 20.95;
+    let u = a + domain_step + 0.99 * (b - a - 2.0 * domain_step);
+    assert_eq!(find_span(c.degree, &c.knots, c.ctrl.len(), u), 6);
+    let coarse = difference_error(&c, u, domain_step);
+    assert!(coarse > 10.0, "{coarse}");
+    let fine = difference_error(&c, u, difference_step(&c, 6));
+    assert!(fine < 1e-2, "{fine}");
 }
 
 #[test]
