@@ -228,6 +228,9 @@ struct State {
     /// Errors found on a line that still runs (a Fanuc curve it ended).
     deferred: Vec<Diagnostic>,
     ended: bool,
+    /// The moves of `G4 P` dwells read before the program's dialect was known: seconds
+    /// in LinuxCNC, milliseconds in Fanuc, so made a thousandth if it ends up Fanuc.
+    dwells_in_doubt: Vec<usize>,
 }
 
 /// The longest line LinuxCNC reads, in bytes without the newline: its `fgets` buffer is
@@ -348,6 +351,7 @@ pub fn interpret_with(text: &str, opts: &Options) -> Result<Program, Vec<Diagnos
         fanuc_closed: None,
         deferred: Vec::new(),
         ended: false,
+        dwells_in_doubt: Vec::new(),
     };
     let mut params = Params::default();
     let mut prog = Program::default();
@@ -502,6 +506,13 @@ pub fn interpret_with(text: &str, opts: &Options) -> Result<Program, Vec<Diagnos
         prog.moves.push(Move::End { line: last_line });
     }
     prog.dialect = st.dialect.resolved();
+    if prog.dialect == Dialect::Fanuc {
+        for &i in &st.dwells_in_doubt {
+            if let Move::Dwell { seconds, .. } = &mut prog.moves[i] {
+                *seconds /= 1000.0;
+            }
+        }
+    }
     errors.iter_mut().for_each(|d| units.locate(d));
     if errors.is_empty() {
         Ok(prog)
@@ -936,15 +947,40 @@ fn motion(
         return Err(lw.err("G5.3", w.col, "no G5.2 NURBS is open for it to close"));
     }
     if let Some(w) = codes.dwell {
-        let p = lw
-            .value('P')
-            .ok_or_else(|| lw.err("G4", w.col, "dwell needs P (seconds)"))?;
-        if p < 0.0 {
-            return Err(lw.err("G4", w.col, "dwell time P must not be negative"));
+        // LinuxCNC: `G4 P` in seconds. Fanuc: `G04 X` in seconds, `G04 P` in
+        // milliseconds (its P takes no decimal point): `G04 P500` is half a second, not
+        // eight minutes.
+        let (seconds, word) = if let Some(x) = lw.get('X') {
+            st.dialect
+                .claim(Dialect::Fanuc, lw.line, x.col, "G04 X (a dwell in seconds)")?;
+            (x.value, x)
+        } else {
+            let p = lw.get('P').ok_or_else(|| {
+                lw.err(
+                    "G4",
+                    w.col,
+                    "dwell needs P (seconds; in Fanuc programs milliseconds, or X in seconds)",
+                )
+            })?;
+            match st.dialect.known() {
+                Some(Dialect::Fanuc) => (p.value / 1000.0, p),
+                Some(Dialect::LinuxCnc) => (p.value, p),
+                None => {
+                    st.dwells_in_doubt.push(moves.len());
+                    (p.value, p)
+                }
+            }
+        };
+        if seconds < 0.0 {
+            return Err(lw.err(
+                "G4",
+                word.col,
+                format!("dwell time {} must not be negative", word.letter),
+            ));
         }
         moves.push(Move::Dwell {
             line: lw.line,
-            seconds: p,
+            seconds,
         });
     }
     if let Some((w, m)) = codes.motion {

@@ -872,3 +872,42 @@ fn a_full_circle_off_by_a_rounding_keeps_its_centre() {
     assert_eq!(to, [10.0, 0.0005, 0.0]);
     assert!((dist(to, center) - dist([0.0; 3], center)).abs() < 1e-12);
 }
+
+/// `G4 P` is seconds in LinuxCNC and milliseconds in Fanuc (`G04 P500`: half a second,
+/// not eight minutes); Fanuc's `G04 X` is seconds. A `G04 P` read before anything said
+/// which dialect the program is takes the dialect the program turns out to be.
+#[test]
+fn a_dwell_lasts_what_its_dialect_says() {
+    let dwells = |text: &str, dialect: Option<Dialect>| -> Vec<f64> {
+        interpret_with(
+            text,
+            &Options {
+                dialect,
+                ..Options::default()
+            },
+        )
+        .unwrap_or_else(|e| panic!("{e:?}"))
+        .moves
+        .iter()
+        .filter_map(|m| match m {
+            Move::Dwell { seconds, .. } => Some(*seconds),
+            _ => None,
+        })
+        .collect()
+    };
+    assert_eq!(dwells("G4 P0.5\nM2\n", None), [0.5]);
+    assert_eq!(dwells("O1000\nG04 P500\nG04 X1.5\nM30\n", None), [0.5, 1.5]);
+    assert_eq!(dwells("G04 P500\nM30\n", Some(Dialect::Fanuc)), [0.5]);
+    // Fanuc found after the dwell (its G05 P10000), and LinuxCNC before it (G5.1).
+    assert_eq!(
+        dwells("G04 P250\nG05 P10000\nG1 X1 F100\nG05 P0\nM30\n", None),
+        [0.25]
+    );
+    assert_eq!(dwells("F100\nG5.1 X1 Y1 I0.5 J0\nG4 P2\nM2\n", None), [2.0]);
+    // `G04 X` is Fanuc's: refused in a program that is LinuxCNC's.
+    let e = errors("F100\nG5.1 X1 Y1 I0.5 J0\nG04 X1\nM2\n");
+    assert_eq!((e[0].0, e[0].1), (3, 5), "{e:?}");
+    assert!(e[0].2.contains("G04 X"), "{e:?}");
+    let e = errors("G4 P-1\nM2\n");
+    assert_eq!(e[0].2, "G4: dwell time P must not be negative");
+}
