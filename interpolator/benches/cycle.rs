@@ -13,6 +13,8 @@
 //! * `cycle/surface_cubic`: the same with the passes bent into cubic `(u, v)` curves
 //!   (`FLAG_UV_CUBIC`, as `PLANE_CC_STRATEGY` blocks are): the uv rate changes along the
 //!   pass.
+//! * `clock/now_ns`, `clock/thread_cpu_ns`: a read of the wall clock and of the
+//!   thread's own CPU time, as the cycle reads them.
 //! * `cycle/profile_worst`: the same on a chain of 0.01 mm lines whose planned end speeds
 //!   fall to a stop every 2 mm, look-ahead window 256: every cycle has many speed limits
 //!   ahead, the most expensive path of the engine's profile step.
@@ -504,6 +506,14 @@ fn criterion_benches(c: &mut Criterion) {
     g.bench_function("profile_worst", |bch| {
         let (_, mut case) = worst_case();
         bch.iter_custom(|iters| case.timed(iters))
+    });
+    g.finish();
+    // A read of each clock the cycle reads: the wall clock (vDSO) three times a cycle,
+    // the thread's own CPU time (a system call) once, for the `preempted` cause.
+    let mut g = c.benchmark_group("clock");
+    g.bench_function("now_ns", |bch| bch.iter(shared::clock::now_ns));
+    g.bench_function("thread_cpu_ns", |bch| {
+        bch.iter(shared::clock::thread_cpu_ns)
     });
     g.finish();
 }

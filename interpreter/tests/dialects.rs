@@ -18,8 +18,11 @@ fn moves(text: &str) -> Vec<Move> {
     interpret(text).unwrap_or_else(|e| panic!("{e:?}")).moves
 }
 
-/// The errors of a program as `(line, col, "rule: message")`.
-fn errors_as(text: &str, dialect: Option<Dialect>) -> Vec<(u32, u32, String)> {
+/// A program read in `dialect` (detected when none).
+fn read_as(
+    text: &str,
+    dialect: Option<Dialect>,
+) -> Result<interpreter::program::Program, Vec<interpreter::parse::Diagnostic>> {
     interpret_with(
         text,
         &Options {
@@ -27,10 +30,15 @@ fn errors_as(text: &str, dialect: Option<Dialect>) -> Vec<(u32, u32, String)> {
             ..Options::default()
         },
     )
-    .expect_err("the program should be refused")
-    .into_iter()
-    .map(|d| (d.line, d.col, format!("{}: {}", d.rule, d.message)))
-    .collect()
+}
+
+/// The errors of a program as `(line, col, "rule: message")`.
+fn errors_as(text: &str, dialect: Option<Dialect>) -> Vec<(u32, u32, String)> {
+    read_as(text, dialect)
+        .expect_err("the program should be refused")
+        .into_iter()
+        .map(|d| (d.line, d.col, format!("{}: {}", d.rule, d.message)))
+        .collect()
 }
 
 fn errors(text: &str) -> Vec<(u32, u32, String)> {
@@ -313,14 +321,7 @@ fn dialect_is_detected_forced_and_never_mixed() {
         Dialect::LinuxCnc
     );
     assert_eq!(d("O1000\nG1 X1 F100\n"), Dialect::Fanuc);
-    let forced = interpret_with(
-        "G1 X1 F100\n",
-        &Options {
-            dialect: Some(Dialect::Fanuc),
-            ..Options::default()
-        },
-    )
-    .unwrap();
+    let forced = read_as("G1 X1 F100\n", Some(Dialect::Fanuc)).unwrap();
     assert_eq!(forced.dialect, Dialect::Fanuc);
 
     let e = errors("F100\nG5.2 P1 L3\nX1 Y1 P1\nX2 Y0 P1\nG5.3\nG05 P10000\n");
@@ -879,21 +880,15 @@ fn a_full_circle_off_by_a_rounding_keeps_its_centre() {
 #[test]
 fn a_dwell_lasts_what_its_dialect_says() {
     let dwells = |text: &str, dialect: Option<Dialect>| -> Vec<f64> {
-        interpret_with(
-            text,
-            &Options {
-                dialect,
-                ..Options::default()
-            },
-        )
-        .unwrap_or_else(|e| panic!("{e:?}"))
-        .moves
-        .iter()
-        .filter_map(|m| match m {
-            Move::Dwell { seconds, .. } => Some(*seconds),
-            _ => None,
-        })
-        .collect()
+        read_as(text, dialect)
+            .unwrap_or_else(|e| panic!("{e:?}"))
+            .moves
+            .iter()
+            .filter_map(|m| match m {
+                Move::Dwell { seconds, .. } => Some(*seconds),
+                _ => None,
+            })
+            .collect()
     };
     assert_eq!(dwells("G4 P0.5\nM2\n", None), [0.5]);
     assert_eq!(dwells("O1000\nG04 P500\nG04 X1.5\nM30\n", None), [0.5, 1.5]);
