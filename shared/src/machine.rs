@@ -54,6 +54,7 @@ impl Default for Axes {
                 max_vel_mm_per_min: 10_000.0,
                 max_acc_mm_per_s2: 2_000.0,
                 max_jerk_mm_per_s3: 50_000.0,
+                ..AxisLimits::default()
             },
         }
     }
@@ -65,13 +66,25 @@ impl Axes {
     }
 }
 
-/// One axis's velocity, acceleration and jerk limit.
+/// One axis's velocity, acceleration and jerk limit, and its travel (soft limits).
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct AxisLimits {
     pub max_vel_mm_per_min: f64,
     pub max_acc_mm_per_s2: f64,
     pub max_jerk_mm_per_s3: f64,
+    /// Soft limits, as LinuxCNC's `MIN_LIMIT`/`MAX_LIMIT`: the lowest and highest
+    /// commanded position of this axis, in machine coordinates. `cnc check` refuses any
+    /// motion whose exact path leaves them and the interpolator refuses such a block again.
+    pub min_mm: f64,
+    pub max_mm: f64,
+}
+
+impl AxisLimits {
+    /// Whether `x_mm` lies within this axis's travel.
+    pub fn within_travel(&self, x_mm: f64) -> bool {
+        x_mm >= self.min_mm && x_mm <= self.max_mm
+    }
 }
 
 impl Default for AxisLimits {
@@ -80,6 +93,8 @@ impl Default for AxisLimits {
             max_vel_mm_per_min: 15_000.0,
             max_acc_mm_per_s2: 3_000.0,
             max_jerk_mm_per_s3: 100_000.0,
+            min_mm: -1_000.0,
+            max_mm: 1_000.0,
         }
     }
 }
@@ -244,6 +259,15 @@ impl Machine {
                 return Err(format!("{name} must be a positive number, got {v}"));
             }
         }
+        for (axis, l) in ["x", "y", "z"].iter().zip(self.axes.as_array()) {
+            if !l.min_mm.is_finite() || !l.max_mm.is_finite() || l.min_mm >= l.max_mm {
+                return Err(format!(
+                    "axes.{axis}: the travel min_mm ({}) must be below max_mm ({}), both \
+                     finite",
+                    l.min_mm, l.max_mm
+                ));
+            }
+        }
         if self.min_period_us == 0 || self.min_period_us > self.max_period_us {
             return Err(format!(
                 "min_period_us ({}) must be at least 1 and at most max_period_us ({})",
@@ -369,18 +393,42 @@ const KEY_DOCS: &[(&str, &str)] = &[
         "X axis acceleration limit, mm/s²",
     ),
     ("axes.x.max_jerk_mm_per_s3", "X axis jerk limit, mm/s³"),
+    (
+        "axes.x.min_mm",
+        "X soft limit: lowest commanded position (LinuxCNC MIN_LIMIT), mm",
+    ),
+    (
+        "axes.x.max_mm",
+        "X soft limit: highest commanded position (LinuxCNC MAX_LIMIT), mm",
+    ),
     ("axes.y.max_vel_mm_per_min", "Y axis velocity limit, mm/min"),
     (
         "axes.y.max_acc_mm_per_s2",
         "Y axis acceleration limit, mm/s²",
     ),
     ("axes.y.max_jerk_mm_per_s3", "Y axis jerk limit, mm/s³"),
+    (
+        "axes.y.min_mm",
+        "Y soft limit: lowest commanded position (LinuxCNC MIN_LIMIT), mm",
+    ),
+    (
+        "axes.y.max_mm",
+        "Y soft limit: highest commanded position (LinuxCNC MAX_LIMIT), mm",
+    ),
     ("axes.z.max_vel_mm_per_min", "Z axis velocity limit, mm/min"),
     (
         "axes.z.max_acc_mm_per_s2",
         "Z axis acceleration limit, mm/s²",
     ),
     ("axes.z.max_jerk_mm_per_s3", "Z axis jerk limit, mm/s³"),
+    (
+        "axes.z.min_mm",
+        "Z soft limit: lowest commanded position (LinuxCNC MIN_LIMIT), mm",
+    ),
+    (
+        "axes.z.max_mm",
+        "Z soft limit: highest commanded position (LinuxCNC MAX_LIMIT), mm",
+    ),
     (
         "chord_tolerance_mm",
         "largest deviation of a set-point chord from the curve, mm",
@@ -461,6 +509,16 @@ mod tests {
         assert_eq!(m.servo.total_mass_kg(), 80.0);
         assert_eq!(m.servo.encoder_resolution_mm, 0.001);
         assert_eq!(Machine::default().servo.total_mass_kg(), 50.0);
+    }
+
+    #[test]
+    fn travel_is_read_per_axis_and_must_be_an_interval() {
+        let m = Machine::from_toml("[axes.x]\nmin_mm = -5.0\nmax_mm = 300.0\n").unwrap();
+        assert_eq!((m.axes.x.min_mm, m.axes.x.max_mm), (-5.0, 300.0));
+        assert_eq!(m.axes.y.min_mm, -1_000.0);
+        assert!(m.axes.x.within_travel(300.0) && !m.axes.x.within_travel(300.001));
+        let e = Machine::from_toml("[axes.z]\nmin_mm = 10.0\nmax_mm = 10.0\n").unwrap_err();
+        assert!(e.contains("axes.z") && e.contains("min_mm"), "{e}");
     }
 
     #[test]
