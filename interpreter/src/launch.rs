@@ -41,9 +41,14 @@ fn catch_interrupts() {
 pub struct RunArgs {
     /// The NC program (RS274/NGC with LinuxCNC G5.2 NURBS); the built-in demo when absent.
     pub program: Option<PathBuf>,
-    /// Run directory [default: runs/<UTC timestamp>/].
+    /// Run directory [default: runs/<UTC timestamp>/]. It must be new or empty, unless
+    /// --force.
     #[arg(long)]
     pub out: Option<PathBuf>,
+    /// Reuse a non-empty --out: the earlier run's files there are removed first (other
+    /// files are kept).
+    #[arg(long)]
+    pub force: bool,
     /// Interpolation period in µs (100..=10000).
     #[arg(long, default_value_t = 1000, value_parser = clap::value_parser!(u64).range(100..=10_000))]
     pub period_us: u64,
@@ -289,7 +294,7 @@ fn run_inner(args: &RunArgs) -> Result<bool, String> {
         }
     };
     let dir = args.out.clone().unwrap_or_else(default_out_dir);
-    std::fs::create_dir_all(&dir).map_err(|e| format!("{}: {e}", dir.display()))?;
+    crate::rundir::prepare(&dir, args.force)?;
     // The run directory keeps the exact program and machine it ran (a STEP-NC part too:
     // the interpreter process knows it by its content, the report page reads its lines).
     let program_copy = dir.join("program.ngc");

@@ -31,6 +31,7 @@ pub mod program;
 pub mod publish;
 pub mod replay;
 pub mod report;
+pub mod rundir;
 pub mod scallop;
 pub mod step;
 pub mod surface_blocks;

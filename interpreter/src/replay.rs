@@ -16,9 +16,14 @@ use std::process::ExitCode;
 pub struct ReplayArgs {
     /// A run directory (its commands.log and machine.toml are used) or a commands.log.
     pub source: PathBuf,
-    /// Run directory for the replay [default: runs/<UTC timestamp>/].
+    /// Run directory for the replay [default: runs/<UTC timestamp>/]. It must be new or
+    /// empty, unless --force.
     #[arg(long)]
     pub out: Option<PathBuf>,
+    /// Reuse a non-empty --out: the earlier run's files there are removed first (other
+    /// files are kept). The source run directory itself is never reused.
+    #[arg(long)]
+    pub force: bool,
     /// Machine file; default: the machine.toml beside the log, else the built-in machine.
     /// It must be the machine the log was written with (its hash is in the header).
     #[arg(long)]
@@ -88,7 +93,19 @@ fn replay_inner(args: &ReplayArgs) -> Result<bool, String> {
         ));
     }
     let dir = args.out.clone().unwrap_or_else(default_out_dir);
-    std::fs::create_dir_all(&dir).map_err(|e| format!("{}: {e}", dir.display()))?;
+    // Replaying into the directory the log is read from would remove the log itself.
+    let same = |a: &Path, b: &Path| match (std::fs::canonicalize(a), std::fs::canonicalize(b)) {
+        (Ok(a), Ok(b)) => a == b,
+        _ => false,
+    };
+    if let Some(src_dir) = log.parent().filter(|d| same(d, &dir)) {
+        return Err(format!(
+            "--out {}: that is the run directory being replayed ({}); choose another --out",
+            dir.display(),
+            src_dir.display()
+        ));
+    }
+    crate::rundir::prepare(&dir, args.force)?;
     let mut input = vec!["--replay".to_string(), log.display().to_string()];
     if args.salvage {
         input.push("--salvage".into());

@@ -213,8 +213,15 @@ pub fn assemble(
         .and_then(|(blocks, t)| crate::scallop::measure(blocks, &t.fb_pos_mm));
     let worst = contour.as_ref().and_then(|c| c.max);
     let chord = contour.as_ref().and_then(|c| c.chord);
+    let salvaged = interp.as_ref().and_then(|s| s.salvaged.clone());
+    // A salvaged log ran only its intact blocks: never "done", whatever the processes say.
+    let outcome = match (&fault, &salvaged) {
+        (Some(_), _) => "fault",
+        (None, Some(_)) => "salvaged",
+        (None, None) => "done",
+    };
     Report {
-        outcome: if fault.is_some() { "fault" } else { "done" }.into(),
+        outcome: outcome.into(),
         fault,
         program: program.to_string(),
         clock: clock.name().into(),
@@ -251,7 +258,7 @@ pub fn assemble(
         servo_held_ticks: servo.as_ref().map_or(0, |s| s.held_ticks),
         servo_skipped_setpoints: servo.as_ref().map_or(0, |s| s.skipped_setpoints),
         blocks: interp.as_ref().map_or(0, |s| s.blocks),
-        salvaged: interp.as_ref().and_then(|s| s.salvaged.clone()),
+        salvaged,
         dialect: interp.as_ref().and_then(|s| s.dialect.clone()),
         max_scallop_mm: interp.as_ref().and_then(|s| s.max_scallop_mm),
         measured_max_scallop_mm: scallop.map(|s| s.max_mm),
@@ -306,7 +313,12 @@ impl Report {
         let mut s = format!(
             "{}: {}\n  program      {}\n  period       {} µs, {} cycles, {:.3} s machining ({} clock)\n  path         {:.3} mm, average feed {:.1} mm/min, peak {:.1} mm/min\n{chord}  servo        max following error {:.2} µm, {contour}\n  timing       {timing}\n  run dir      {}\n",
             self.outcome,
-            self.fault.as_deref().unwrap_or("program completed"),
+            match (self.fault.as_deref(), self.salvaged.as_deref()) {
+                (Some(f), _) => f,
+                (None, Some(_)) =>
+                    "only the intact blocks of a damaged command log ran, then a stop: not the whole program",
+                (None, None) => "program completed",
+            },
             self.program,
             self.period_ns / 1000,
             self.cycles,

@@ -29,6 +29,41 @@ pub fn err(what: &str, e: impl core::fmt::Debug) -> IpcError {
     IpcError(format!("{what}: {e:?}"))
 }
 
+/// The iceoryx2 configuration of every node of the stack: iceoryx2's own (its defaults,
+/// or a config file an operator put in one of the places iceoryx2 looks), except that
+/// where it keeps iceoryx2's default root directory (`/tmp/iceoryx2/`) and file prefix
+/// (`iox2_`), each user gets their own: `/tmp/iceoryx2-cnc-<uid>/` and `iox2u<uid>_`.
+///
+/// iceoryx2 creates its root directory mode 0750 for the first user who runs it, and
+/// every other user's node creation then fails (`InternalError`): one root run, and no
+/// one else could run the stack on that machine again. The three processes of one stack
+/// are always one user's, so a root of one's own loses nothing. A root or prefix set in
+/// a config file is kept as it is: that operator chose it.
+pub fn config() -> &'static Config {
+    static CONFIG: std::sync::OnceLock<Config> = std::sync::OnceLock::new();
+    CONFIG.get_or_init(|| {
+        let mut cfg = Config::global_config().clone();
+        let default = Config::default();
+        // SAFETY: getuid(2) cannot fail and touches no memory of ours.
+        let uid = unsafe { libc::getuid() };
+        if cfg.global.root_path() == default.global.root_path() {
+            let root = format!("/tmp/iceoryx2-cnc-{uid}/");
+            match Path::new(root.as_bytes()) {
+                Ok(p) => cfg.global.set_root_path(&p),
+                Err(e) => tracing::warn!("iceoryx2 root {root}: {e:?}; the default is used"),
+            }
+        }
+        if cfg.global.prefix == default.global.prefix {
+            let prefix = format!("iox2u{uid}_");
+            match FileName::new(prefix.as_bytes()) {
+                Ok(f) => cfg.global.prefix = f,
+                Err(e) => tracing::warn!("iceoryx2 prefix {prefix}: {e:?}; the default is used"),
+            }
+        }
+        cfg
+    })
+}
+
 /// A node of the stack; `role` names it in iceoryx2's introspection.
 pub fn node<S: Service>(role: &str) -> Result<Node<S>, IpcError> {
     // iceoryx2 warns on every start that no config file exists (we need none); only its
@@ -36,6 +71,7 @@ pub fn node<S: Service>(role: &str) -> Result<Node<S>, IpcError> {
     set_log_level_from_env_or(LogLevel::Error);
     let name = NodeName::new(role).map_err(|e| err("node name", e))?;
     let node = NodeBuilder::new()
+        .config(config())
         .name(&name)
         .signal_handling_mode(SignalHandlingMode::Disabled)
         .create::<S>()

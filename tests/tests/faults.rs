@@ -89,7 +89,7 @@ fn next_run_works_and_the_dead_node_is_gone(dir: &Path, killed_pid: u32) {
         String::from_utf8_lossy(&out.stderr)
     );
     let mut left = vec![];
-    Node::<ipc::Service>::list(Config::global_config(), |state| {
+    Node::<ipc::Service>::list(shared::ipc::config(), |state| {
         let id = match &state {
             NodeState::Alive(v) => Some(*v.id()),
             NodeState::Dead(v) => Some(*v.id()),

@@ -284,12 +284,20 @@ fn damaged_log_is_refused_with_record_and_offset_or_salvaged() {
         .arg(&bad)
         .output()
         .unwrap();
-    assert!(
-        out.status.success(),
+    // Only part of the program ran: not a success, and the summary says so.
+    assert_eq!(
+        out.status.code(),
+        Some(1),
         "{}",
         String::from_utf8_lossy(&out.stderr)
     );
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        text.starts_with("salvaged: only the intact blocks of a damaged command log ran"),
+        "{text}"
+    );
     let rep = report(&dir.join("salvaged"));
+    assert_eq!(rep["outcome"], "salvaged", "{rep:#}");
     assert!(
         rep["salvaged"].as_str().unwrap().contains("record 2"),
         "{rep:#}"

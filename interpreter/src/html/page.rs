@@ -317,6 +317,9 @@ fn outcome(r: &Report) -> String {
         (Some("done"), _) => {
             "<span class=\"good\">completed</span>: the program ran to its end".into()
         }
+        (Some("salvaged"), None) => "<span class=\"bad\">salvaged</span>: only the intact \
+            blocks of a damaged command log ran, then a stop"
+            .into(),
         (Some(_), Some(f)) => format!(
             "<span class=\"bad\">stopped with a fault</span>: {}",
             esc(f)
