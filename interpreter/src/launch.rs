@@ -749,11 +749,17 @@ fn suspended_text(dir: &Path, roles: &[Role]) -> Option<String> {
     Some(match r.name {
         "servo-sim" => format!(
             "{what} and stopped answering after set-point cycle {}; the interpolator braked on the path",
-            last_cycle_in(&dir.join("feedback.csv")).map_or("?".into(), |c| c.to_string())
+            // What the interpolator had seen when it stopped: a suspended drive that is
+            // resumed later answers the rest from its queue.
+            interpolator_summary(dir)
+                .and_then(|s| s.fault_info)
+                .and_then(|f| f.last_feedback_cycle)
+                .or_else(|| last_cycle_in(&dir.join("feedback.csv")))
+                .map_or("?".into(), |c| c.to_string())
         ),
         "interpolator" => format!(
-            "{what} and sent no set-point after cycle {}; the drives held position",
-            last_cycle_in(&dir.join("setpoints.csv")).map_or("?".into(), |c| c.to_string())
+            "{what}: the drives' last set-point was cycle {}, then they held position",
+            last_cycle_in(&dir.join("feedback.csv")).map_or("?".into(), |c| c.to_string())
         ),
         _ => format!("{what}; the interpolator stopped on the path"),
     })

@@ -222,12 +222,26 @@ impl TraceFigures {
         let sp = csv_rows(&dir.join("setpoints.csv"));
         t.cycles = sp.len() as u64;
         let dt = period_ns.max(1) as f64 * 1e-9;
+        // The peak feed is over feed moves, as the interpolator counts it: the source
+        // lines of rapids come from the command log.
+        let rapid_lines: std::collections::HashSet<u32> =
+            shared::cmdlog::read(&dir.join("commands.log"))
+                .map(|log| {
+                    log.blocks
+                        .iter()
+                        .filter(|b| b.flags & shared::protocol::FLAG_RAPID != 0)
+                        .map(|b| b.source_line)
+                        .collect()
+                })
+                .unwrap_or_default();
         let mut last = [0.0; 3];
-        for r in sp.iter().filter(|r| r.len() >= 5) {
+        for r in sp.iter().filter(|r| r.len() >= 6) {
             let p = [r[2], r[3], r[4]];
             let d = shared::path::norm([p[0] - last[0], p[1] - last[1], p[2] - last[2]]);
             t.path_length_mm += d;
-            t.peak_speed_mm_per_s = t.peak_speed_mm_per_s.max(d / dt);
+            if !rapid_lines.contains(&(r[5] as u32)) {
+                t.peak_speed_mm_per_s = t.peak_speed_mm_per_s.max(d / dt);
+            }
             last = p;
         }
         let fb = csv_rows(&dir.join("feedback.csv"));
