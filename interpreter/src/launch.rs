@@ -272,6 +272,16 @@ fn exit_text(s: Option<std::process::ExitStatus>) -> String {
     }
 }
 
+/// The exit code of a run that did not complete: 128 + the signal when the operator
+/// stopped it (130 for Ctrl-C, 143 for SIGTERM, the shell's convention), else 1. For
+/// `cnc run` and whatever else launches a [`Stack`] (`cnc replay`).
+pub fn failure_code() -> ExitCode {
+    match interrupted() {
+        Some(sig) => ExitCode::from((128 + sig).clamp(0, 255) as u8),
+        None => ExitCode::FAILURE,
+    }
+}
+
 /// Starts `exe` in `role`. The child asks the kernel for the launcher's death signal
 /// right after the fork (see [`shared::stop::die_with_parent`]); it is spawned from the
 /// launcher's main thread, which lives until the run is over (the parent-death signal
@@ -294,10 +304,7 @@ fn spawn(exe: &Path, role: &str, args: &[String]) -> std::io::Result<Child> {
 pub fn run(args: &RunArgs) -> ExitCode {
     match run_inner(args) {
         Ok(true) => ExitCode::SUCCESS,
-        Ok(false) => match interrupted() {
-            Some(sig) => ExitCode::from((128 + sig).clamp(0, 255) as u8),
-            None => ExitCode::FAILURE,
-        },
+        Ok(false) => failure_code(),
         Err(e) => {
             say_err(&format!("cnc run: {e}\n"));
             ExitCode::FAILURE
