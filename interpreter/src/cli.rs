@@ -136,7 +136,7 @@ fn init_tracing() {
 }
 
 fn fail(msg: impl std::fmt::Display) -> ExitCode {
-    eprintln!("cnc: {msg}");
+    let _ = std::io::Write::write_fmt(&mut std::io::stderr(), format_args!("cnc: {msg}\n"));
     ExitCode::FAILURE
 }
 

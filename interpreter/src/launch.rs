@@ -5,10 +5,19 @@
 //! peer. Each survivor notices a dead peer by itself (iceoryx2 liveness, within a few
 //! periods) and stops its own way: the interpolator decelerates along the path, the drives
 //! hold position. The launcher gives them [`SURVIVOR_GRACE`] to do so and to write their
-//! summaries, then asks any that are left to stop (SIGTERM), and kills what is still there
-//! after that. The report names a process that died and the cycle it died at. The
-//! servo-sim starts first, then the interpolator, then the interpreter, so every consumer
-//! exists before its producer sends.
+//! summaries, then asks any that are left to stop (SIGTERM, and SIGCONT for a suspended
+//! one), and kills what is still there after that. The report names the first fault: an
+//! operator's stop, a suspended process, a process that died and the cycle it died at,
+//! else the fault the processes' own summaries give. The servo-sim starts first, then the
+//! interpolator, then the interpreter, so every consumer exists before its producer sends.
+//!
+//! The operator's Ctrl-C (SIGINT) or SIGTERM is passed on to the interpolator alone: it
+//! brakes on the path, the drives follow it to its last set-point, then all exit, and
+//! `cnc run` exits 128 + the signal (130, 143). Each process is started with the kernel's
+//! parent-death signal ([`shared::stop::die_with_parent`]): should the launcher itself
+//! die, the interpolator brakes on the path, the others follow, and the interpreter (the
+//! last to finish) writes `report.json` in its place. Nothing is printed with `print!`:
+//! a closed stdout or stderr (`cnc run | head -1`) must not stop the run or its reports.
 
 use crate::process::{self, Source};
 use crate::report::{self, Process};
@@ -16,14 +25,38 @@ use serde::{Deserialize, Serialize};
 use shared::clock::ClockMode;
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, ExitCode, Stdio};
-use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::atomic::{AtomicI32, Ordering};
 use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
 
-/// Set by SIGINT/SIGTERM: the operator wants the run stopped.
-static INTERRUPTED: AtomicBool = AtomicBool::new(false);
+/// Set by SIGINT/SIGTERM: the operator wants the run stopped (the first signal; 0: none).
+static INTERRUPTED: AtomicI32 = AtomicI32::new(0);
 
-extern "C" fn on_interrupt(_signal: libc::c_int) {
-    INTERRUPTED.store(true, Ordering::SeqCst);
+extern "C" fn on_interrupt(signal: libc::c_int) {
+    let _ = INTERRUPTED.compare_exchange(0, signal, Ordering::SeqCst, Ordering::SeqCst);
+}
+
+/// The signal the operator stopped the run with (SIGINT, SIGTERM), if any.
+pub fn interrupted() -> Option<i32> {
+    Some(INTERRUPTED.load(Ordering::SeqCst)).filter(|s| *s != 0)
+}
+
+/// How long after the operator's stop the processes get to brake, follow and write their
+/// summaries before the launcher stops what is left.
+pub const OPERATOR_STOP_GRACE: Duration = Duration::from_secs(10);
+
+/// Writes to stdout, quietly: a closed pipe (`cnc run | head -1`) or a full disk must not
+/// stop the run or keep its reports from being written.
+pub fn say(text: &str) {
+    use std::io::Write;
+    let mut out = std::io::stdout().lock();
+    let _ = out.write_all(text.as_bytes());
+    let _ = out.flush();
+}
+
+/// [`say`] on stderr.
+pub fn say_err(text: &str) {
+    use std::io::Write;
+    let _ = std::io::stderr().write_all(text.as_bytes());
 }
 
 /// Catch Ctrl-C and SIGTERM so the launcher outlives its children and still writes the
@@ -173,6 +206,19 @@ struct Role {
     spawned: Instant,
     memory: Option<ProcessMemory>,
     start_settled: bool,
+    /// Seen suspended (state `T`: SIGSTOP, Ctrl-Z) while the launcher watched, and when.
+    suspended_at: Option<Instant>,
+}
+
+/// Whether a live process is suspended (state `T` in /proc: SIGSTOP, SIGTSTP).
+fn is_suspended(pid: u32) -> bool {
+    std::fs::read_to_string(format!("/proc/{pid}/stat"))
+        .ok()
+        .and_then(|s| {
+            let after = &s[s.rfind(')')? + 1..];
+            after.split_whitespace().next().map(|st| st == "T")
+        })
+        .unwrap_or(false)
 }
 
 /// VmRSS of a live process in KiB, from /proc.
@@ -192,6 +238,7 @@ impl Role {
             spawned: Instant::now(),
             memory: None,
             start_settled: false,
+            suspended_at: None,
         }
     }
 
@@ -230,22 +277,41 @@ fn exit_text(s: Option<std::process::ExitStatus>) -> String {
     }
 }
 
-fn spawn(exe: &Path, role: &str, args: &[String]) -> std::io::Result<Child> {
-    Command::new(exe)
-        .arg("role")
-        .arg(role)
-        .args(args)
-        .stdin(Stdio::null())
-        .spawn()
+/// The exit code of a run that did not complete: 128 + the signal when the operator
+/// stopped it (130 for Ctrl-C, 143 for SIGTERM, the shell's convention), else 1. For
+/// `cnc run` and whatever else launches a [`Stack`] (`cnc replay`).
+pub fn failure_code() -> ExitCode {
+    match interrupted() {
+        Some(sig) => ExitCode::from((128 + sig).clamp(0, 255) as u8),
+        None => ExitCode::FAILURE,
+    }
 }
 
-/// Runs a program end to end. Exit code 0 when it completed, 1 otherwise.
+/// Starts `exe` in `role`. The child asks the kernel for the launcher's death signal
+/// right after the fork (see [`shared::stop::die_with_parent`]); it is spawned from the
+/// launcher's main thread, which lives until the run is over (the parent-death signal
+/// follows the thread that forked, not the process).
+fn spawn(exe: &Path, role: &str, args: &[String]) -> std::io::Result<Child> {
+    use std::os::unix::process::CommandExt;
+    let launcher = std::process::id() as libc::pid_t;
+    let mut cmd = Command::new(exe);
+    cmd.arg("role").arg(role).args(args).stdin(Stdio::null());
+    // SAFETY: the closure runs between fork and exec and makes only async-signal-safe
+    // calls (prctl, getppid), allocating nothing.
+    unsafe {
+        cmd.pre_exec(move || shared::stop::die_with_parent(launcher));
+    }
+    cmd.spawn()
+}
+
+/// Runs a program end to end. Exit code 0 when it completed, 128 + the signal when the
+/// operator stopped it (130 for Ctrl-C, 143 for SIGTERM), 1 otherwise.
 pub fn run(args: &RunArgs) -> ExitCode {
     match run_inner(args) {
         Ok(true) => ExitCode::SUCCESS,
-        Ok(false) => ExitCode::FAILURE,
+        Ok(false) => failure_code(),
         Err(e) => {
-            eprintln!("cnc run: {e}");
+            say_err(&format!("cnc run: {e}\n"));
             ExitCode::FAILURE
         }
     }
@@ -289,7 +355,7 @@ fn run_inner(args: &RunArgs) -> Result<bool, String> {
     let blocks = match process::compile_source(&src.name, &src.text, &opts, &machine, period_ns) {
         Ok(c) => c.blocks,
         Err(errors) => {
-            eprint!("{errors}");
+            say_err(&errors);
             return Ok(false);
         }
     };
@@ -488,7 +554,14 @@ impl Stack {
         };
         let started = start(
             "servo-sim",
-            vec!["--servo-clock".into(), self.servo_clock.to_string()],
+            vec![
+                "--servo-clock".into(),
+                self.servo_clock.to_string(),
+                "--sched".into(),
+                sched.into(),
+                "--rt-priority".into(),
+                interpolator::rt::sched::servo_priority(self.rt_priority).to_string(),
+            ],
         )
         .and_then(|_| {
             start(
@@ -502,9 +575,10 @@ impl Stack {
             )
         })
         .and_then(|_| start("interpreter", input));
-        let mut launcher_fault = started.err();
-        if launcher_fault.is_none() {
-            launcher_fault = supervise(&mut roles, progress.as_mut());
+        let start_failed = started.err();
+        let mut exit_fault = None;
+        if start_failed.is_none() {
+            exit_fault = supervise(&mut roles, progress.as_mut());
         } else {
             stop_all(&mut roles);
         }
@@ -523,54 +597,63 @@ impl Stack {
                 },
             })
             .collect();
-        // A process killed from outside is the cause; say which and at which cycle.
+        // The first fault is the one named: the operator's stop, a process that could not
+        // start, one found suspended, one killed from outside (which, at which cycle);
+        // else what the processes' own summaries say, and the exit codes last.
         let dead = dead_process(dir, &roles);
-        if let Some(d) = &dead {
-            launcher_fault = Some(format!(
-                "{} failed ({}): died at cycle {}: {}",
-                d.role,
-                d.exit,
-                d.cycle.map_or("?".to_string(), |c| c.to_string()),
-                d.detail
-            ));
-        }
+        let primary = interrupted()
+            .map(|sig| operator_stop_text(dir, sig))
+            .or(start_failed)
+            .or_else(|| suspended_text(dir, &roles))
+            .or_else(|| {
+                dead.as_ref().map(|d| {
+                    format!(
+                        "{} failed ({}): died at cycle {}: {}",
+                        d.role,
+                        d.exit,
+                        d.cycle.map_or("?".to_string(), |c| c.to_string()),
+                        d.detail
+                    )
+                })
+            });
         let mut rep = report::assemble(
             dir,
             program_name,
             self.clock,
             self.period_ns,
             processes,
-            launcher_fault,
+            primary,
+            exit_fault,
         );
         rep.dead_process = dead;
         rep.memory = roles.iter().filter_map(|r| r.memory.clone()).collect();
         rep.write(&dir.join("report.json"))
             .map_err(|e| format!("writing report.json: {e}"))?;
-        print!("{}", rep.summary_text(dir));
+        say(&rep.summary_text(dir));
         if let Some(line) = interpolator::deadline::summary_line(dir) {
-            println!("  deadlines    {line}");
+            say(&format!("  deadlines    {line}\n"));
         }
         if rep.starvations > 0 {
-            println!(
-                "  starvation   {} time(s) the interpolator ran out of blocks, stopped on the path and waited",
+            say(&format!(
+                "  starvation   {} time(s) the interpolator ran out of blocks, stopped on the path and waited\n",
                 rep.starvations
-            );
+            ));
         }
         if let Some(f) = &rep.fault_info {
-            println!(
-                "  stop         {} at cycle {} (line {}{}): decelerated from {:.1} mm/min, at rest in cycle {}",
-                f.kind,
+            say(&format!(
+                "  stop         {} at cycle {} (line {}{}): decelerated from {:.1} mm/min, at rest in cycle {}\n",
+                report::kind_words(&f.kind),
                 f.cycle,
                 f.line,
                 f.axis.as_deref().map(|a| format!(", axis {a}")).unwrap_or_default(),
                 f.speed_at_fault_mm_per_min,
                 f.stopped_cycle
-            );
+            ));
         }
         if self.html {
             match crate::html::write(dir, None) {
-                Ok(page) => println!("  report page  {}", page.display()),
-                Err(e) => eprintln!("cnc: report.html not written: {e}"),
+                Ok(page) => say(&format!("  report page  {}\n", page.display())),
+                Err(e) => say_err(&format!("cnc: report.html not written: {e}\n")),
             }
         }
         Ok(rep.outcome == "done")
@@ -637,13 +720,74 @@ fn dead_process(dir: &Path, roles: &[Role]) -> Option<DeadProcess> {
     })
 }
 
+/// The interpolator's summary, if it wrote one.
+fn interpolator_summary(dir: &Path) -> Option<interpolator::summary::Summary> {
+    std::fs::read_to_string(dir.join("interpolator.json"))
+        .ok()
+        .and_then(|t| serde_json::from_str(&t).ok())
+}
+
+/// The report's fault after the operator stopped the run with `sig`.
+fn operator_stop_text(dir: &Path, sig: i32) -> String {
+    let how = match sig {
+        libc::SIGINT => "Ctrl-C, SIGINT".to_string(),
+        libc::SIGTERM => "SIGTERM".to_string(),
+        other => format!("signal {other}"),
+    };
+    let info = interpolator_summary(dir).and_then(|s| s.fault_info);
+    let followed = last_cycle_in(&dir.join("feedback.csv"))
+        .map(|c| format!("; the drives followed to cycle {c}"))
+        .unwrap_or_default();
+    match info {
+        Some(i) => format!(
+            "stopped by the operator at line {} ({how}): the interpolator braked on the path from {:.1} mm/min in cycle {} and was at rest in cycle {}{followed}",
+            i.line, i.speed_at_fault_mm_per_min, i.stop_from_cycle, i.stopped_cycle
+        ),
+        None => format!("stopped by the operator ({how}){followed}"),
+    }
+}
+
+/// The report's fault when a process was found suspended (SIGSTOP, Ctrl-Z) mid-run: the
+/// first one seen, and the last cycle it had a part in.
+fn suspended_text(dir: &Path, roles: &[Role]) -> Option<String> {
+    let r = roles
+        .iter()
+        .filter(|r| r.suspended_at.is_some())
+        .min_by_key(|r| r.suspended_at)?;
+    let what = format!(
+        "the {} was suspended (stopped by SIGSTOP or Ctrl-Z: its process was alive but did not run)",
+        r.name
+    );
+    Some(match r.name {
+        "servo-sim" => format!(
+            "{what} and stopped answering after set-point cycle {}; the interpolator braked on the path",
+            // What the interpolator had seen when it stopped: a suspended drive that is
+            // resumed later answers the rest from its queue.
+            interpolator_summary(dir)
+                .and_then(|s| s.fault_info)
+                .and_then(|f| f.last_feedback_cycle)
+                .or_else(|| last_cycle_in(&dir.join("feedback.csv")))
+                .map_or("?".into(), |c| c.to_string())
+        ),
+        "interpolator" => format!(
+            "{what}: the drives' last set-point was cycle {}, then they held position",
+            last_cycle_in(&dir.join("feedback.csv")).map_or("?".into(), |c| c.to_string())
+        ),
+        _ => format!("{what}; the interpolator stopped on the path"),
+    })
+}
+
 /// Asks every live process to stop (SIGTERM: each stops its own way, writes its summary
-/// and exits), then kills whatever is still there after a grace period.
+/// and exits; SIGCONT, so that a suspended one can), then kills whatever is still there
+/// after a grace period.
 fn stop_all(roles: &mut [Role]) {
     for r in roles.iter_mut().filter(|r| r.exit.is_none()) {
         r.stopped = true;
         // SAFETY: plain kill(2) on a child we started and have not reaped.
-        unsafe { libc::kill(r.child.id() as libc::pid_t, libc::SIGTERM) };
+        unsafe {
+            libc::kill(r.child.id() as libc::pid_t, libc::SIGTERM);
+            libc::kill(r.child.id() as libc::pid_t, libc::SIGCONT);
+        }
     }
     let deadline = Instant::now() + Duration::from_secs(3);
     while Instant::now() < deadline && roles.iter().any(|r| r.exit.is_none()) {
@@ -667,6 +811,7 @@ fn supervise(roles: &mut [Role], mut progress: Option<&mut Progress>) -> Option<
     let mut failed_at: Option<Instant> = None;
     let mut last_exit: Option<Instant> = None;
     let mut last_sample: Option<Instant> = None;
+    let mut operator_stop: Option<Instant> = None;
     loop {
         if let Some(p) = progress.as_deref_mut() {
             p.update();
@@ -678,6 +823,9 @@ fn supervise(roles: &mut [Role], mut progress: Option<&mut Progress>) -> Option<
             }
         }
         for r in roles.iter_mut().filter(|r| r.exit.is_none()) {
+            if r.suspended_at.is_none() && is_suspended(r.child.id()) {
+                r.suspended_at = Some(Instant::now());
+            }
             if let Ok(Some(status)) = r.child.try_wait() {
                 r.exit = Some(status);
                 last_exit = Some(Instant::now());
@@ -690,11 +838,28 @@ fn supervise(roles: &mut [Role], mut progress: Option<&mut Progress>) -> Option<
         if roles.iter().all(|r| r.exit.is_some()) {
             return fault;
         }
-        if INTERRUPTED.load(Ordering::SeqCst) {
+        // The operator's stop goes to the interpolator alone: it brakes on the path, the
+        // drives follow it to its last set-point, the interpreter sees it end; then all
+        // exit by themselves. Without an interpolator there is nothing moving to brake.
+        if let (Some(sig), None) = (interrupted(), operator_stop) {
+            operator_stop = Some(Instant::now());
+            match roles
+                .iter()
+                .find(|r| r.name == "interpolator" && r.exit.is_none())
+            {
+                // SAFETY: plain kill(2) on a child we started and have not reaped.
+                Some(r) => unsafe {
+                    libc::kill(r.child.id() as libc::pid_t, sig);
+                },
+                None => {
+                    stop_all(roles);
+                    return fault;
+                }
+            }
+        }
+        if operator_stop.is_some_and(|t| t.elapsed() > OPERATOR_STOP_GRACE) {
             stop_all(roles);
-            return Some(
-                "interrupted by the operator (SIGINT/SIGTERM); all processes stopped".into(),
-            );
+            return fault;
         }
         // After a failure the survivors stop by themselves (they watch each other); after a
         // clean exit the others get a grace period to finish the shutdown handshake.

@@ -376,5 +376,9 @@ pub fn run_streaming<S: Service>(
     let text = serde_json::to_string_pretty(&summary).map_err(|e| e.to_string())?;
     std::fs::write(cfg.out_dir.join("interpreter.json"), text)
         .map_err(|e| format!("writing interpreter.json: {e}"))?;
+    // With the launcher dead nobody else will fold the summaries into a report.
+    if shared::stop::launcher_gone() {
+        crate::report::write_orphan_report(&cfg.out_dir, &summary.program, cfg.period_ns)?;
+    }
     Ok(summary)
 }

@@ -102,7 +102,7 @@ pub fn publish<S: Service>(
             if last_state == RunState::Fault {
                 return Ok((Finish::Fault, sent));
             }
-            if shared::stop::requested() {
+            if shared::stop::terminate_requested() {
                 return Err(IpcError(format!(
                     "stopped on request before block {}",
                     b.seq

@@ -58,7 +58,8 @@ fn log_path(source: &Path) -> PathBuf {
 pub fn replay(args: &ReplayArgs) -> ExitCode {
     match replay_inner(args) {
         Ok(true) => ExitCode::SUCCESS,
-        Ok(false) => ExitCode::FAILURE,
+        // 130/143 when the operator stopped it, as `cnc run`.
+        Ok(false) => crate::launch::failure_code(),
         Err(e) => {
             eprintln!("cnc replay: {e}");
             ExitCode::FAILURE

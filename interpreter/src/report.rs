@@ -107,6 +107,10 @@ pub struct Report {
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub measured_max_scallop_at_mm: Option<[f64; 3]>,
     pub sched: Option<interpolator::rt::sched::SchedReport>,
+    /// The servo-sim's drive loop scheduling (policy, priority, locked memory, warnings);
+    /// null when it wrote no summary.
+    #[serde(default)]
+    pub servo_sched: Option<interpolator::rt::sched::SchedReport>,
     pub miss_list: Vec<interpolator::summary::MissEntry>,
     /// Misses per cause id (`late_wake`, `long_compute`, `publish_stall`,
     /// `downstream_lag`, `preempted`), every miss counted, not only those listed.
@@ -172,36 +176,164 @@ fn read<T: for<'de> Deserialize<'de>>(path: &Path) -> Option<T> {
     serde_json::from_str(&std::fs::read_to_string(path).ok()?).ok()
 }
 
+/// A fault `kind` of `fault_info` in words, for the lines people read.
+pub fn kind_words(kind: &str) -> &str {
+    match kind {
+        "following_error" => "following error over the limit",
+        "peer_gone" => "a process ended or died",
+        "peer_silent" => "the drives stopped answering",
+        "bad_block" => "a bad command block",
+        "bad_feedback" => "bad feedback from the drives",
+        "stop_requested" => "stop requested",
+        "launcher_gone" => "the launcher (cnc run) died",
+        "stalled" => "the path stood still",
+        other => other,
+    }
+}
+
+/// What the traces say when a process's own summary is missing (it was killed): the
+/// set-points' count, path length and peak speed, and the largest following error.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct TraceFigures {
+    pub cycles: u64,
+    pub path_length_mm: f64,
+    pub peak_speed_mm_per_s: f64,
+    pub max_following_error_axis_um: [f64; 3],
+    pub feedback_rows: u64,
+}
+
+/// The complete lines of a CSV file's data rows as numbers (a killed writer may leave a
+/// half line at the end; it is left out, as is any row that does not parse).
+fn csv_rows(path: &Path) -> Vec<Vec<f64>> {
+    let Ok(text) = std::fs::read_to_string(path) else {
+        return Vec::new();
+    };
+    let complete = text.rfind('\n').map_or("", |n| &text[..n]);
+    complete
+        .lines()
+        .skip(1)
+        .map_while(|l| l.split(',').map(|v| v.parse::<f64>().ok()).collect())
+        .collect()
+}
+
+impl TraceFigures {
+    pub fn read(dir: &Path, period_ns: u64) -> TraceFigures {
+        let mut t = TraceFigures::default();
+        let sp = csv_rows(&dir.join("setpoints.csv"));
+        t.cycles = sp.len() as u64;
+        let dt = period_ns.max(1) as f64 * 1e-9;
+        // The peak feed is over feed moves, as the interpolator counts it: the source
+        // lines of rapids come from the command log.
+        let rapid_lines: std::collections::HashSet<u32> =
+            shared::cmdlog::read(&dir.join("commands.log"))
+                .map(|log| {
+                    log.blocks
+                        .iter()
+                        .filter(|b| b.flags & shared::protocol::FLAG_RAPID != 0)
+                        .map(|b| b.source_line)
+                        .collect()
+                })
+                .unwrap_or_default();
+        let mut last = [0.0; 3];
+        for r in sp.iter().filter(|r| r.len() >= 6) {
+            let p = [r[2], r[3], r[4]];
+            let d = shared::path::norm([p[0] - last[0], p[1] - last[1], p[2] - last[2]]);
+            t.path_length_mm += d;
+            if !rapid_lines.contains(&(r[5] as u32)) {
+                t.peak_speed_mm_per_s = t.peak_speed_mm_per_s.max(d / dt);
+            }
+            last = p;
+        }
+        let fb = csv_rows(&dir.join("feedback.csv"));
+        t.feedback_rows = fb.len() as u64;
+        for r in fb.iter().filter(|r| r.len() >= 8) {
+            for a in 0..3 {
+                let e = r[5 + a].abs();
+                if e.is_finite() {
+                    t.max_following_error_axis_um[a] = t.max_following_error_axis_um[a].max(e);
+                }
+            }
+        }
+        t
+    }
+}
+
 /// Folds the per-process summaries of `dir` into a report. Missing parts (a process that
-/// died before writing its summary) leave their figures at zero and are named in `fault`.
+/// died before writing its summary) are taken from the traces where they can be (the
+/// cycles, path and peak feed from `setpoints.csv`, the following error from
+/// `feedback.csv`) and are named in `fault`.
+///
+/// `fault` names the first fault first: `primary` (the launcher's finding: the operator's
+/// stop, a process suspended or killed), then the processes' own faults, the
+/// interpolator's before the others' (they follow it), unless it stopped for a peer that
+/// has a fault of its own; `exit_fault` (which process exited first, and how) only when
+/// nothing else says why.
 pub fn assemble(
     dir: &Path,
     program: &str,
     clock: ClockMode,
     period_ns: u64,
     processes: Vec<Process>,
-    launcher_fault: Option<String>,
+    primary: Option<String>,
+    exit_fault: Option<String>,
 ) -> Report {
     let interp: Option<InterpreterSummary> = read(&dir.join("interpreter.json"));
     let ipol: Option<InterpSummary> = read(&dir.join("interpolator.json"));
     let servo: Option<ServoSummary> = read(&dir.join("servo.json"));
-    let mut faults: Vec<String> = Vec::new();
-    if let Some(f) = launcher_fault {
-        faults.push(f);
+    let ipol_kind = ipol
+        .as_ref()
+        .and_then(|s| s.fault_info.as_ref())
+        .map(|f| (f.kind.clone(), f.peer.clone()));
+    // A stop the launcher names itself (the operator, its own death) is not repeated.
+    let stop_named = primary.is_some()
+        && ipol_kind
+            .as_ref()
+            .is_some_and(|(k, _)| k == "stop_requested" || k == "launcher_gone");
+    let mut order = vec!["interpolator", "servo-sim", "interpreter"];
+    if let Some((k, Some(peer))) = &ipol_kind {
+        let peer_fault = match peer.as_str() {
+            "servo-sim" => servo.as_ref().is_some_and(|s| s.fault.is_some()),
+            "interpreter" => interp.as_ref().is_some_and(|s| s.fault.is_some()),
+            _ => false,
+        };
+        if (k == "peer_gone" || k == "peer_silent") && peer_fault {
+            order.retain(|r| r != peer);
+            order.insert(
+                0,
+                if peer == "servo-sim" {
+                    "servo-sim"
+                } else {
+                    "interpreter"
+                },
+            );
+        }
     }
-    for (role, outcome) in [
-        ("interpreter", interp.as_ref().map(|s| s.fault.clone())),
-        ("interpolator", ipol.as_ref().map(|s| s.fault.clone())),
-        ("servo-sim", servo.as_ref().map(|s| s.fault.clone())),
-    ] {
+    let ipol_faulted = ipol.as_ref().is_some_and(|s| s.fault.is_some());
+    let mut faults: Vec<String> = primary.into_iter().collect();
+    let mut missing: Vec<String> = Vec::new();
+    for role in order {
+        let outcome = match role {
+            "interpreter" => interp.as_ref().map(|s| s.fault.clone()),
+            "interpolator" => ipol.as_ref().map(|s| s.fault.clone()),
+            _ => servo.as_ref().map(|s| s.fault.clone()),
+        };
         match outcome {
-            None => faults.push(format!("{role} wrote no summary")),
+            None => missing.push(format!("{role} wrote no summary")),
+            Some(Some(_)) if stop_named && role != "servo-sim" => {}
+            // The interpreter's "the interpolator stopped" says nothing the
+            // interpolator's own fault does not.
+            Some(Some(_)) if role == "interpreter" && ipol_faulted && interp_followed(&interp) => {}
             Some(Some(f)) => faults.push(format!("{role}: {f}")),
             Some(None) => {}
         }
     }
+    if faults.is_empty() {
+        faults.extend(exit_fault);
+    }
+    faults.extend(missing);
     faults.dedup();
     let fault = (!faults.is_empty()).then(|| faults.join("; "));
+    let traced = (ipol.is_none() || servo.is_none()).then(|| TraceFigures::read(dir, period_ns));
     let i = ipol.as_ref();
     // After every process has ended: the traces are complete and nothing runs in real time.
     let traces = crate::contour::read_dir(dir).ok();
@@ -226,19 +358,45 @@ pub fn assemble(
         program: program.to_string(),
         clock: clock.name().into(),
         period_ns,
-        cycles: i.map_or(0, |s| s.cycles),
+        cycles: i.map_or(traced.map_or(0, |t| t.cycles), |s| s.cycles),
         misses: i.and_then(|s| s.misses),
         wake_late_ns: i.and_then(|s| s.wake_late_ns),
         compute_ns: i.and_then(|s| s.compute_ns),
         publish_ns: i.and_then(|s| s.publish_ns),
-        path_length_mm: i.map_or(0.0, |s| s.path_length_mm),
-        time_s: i.map_or(0.0, |s| s.time_s),
-        avg_feed_mm_per_min: i.map_or(0.0, |s| s.avg_feed_mm_per_min),
-        peak_feed_mm_per_min: i.map_or(0.0, |s| s.peak_feed_mm_per_min),
-        max_following_error_um: servo.as_ref().map_or(0.0, |s| s.max_following_error_um),
-        max_following_error_axis_um: servo
-            .as_ref()
-            .map_or([0.0; 3], |s| s.max_following_error_axis_um),
+        path_length_mm: i.map_or(traced.map_or(0.0, |t| t.path_length_mm), |s| {
+            s.path_length_mm
+        }),
+        time_s: i.map_or(
+            traced.map_or(0.0, |t| (t.cycles * period_ns) as f64 * 1e-9),
+            |s| s.time_s,
+        ),
+        avg_feed_mm_per_min: i.map_or(
+            traced.map_or(0.0, |t| {
+                let s = (t.cycles * period_ns) as f64 * 1e-9;
+                if s > 0.0 {
+                    t.path_length_mm / s * 60.0
+                } else {
+                    0.0
+                }
+            }),
+            |s| s.avg_feed_mm_per_min,
+        ),
+        peak_feed_mm_per_min: i.map_or(traced.map_or(0.0, |t| t.peak_speed_mm_per_s * 60.0), |s| {
+            s.peak_feed_mm_per_min
+        }),
+        max_following_error_um: servo.as_ref().map_or(
+            traced.map_or(0.0, |t| {
+                t.max_following_error_axis_um
+                    .iter()
+                    .fold(0.0, |a: f64, b| a.max(*b))
+            }),
+            |s| s.max_following_error_um,
+        ),
+        max_following_error_axis_um: servo.as_ref().map_or(
+            traced.map_or([0.0; 3], |t| t.max_following_error_axis_um),
+            |s| s.max_following_error_axis_um,
+        ),
+        servo_sched: servo.as_ref().and_then(|s| s.sched.clone()),
         rms_following_error_axis_um: servo.as_ref().map(|s| s.rms_following_error_axis_um),
         max_contour_error_um: worst.map(|w| w.um),
         max_contour_error_cycle: worst.map(|w| w.cycle),
@@ -355,6 +513,75 @@ impl Report {
                 s.push_str(&format!("  warning      {w}\n"));
             }
         }
+        if let Some(sched) = &self.servo_sched {
+            for w in &sched.warnings {
+                s.push_str(&format!("  warning      servo-sim: {w}\n"));
+            }
+        }
         s
     }
+}
+
+/// Whether the interpreter only followed the interpolator's stop (its fault says so).
+fn interp_followed(interp: &Option<InterpreterSummary>) -> bool {
+    interp
+        .as_ref()
+        .and_then(|s| s.fault.as_deref())
+        .is_some_and(|f| f.starts_with("the interpolator stopped"))
+}
+
+/// When the launcher (`cnc run`) died: the interpreter, the survivor that runs this
+/// crate, waits for the interpolator's and the servo-sim's summaries (they finish the
+/// controlled stop after it has left) and writes `report.json` and `report.html` in the
+/// launcher's place, so the run directory says why the run stopped.
+pub fn write_orphan_report(dir: &Path, program: &str, period_ns: u64) -> Result<(), String> {
+    let t = std::time::Instant::now();
+    while t.elapsed() < std::time::Duration::from_secs(15)
+        && !(dir.join("interpolator.json").exists() && dir.join("servo.json").exists())
+    {
+        std::thread::sleep(std::time::Duration::from_millis(20));
+    }
+    // A summary is written in one call, but give a writer caught mid-write a moment.
+    std::thread::sleep(std::time::Duration::from_millis(50));
+    let ipol: Option<InterpSummary> = read(&dir.join("interpolator.json"));
+    let clock = match ipol.as_ref().map(|s| s.clock.as_str()) {
+        Some("sim") => ClockMode::Sim,
+        _ => ClockMode::Real,
+    };
+    let primary = match ipol.as_ref().and_then(|s| s.fault.clone()) {
+        Some(f) if f.starts_with("stopped: the launcher") => f,
+        _ => "stopped: the launcher (cnc run) died; the interpolator's summary does not say when"
+            .into(),
+    };
+    let processes = [
+        ("interpreter", Some(std::process::id())),
+        ("interpolator", ipol.as_ref().map(|s| s.pid)),
+        (
+            "servo-sim",
+            read::<ServoSummary>(&dir.join("servo.json")).map(|s| s.pid),
+        ),
+    ]
+    .into_iter()
+    .filter_map(|(role, pid)| {
+        Some(Process {
+            role: role.into(),
+            pid: pid?,
+            exit: "unknown (the launcher that would have waited for it died)".into(),
+        })
+    })
+    .collect();
+    let mut rep = assemble(
+        dir,
+        program,
+        clock,
+        period_ns,
+        processes,
+        Some(format!("{primary} (report written by the interpreter)")),
+        None,
+    );
+    rep.outcome = "fault".into();
+    rep.write(&dir.join("report.json"))
+        .map_err(|e| format!("writing report.json: {e}"))?;
+    crate::html::write(dir, None).map_err(|e| format!("writing report.html: {e}"))?;
+    Ok(())
 }

@@ -1,6 +1,7 @@
 //! Command-line arguments of the servo-sim process (also a role of `cnc`).
 
 use crate::run::{self, Config, ServoClock};
+use interpolator::rt::sched::{servo_priority, SchedMode, DEFAULT_PRIORITY};
 use shared::clock::ClockMode;
 use std::path::PathBuf;
 use std::time::Duration;
@@ -26,6 +27,14 @@ pub struct Args {
     /// (the drives' own period; a late set-point is held, as real drives do).
     #[arg(long, value_enum, default_value_t = ServoClock::Lockstep)]
     pub servo_clock: ServoClock,
+    /// Scheduling of the drive loop (real clock): `auto` tries SCHED_FIFO and locked
+    /// memory as the interpolator does, and falls back with a warning.
+    #[arg(long, value_enum, default_value_t = SchedMode::Auto)]
+    pub sched: SchedMode,
+    /// SCHED_FIFO priority (1..=99) of the drive loop; `cnc run` gives it ten below the
+    /// interpolator's (see `interpolator::rt::sched::servo_priority`).
+    #[arg(long, default_value_t = servo_priority(DEFAULT_PRIORITY), value_parser = clap::value_parser!(i32).range(1..=99))]
+    pub rt_priority: i32,
 }
 
 pub fn run(args: &Args, machine: shared::Machine) -> anyhow::Result<()> {
@@ -37,6 +46,8 @@ pub fn run(args: &Args, machine: shared::Machine) -> anyhow::Result<()> {
         machine,
         clock: args.clock,
         servo_clock: args.servo_clock,
+        sched: args.sched,
+        rt_priority: args.rt_priority,
         start_timeout: Duration::from_secs(30),
         // Set-points come every period under the real clock: 100 ms of silence means the
         // interpolator is gone. The simulated clock may pause while blocks are late.

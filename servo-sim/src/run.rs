@@ -46,6 +46,11 @@ pub struct Config {
     pub machine: Machine,
     pub clock: ClockMode,
     pub servo_clock: ServoClock,
+    /// Scheduling of the drive loop under the real clock (the simulated clock runs plain,
+    /// as the interpolator does: it spins, and spinning at SCHED_FIFO invites throttling).
+    pub sched: interpolator::rt::sched::SchedMode,
+    /// SCHED_FIFO priority when real-time scheduling is granted.
+    pub rt_priority: i32,
     /// How long to wait for the first set-point.
     pub start_timeout: Duration,
     /// Silence after which the interpolator is taken for dead (drives hold position).
@@ -77,6 +82,10 @@ pub struct Summary {
     /// Own clock only: set-points overtaken by a newer one before a tick used them.
     #[serde(default)]
     pub skipped_setpoints: u64,
+    /// The drive loop's scheduling as granted (policy, priority, locked memory, warnings);
+    /// null in files older than it.
+    #[serde(default)]
+    pub sched: Option<interpolator::rt::sched::SchedReport>,
 }
 
 #[derive(Debug, Clone, Copy)]
@@ -218,6 +227,18 @@ pub fn run<S: Service>(cfg: &Config) -> Result<Summary, IpcError> {
     )
     .map_err(io)?;
     let mut drives = Drives::new(cfg.machine.clone(), cfg.period_ns);
+    // The drive loop gets the interpolator's real-time set-up (unpinned, a priority
+    // below its): starved of the CPU, the drives would go silent and fault a healthy run.
+    // Its trace writer, started above, stays SCHED_OTHER.
+    let sched_mode = if sim {
+        interpolator::rt::sched::SchedMode::Other
+    } else {
+        cfg.sched
+    };
+    let sched = interpolator::rt::sched::setup_with(sched_mode, cfg.rt_priority, false);
+    for w in &sched.warnings {
+        tracing::warn!("servo-sim: {w}");
+    }
     let mut fault: Option<String> = None;
     let mut count = 0u64;
     let mut last_seen = Instant::now();
@@ -331,9 +352,12 @@ pub fn run<S: Service>(cfg: &Config) -> Result<Summary, IpcError> {
                 break;
             }
         }
-        if !done && shared::stop::requested() {
+        // Only SIGTERM stops the drives here: on a SIGINT (a terminal's Ctrl-C reaches
+        // every process) or the launcher's death the interpolator brakes on the path, and
+        // the drives follow it to its last set-point.
+        if !done && shared::stop::terminate_requested() {
             fault = Some(format!(
-                "stopped on request (SIGTERM/SIGINT) after {count} set-points; drives hold position"
+                "stopped on request (SIGTERM) after {count} set-points; drives hold position"
             ));
             done = true;
         }
@@ -355,10 +379,18 @@ pub fn run<S: Service>(cfg: &Config) -> Result<Summary, IpcError> {
             cfg.idle_timeout
         };
         if !done && last_seen.elapsed() > limit {
-            fault = Some(format!(
-                "no set-point for {:.1} s after {count} set-points: the interpolator is dead or stalled; drives hold position",
-                limit.as_secs_f64()
-            ));
+            fault = Some(if count == 0 {
+                format!(
+                    "no set-point came within {:.1} s of the start: the interpolator never started moving; drives hold position",
+                    limit.as_secs_f64()
+                )
+            } else {
+                format!(
+                    "the interpolator sent no set-point for {:.1} s after set-point cycle {} although its process is alive: it was starved of CPU time (this machine is too loaded) or suspended; drives hold position. Check the machine with `cnc latency-test`, or run with `--clock sim`",
+                    limit.as_secs_f64(),
+                    last_cycle.unwrap_or(0)
+                )
+            });
             done = true;
         }
     }
@@ -379,6 +411,7 @@ pub fn run<S: Service>(cfg: &Config) -> Result<Summary, IpcError> {
         servo_clock: cfg.servo_clock.to_string(),
         held_ticks,
         skipped_setpoints: skipped,
+        sched: Some(sched),
     };
     let text = serde_json::to_string_pretty(&summary).map_err(|e| IpcError(e.to_string()))?;
     std::fs::write(cfg.out_dir.join("servo.json"), text).map_err(io)?;

@@ -8,9 +8,15 @@ use std::sync::OnceLock;
 /// The `cnc` executable of this build, built first if needed. `CARGO_BIN_EXE_cnc` exists
 /// only for tests of the package that owns the binary, so this asks Cargo (a no-op when
 /// it is up to date) and takes the file from the target directory of this test binary.
+///
+/// `CNC_EXE=/path/to/cnc` runs the tests against another build instead (to check that a
+/// test fails on an older one).
 pub fn cnc_exe() -> PathBuf {
     static EXE: OnceLock<PathBuf> = OnceLock::new();
     EXE.get_or_init(|| {
+        if let Some(exe) = std::env::var_os("CNC_EXE") {
+            return PathBuf::from(exe);
+        }
         let me = std::env::current_exe().expect("test executable path");
         // target/<profile>/deps/<test> -> target/<profile>
         let profile_dir = me
@@ -138,4 +144,25 @@ pub fn complete_csv(path: &Path) -> Vec<Vec<f64>> {
             row
         })
         .collect()
+}
+
+/// Whether the process `pid` has ended (gone, or a zombie waiting to be reaped).
+pub fn process_ended(pid: u32) -> bool {
+    match std::fs::read_to_string(format!("/proc/{pid}/stat")) {
+        Err(_) => true,
+        Ok(stat) => stat
+            .rfind(')')
+            .and_then(|i| stat[i + 1..].split_whitespace().next())
+            .is_none_or(|state| state == "Z" || state == "X"),
+    }
+}
+
+/// Sends `signal` to `pid`; panics if that fails.
+pub fn signal(pid: u32, signal: i32) {
+    // SAFETY: kill(2) on a process the test started (or one of its children).
+    assert_eq!(
+        unsafe { libc::kill(pid as libc::pid_t, signal) },
+        0,
+        "kill({pid}, {signal})"
+    );
 }

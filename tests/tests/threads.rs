@@ -28,6 +28,8 @@ fn run_stack(
         machine: Machine::default(),
         clock: ClockMode::Real,
         servo_clock: servo_sim::run::ServoClock::Lockstep,
+        sched: SchedMode::Other,
+        rt_priority: 1,
         start_timeout: Duration::from_secs(20),
         idle_timeout: Duration::from_secs(5),
     };

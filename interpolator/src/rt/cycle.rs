@@ -356,6 +356,9 @@ pub fn run_with<S: Service>(cfg: &Config, hooks: Hooks) -> Result<Summary, RunEr
 
     let mut fault: Option<Fault> = None;
     let mut info: Option<FaultRecord> = None;
+    // Whether the servo-sim's process was found gone when the stop began (a silent one
+    // that is alive was starved or suspended).
+    let mut servo_dead = false;
     let mut answers = Answers::default();
     let mut lines = [0u32; LINE_RING];
     // Under the simulated clock: once the drives are gone or silent, stop waiting for them.
@@ -418,6 +421,7 @@ pub fn run_with<S: Service>(cfg: &Config, hooks: Hooks) -> Result<Summary, RunEr
         let mut begin_stop = |f: Fault, engine: &mut Engine| {
             if !engine.stopping() {
                 info = Some(FaultRecord::at(f, cycle, engine, answers.last_cycle));
+                servo_dead = watch.servo_gone();
                 engine.stop();
             }
         };
@@ -565,20 +569,39 @@ pub fn run_with<S: Service>(cfg: &Config, hooks: Hooks) -> Result<Summary, RunEr
         )
     };
     deadline.write(&cfg.out_dir)?;
+    // The fault in words, after the loop (who asked for a stop, a starved drive).
+    let request = shared::stop::request();
+    let fault_info = info.map(|r| {
+        let mut i = FaultInfo::new(&r, cycle);
+        i.kind = crate::rt::words::kind(&r.fault, request).into();
+        i
+    });
+    let silence_ns = if sim {
+        SIM_TIMEOUT_NS
+    } else {
+        lag_limit * cfg.period_ns
+    };
+    let fault_text = fault.map(|f| {
+        crate::rt::words::fault_text(
+            &f,
+            fault_info.as_ref(),
+            request,
+            servo_dead,
+            silence_ns / 1_000_000,
+            cfg.period_ns,
+        )
+    });
     let summary = Summary::new(
         cfg,
         cycle + 1,
         (!sim).then_some((&timing, &misses[..])),
         &feed,
-        fault.map(|f| f.to_string()),
+        fault_text,
         sched_report,
         dropped,
         answers.max_ferr_mm,
     )
-    .with_faults(
-        info.map(|r| FaultInfo::new(&r, cycle)),
-        engine.starvations(),
-    )
+    .with_faults(fault_info, engine.starvations())
     .with_fluctuation(engine.fluctuation());
     summary.write(&cfg.out_dir.join("interpolator.json"))?;
     Ok(summary)

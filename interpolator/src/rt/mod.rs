@@ -5,3 +5,4 @@ pub mod latency;
 pub mod preempt;
 pub mod sched;
 pub mod watch;
+pub mod words;

@@ -35,7 +35,25 @@ fn errno_text() -> String {
 /// the threaded IRQ handlers (50) and most kernel threads, below the watchdogs (99).
 pub const DEFAULT_PRIORITY: i32 = 80;
 
+/// SCHED_FIFO priority of the servo-sim's drive loop for an interpolator at `priority`:
+/// ten below it (70 by default). The interpolator owns the clock: a drive step must never
+/// delay the set-point being computed, and the servo-sim has the rest of the period to
+/// answer. Still above the threaded IRQ handlers (50), so that a loaded desktop cannot
+/// starve the drives (a 416 s job was once aborted at 229 s because the servo-sim ran
+/// SCHED_OTHER). Never below 1.
+pub fn servo_priority(priority: i32) -> i32 {
+    (priority - 10).max(1)
+}
+
+/// The real-time set-up of the interpolator's cycle thread (pinned to the last CPU).
 pub fn setup(mode: SchedMode, priority: i32) -> SchedReport {
+    setup_with(mode, priority, true)
+}
+
+/// The real-time set-up of the calling thread: locked memory, 1 ns timer slack, and in
+/// `Auto` mode SCHED_FIFO at `priority`, pinned to the last allowed CPU when `pin`. The
+/// servo-sim takes it unpinned: it may run on any CPU the interpolator leaves free.
+pub fn setup_with(mode: SchedMode, priority: i32, pin: bool) -> SchedReport {
     let mut rep = SchedReport {
         policy: "other".into(),
         priority: 0,
@@ -71,7 +89,8 @@ pub fn setup(mode: SchedMode, priority: i32) -> SchedReport {
                 // processes stay free to use every CPU.
                 let size = core::mem::size_of::<libc::cpu_set_t>();
                 let mut allowed: libc::cpu_set_t = core::mem::zeroed();
-                if libc::sched_getaffinity(0, size, &mut allowed) == 0
+                if pin
+                    && libc::sched_getaffinity(0, size, &mut allowed) == 0
                     && libc::CPU_COUNT(&allowed) > 1
                 {
                     // The highest CPU this process may use (containers restrict the set).
