@@ -12,7 +12,6 @@
 use criterion::{criterion_group, criterion_main, Criterion, Throughput};
 use interpreter::process;
 use interpreter::program::{self, Options};
-use shared::Machine;
 use std::time::Duration;
 
 mod programs;
@@ -21,7 +20,7 @@ const LINES: usize = 100_000;
 const PERIOD_NS: u64 = 1_000_000;
 
 fn bench(c: &mut Criterion) {
-    let machine = Machine::default();
+    let machine = programs::long_x_machine();
     let mut programs = vec![
         ("plain_g1".to_string(), programs::plain_g1(LINES)),
         ("mixed".to_string(), programs::mixed(LINES)),

@@ -19,6 +19,7 @@
 //! ([`Plannable`]) and [`commands`] gives the [`CommandBlock`]s.
 
 pub mod block;
+pub mod check;
 
 pub use block::{commands, Block, Straight};
 

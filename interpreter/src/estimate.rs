@@ -45,6 +45,18 @@ pub fn estimate(
     machine: &Machine,
     period_ns: u64,
 ) -> Result<Estimate, String> {
+    estimate_up_to(blocks, machine, period_ns, u64::MAX)?
+        .ok_or_else(|| "the program did not end in 2^64 cycles".to_string())
+}
+
+/// [`estimate`], stopped after `max_cycles` cycles: `None` if the program has not ended
+/// by then (the property tests step long programs only so far).
+pub fn estimate_up_to(
+    blocks: &[CommandBlock],
+    machine: &Machine,
+    period_ns: u64,
+    max_cycles: u64,
+) -> Result<Option<Estimate>, String> {
     let lim = Limits::new(machine, period_ns);
     let mut engine = Engine::new(lim, [0.0; 3]);
     let mut src = Slice(blocks, 0);
@@ -77,6 +89,7 @@ pub fn estimate(
         }
         match t.state {
             TickState::Done => break,
+            TickState::Running if cycles >= max_cycles => return Ok(None),
             TickState::Running => {}
             // All blocks are in hand from the start, so the engine can only starve if the
             // block list lacks its end.
@@ -90,11 +103,11 @@ pub fn estimate(
                 .iter()
                 .any(|b| b.source_line == m.line && b.flags & FLAG_RAPID != 0);
     }
-    Ok(Estimate {
+    Ok(Some(Estimate {
         period_ns,
         cycles,
         time_s: (cycles * period_ns) as f64 * 1e-9,
         path_length_mm: total,
         moves,
-    })
+    }))
 }

@@ -96,20 +96,13 @@ pub fn check_with(
     let prog = program::interpret_with(text, opts)?;
     let mut blocks = blocks::build(&prog.moves, machine);
     // Nothing leaves this process unless a receiver would accept it: every block is
-    // validated as soon as the plan is done with it (last to first).
-    let mut bad = Vec::new();
+    // validated, and kept within the machine's travel, as soon as the plan is done with
+    // it (last to first).
+    let mut check = blocks::check::Checker::new(text, machine);
     blocks::plan_and(&mut blocks, machine, period_ns, |seq, b| {
-        if let Err(e) = b.validate(seq as u64) {
-            bad.push(Diagnostic {
-                file: None,
-                line: b.source_line(),
-                col: 1,
-                rule: "internal",
-                message: e.to_string(),
-            });
-        }
+        check.block(seq, b)
     });
-    bad.reverse();
+    let bad = check.finish();
     if bad.is_empty() {
         Ok((prog, blocks))
     } else {

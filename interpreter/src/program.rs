@@ -34,6 +34,7 @@ use crate::parse::{flow, Diagnostic, LineReader, OKind, Params, Word};
 pub use dialect::Dialect;
 use dialect::DialectState;
 use flow::Runner;
+use shared::machine::{shown, MIN_FEED_MM_PER_MIN};
 
 /// The plane of arcs and NURBS, by the axis normal to it.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -239,6 +240,11 @@ struct State {
 const MAX_LINE_BYTES: usize = 252;
 
 const AXES: [char; 3] = ['X', 'Y', 'Z'];
+
+/// The longest dwell, s: a day. Longer is surely a mistake (a `G4 P` in milliseconds
+/// read as seconds), and a dwell becomes a whole number of nanoseconds: 584 years at
+/// most.
+const MAX_DWELL_S: f64 = 86_400.0;
 const OFFSETS: [char; 3] = ['I', 'J', 'K'];
 
 struct LineWords<'a> {
@@ -469,7 +475,20 @@ pub fn interpret_with(text: &str, opts: &Options) -> Result<Program, Vec<Diagnos
         }
         errors.append(&mut st.deferred);
         if st.inverse_time {
-            feed::inverse_time(&mut prog.moves[before..]);
+            if let Some((length, mm_per_min)) = feed::inverse_time(&mut prog.moves[before..]) {
+                errors.push(lw.err(
+                    "G93",
+                    lw.get('F').map_or(lw.first_col(), |f| f.col),
+                    format!(
+                        "inverse time: this {} mm move in 1/F minutes is a feed of \
+                         {} mm/min, below the slowest feed, {MIN_FEED_MM_PER_MIN} \
+                         mm/min (LinuxCNC raises such a feed to its floor of 0.1 units a \
+                         minute; here F must ask for it): raise F or merge the move",
+                        shown(length),
+                        shown(mm_per_min)
+                    ),
+                ));
+            }
         }
         for (p, v) in &parsed.assignments {
             params.set(p, *v);
@@ -978,6 +997,22 @@ fn motion(
                 format!("dwell time {} must not be negative", word.letter),
             ));
         }
+        // A `G4 P` read before the dialect is known may yet be milliseconds.
+        let least = if st.dwells_in_doubt.last() == Some(&moves.len()) {
+            seconds / 1000.0
+        } else {
+            seconds
+        };
+        if least.is_nan() || least > MAX_DWELL_S {
+            return Err(lw.err(
+                "G4",
+                word.col,
+                format!(
+                    "dwell of {} s is longer than a day ({MAX_DWELL_S} s)",
+                    shown(seconds)
+                ),
+            ));
+        }
         moves.push(Move::Dwell {
             line: lw.line,
             seconds,
@@ -1007,7 +1042,7 @@ fn motion(
     // the centre form, refused by `arc` in the radius form or with neither.
     let arc_in_place = !has_axis && matches!(here, Some(Motion::Arc { .. }));
     if (has_axis || arc_in_place) && codes.dwell.is_none() {
-        let mut target = target(st, lw, unit);
+        let mut target = target(st, lw, unit)?;
         let col = motion_word.map_or_else(|| lw.first_col(), |m| m.col);
         if !matches!(st.motion, Motion::Cubic) {
             st.g5_tangent = None;
@@ -1078,15 +1113,90 @@ fn need_feed(st: &State, lw: &LineWords, col: u32) -> Result<(), Diagnostic> {
             "feed move with no feed rate: program F before (or on) this line",
         ));
     }
+    if st.feed < MIN_FEED_MM_PER_MIN {
+        return Err(lw.err(
+            "feed",
+            lw.get('F').map_or(col, |f| f.col),
+            format!(
+                "feed {} mm/min is below the slowest feed, {MIN_FEED_MM_PER_MIN} mm/min \
+                 (LinuxCNC's floor): a millimetre would take over ten minutes",
+                shown(st.feed)
+            ),
+        ));
+    }
     Ok(())
 }
 
-fn target(st: &State, lw: &LineWords, unit: f64) -> [f64; 3] {
-    core::array::from_fn(|i| match lw.value(AXES[i]) {
-        Some(v) if st.absolute => v * unit,
-        Some(v) => st.pos[i] + v * unit,
-        None => st.pos[i],
-    })
+/// The farthest from the origin a position the program names may be, mm: the longest
+/// travel any machine file may give ([`shared::machine::MAX_TRAVEL_MM`]). The machine's
+/// own travel is checked on the blocks; this bound keeps every number the planner sees
+/// far from where a `f64` overflows or stops resolving a micrometre.
+pub const MAX_POSITION_MM: f64 = shared::machine::MAX_TRAVEL_MM;
+
+/// The farthest from the origin an arc centre or a curve's control point may be, mm:
+/// ten times [`MAX_POSITION_MM`] (a flat arc's centre, a control point that pulls a
+/// curve, may lie off the travel while the path stays on it).
+pub const MAX_REACH_MM: f64 = 10.0 * MAX_POSITION_MM;
+
+/// Where the line's axis words take the tool; refused beyond [`MAX_POSITION_MM`], at
+/// the axis word that goes too far.
+fn target(st: &State, lw: &LineWords, unit: f64) -> Result<[f64; 3], Diagnostic> {
+    let mut to = st.pos;
+    for (i, axis) in AXES.iter().enumerate() {
+        if let Some(w) = lw.get(*axis) {
+            to[i] = if st.absolute {
+                w.value * unit
+            } else {
+                st.pos[i] + w.value * unit
+            };
+            if to[i].is_nan() || to[i].abs() > MAX_POSITION_MM {
+                return Err(lw.err(
+                    "range",
+                    w.col,
+                    format!(
+                        "{axis} takes the tool to {} mm, beyond the ±{MAX_POSITION_MM} mm any machine's travel may have",
+                        shown(to[i])
+                    ),
+                ));
+            }
+        }
+    }
+    Ok(to)
+}
+
+/// The lightest and the heaviest weight of a NURBS control point. A weight pulls the
+/// curve towards its point against its neighbours'; a million times another's (1e300
+/// against 1e-300 made the path NaN) is no curve CAM writes or a machine can follow.
+const WEIGHTS: (f64, f64) = (1e-3, 1e3);
+
+fn weight_ok(w: f64) -> bool {
+    (WEIGHTS.0..=WEIGHTS.1).contains(&w)
+}
+
+/// The rule a weight word `letter` broke.
+fn weight_rule(letter: char) -> String {
+    format!(
+        "weight {letter} must be > 0, from {} to {} (its pull on the curve against the other points')",
+        WEIGHTS.0, WEIGHTS.1
+    )
+}
+
+/// Refuses a point (an arc centre, a control point) farther than [`MAX_REACH_MM`] from
+/// the origin, at column `col`.
+fn within_reach(lw: &LineWords, col: u32, what: &str, p: [f64; 3]) -> Result<(), Diagnostic> {
+    if p.iter().all(|v| v.abs() <= MAX_REACH_MM) {
+        return Ok(());
+    }
+    Err(lw.err(
+        "range",
+        col,
+        format!(
+            "{what} lies at ({}, {}, {}) mm, beyond ±{MAX_REACH_MM} mm: no machine's path reaches out there",
+            shown(p[0]),
+            shown(p[1]),
+            shown(p[2])
+        ),
+    ))
 }
 
 fn push_line(

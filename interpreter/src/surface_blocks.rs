@@ -709,15 +709,20 @@ pub fn part_blocks(
 ) -> Result<(Vec<CommandBlock>, f64), Vec<StepError>> {
     let planned = crate::step::check::plan_part(text)?;
     let mut blocks = Vec::new();
-    let mut pos = [0.0; 3];
+    let mut pos = crate::blocks::check::START_MM;
     let mut scallop: f64 = 0.0;
     let mut last_line = 0;
+    let mut travel = start_travel_error(machine).into_iter().collect::<Vec<_>>();
     for (step, sp) in &planned {
         let (b, end) = step_commands(step, sp, machine, pos).map_err(|e| vec![e])?;
+        travel.extend(travel_errors(step, &b, machine));
         blocks.extend(b);
         pos = end;
         scallop = scallop.max(sp.predicted_scallop_mm());
         last_line = step.line;
+    }
+    if !travel.is_empty() {
+        return Err(travel);
     }
     blocks.push(CommandBlock::empty(BlockKind::ProgramEnd, 0, last_line));
     crate::blocks::plan(&mut blocks, machine, period_ns);
@@ -738,6 +743,50 @@ pub fn part_blocks(
     } else {
         Err(errs)
     }
+}
+
+/// The machine's start (the origin) outside its travel, as the error of a part.
+pub fn start_travel_error(machine: &Machine) -> Option<StepError> {
+    crate::blocks::check::start_outside(machine).map(|message| StepError {
+        line: 1,
+        id: None,
+        rule: "travel",
+        message,
+    })
+}
+
+/// The blocks of workingstep `step` whose path leaves the machine's travel (as
+/// [`shared::travel::check_block`] judges them, the interpolator's own check), each as
+/// an error naming the workingstep: the first on each line of the file, so that a pass
+/// grid beyond a limit is not reported a thousand times.
+pub fn travel_errors(
+    step: &FreeformStep,
+    blocks: &[CommandBlock],
+    machine: &Machine,
+) -> Vec<StepError> {
+    let mut errs: Vec<StepError> = Vec::new();
+    for b in blocks {
+        if let Err(e) = shared::travel::check_block(b, &machine.axes) {
+            if errs.last().is_some_and(|l| l.line == b.source_line) {
+                continue;
+            }
+            let what = if b.is_surface() {
+                "a pass over the surface"
+            } else {
+                "a rapid move of the lifts"
+            };
+            errs.push(StepError {
+                line: b.source_line,
+                id: Some(step.id),
+                rule: "travel",
+                message: format!(
+                    "{what} of workingstep '{}' leaves the machine's travel: {e}",
+                    step.name
+                ),
+            });
+        }
+    }
+    errs
 }
 
 /// The parts of an axis-parallel segment on each patch, in the segment's direction, in

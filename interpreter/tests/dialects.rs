@@ -906,3 +906,56 @@ fn a_dwell_lasts_what_its_dialect_says() {
     let e = errors("G4 P-1\nM2\n");
     assert_eq!(e[0].2, "G4: dwell time P must not be negative");
 }
+
+/// Issue #22: a LinuxCNC `G6.2` whose inner knot is repeated as often as the order is
+/// two curves that need not meet (the run jumped 1.414 mm in one cycle); it is refused
+/// at the knot that completes the run, as Fanuc's twin is (PS1008), whether the knot is
+/// written out, computed, or read in a subroutine file. A knot repeated once less (a
+/// corner) still reads, and so does a run of the order at the ends.
+#[test]
+fn g6_2_inner_knot_repeated_order_times_is_refused_at_that_knot() {
+    let curve = |k: &str| {
+        format!(
+            "G1 F100\nG6.2 X0 Y0 R1 K0 P3 Q1\nX1 Y1 R1 K0\nX2 Y0 R1 K0\nX3 Y1 R1 K1\nX4 Y0 R1 {k}\nX5 Y1 R1 K1\nG6.2 K2\nG6.2 K2\nG6.2 K2\nM2\n"
+        )
+    };
+    let e = errors(&curve("K1"));
+    assert_eq!(e.len(), 1, "{e:?}");
+    assert_eq!((e[0].0, e[0].1), (7, 10), "{e:?}");
+    assert!(
+        e[0].2
+            .starts_with("G6.2: knot K1 is repeated 3 times inside the NURBS opened on line 2"),
+        "{e:?}"
+    );
+    let e = errors(&curve("K[2/2]"));
+    assert_eq!((e[0].0, e[0].1), (7, 10), "{e:?}");
+    // Once less: a corner, one curve.
+    let two = "G1 F100\nG6.2 X0 Y0 R1 K0 P3 Q1\nX1 Y1 R1 K0\nX2 Y0 R1 K0\nX3 Y1 R1 K1\nX4 Y0 R1 K1\nG6.2 K2\nG6.2 K2\nG6.2 K2\nM2\n";
+    assert!(read_as(two, None).is_ok());
+    // The order plus one at the start leaves the first control point out of the curve.
+    let e =
+        errors("G1 F100\nG6.2 X0 Y0 R1 K0 P2 Q1\nX1 Y1 R1 K0\nX2 Y0 R1 K0\nG6.2 K1\nG6.2 K1\nM2\n");
+    assert_eq!((e[0].0, e[0].1), (4, 10), "{e:?}");
+    assert!(e[0].2.contains("at an end"), "{e:?}");
+    // A knot smaller than the one before it is named where it stands.
+    let e =
+        errors("G1 F100\nG6.2 X0 Y0 R1 K0 P2 Q1\nX1 Y1 R1 K2\nX2 Y0 R1 K1\nG6.2 K3\nG6.2 K3\nM2\n");
+    assert_eq!((e[0].0, e[0].1), (4, 10), "{e:?}");
+    assert!(e[0].2.contains("must not decrease"), "{e:?}");
+    // In a subroutine file: named in that file, at its line.
+    let dir = temp_dir("g62knot");
+    write(
+        &dir,
+        "jump.ngc",
+        "o<jump> sub\nG6.2 X0 Y0 R1 K0 P2 Q1\nX1 Y1 R1 K0\nX2 Y0 R1 K1\nX3 Y1 R1 K1\nG6.2 K2\nG6.2 K2\no<jump> endsub\n",
+    );
+    let e = with_dirs("G1 F100\no<jump> call\nM2\n", &[&dir]).expect_err("refused");
+    let shown = interpreter::process::format_diagnostics("main.ngc", &e);
+    let jump = dir.join("jump.ngc").display().to_string();
+    assert!(
+        shown.starts_with(&format!(
+            "{jump}:5:10: G6.2: knot K1 is repeated 2 times inside"
+        )),
+        "{shown}"
+    );
+}

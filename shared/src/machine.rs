@@ -217,56 +217,98 @@ impl Machine {
         Ok(m)
     }
 
-    /// Every limit positive and finite.
+    /// Every number within the range a machine can have ([`RANGES`], [`MAX_TRAVEL_MM`],
+    /// [`MAX_SUBSTEPS`]); the error names the key, the range and the value found.
     pub fn check(&self) -> Result<(), String> {
         let s = &self.servo;
-        let named = [
-            ("rapid_mm_per_min", self.rapid_mm_per_min),
-            ("max_feed_mm_per_min", self.max_feed_mm_per_min),
-            ("path_acc_mm_per_s2", self.path_acc_mm_per_s2),
-            ("path_jerk_mm_per_s3", self.path_jerk_mm_per_s3),
-            ("chord_tolerance_mm", self.chord_tolerance_mm),
-            ("corner_angle_deg", self.corner_angle_deg),
-            ("max_following_error_mm", self.max_following_error_mm),
-            ("servo.kv_per_s", s.kv_per_s),
-            ("servo.vel_kp_n_per_mm_s", s.vel_kp_n_per_mm_s),
-            ("servo.vel_ti_ms", s.vel_ti_ms),
-            ("servo.force_limit_n", s.force_limit_n),
-            ("servo.encoder_resolution_mm", s.encoder_resolution_mm),
+        let mut named: Vec<(String, f64, &Range)> = vec![
+            ("rapid_mm_per_min".into(), self.rapid_mm_per_min, &FEED),
             (
-                "servo motor_inertia_kg + load_kg (or mass_kg)",
-                s.total_mass_kg(),
+                "max_feed_mm_per_min".into(),
+                self.max_feed_mm_per_min,
+                &FEED,
             ),
+            ("path_acc_mm_per_s2".into(), self.path_acc_mm_per_s2, &ACC),
+            (
+                "path_jerk_mm_per_s3".into(),
+                self.path_jerk_mm_per_s3,
+                &JERK,
+            ),
+            ("chord_tolerance_mm".into(), self.chord_tolerance_mm, &CHORD),
+            ("corner_angle_deg".into(), self.corner_angle_deg, &CORNER),
+            (
+                "max_following_error_mm".into(),
+                self.max_following_error_mm,
+                &FOLLOWING,
+            ),
+            ("servo.kv_per_s".into(), s.kv_per_s, &KV),
+            (
+                "servo.vel_kp_n_per_mm_s".into(),
+                s.vel_kp_n_per_mm_s,
+                &VEL_KP,
+            ),
+            ("servo.vel_ti_ms".into(), s.vel_ti_ms, &VEL_TI),
+            ("servo.force_limit_n".into(), s.force_limit_n, &FORCE),
+            (
+                "servo.encoder_resolution_mm".into(),
+                s.encoder_resolution_mm,
+                &ENCODER,
+            ),
+            (
+                "servo.motor_inertia_kg".into(),
+                s.motor_inertia_kg,
+                &PART_MASS,
+            ),
+            ("servo.load_kg".into(), s.load_kg, &PART_MASS),
+            (
+                "servo motor_inertia_kg + load_kg (or mass_kg)".into(),
+                s.total_mass_kg(),
+                &MASS,
+            ),
+            (
+                "servo.viscous_n_per_mm_s".into(),
+                s.viscous_n_per_mm_s,
+                &VISCOUS,
+            ),
+            ("servo.coulomb_n".into(), s.coulomb_n, &COULOMB),
+            ("servo.vel_ff".into(), s.vel_ff, &GAIN),
+            ("servo.acc_ff".into(), s.acc_ff, &GAIN),
         ];
-        let mut axis_named = vec![];
         for (axis, l) in ["x", "y", "z"].iter().zip(self.axes.as_array()) {
-            axis_named.push((
+            named.push((
                 format!("axes.{axis}.max_vel_mm_per_min"),
                 l.max_vel_mm_per_min,
+                &FEED,
             ));
-            axis_named.push((
+            named.push((
                 format!("axes.{axis}.max_acc_mm_per_s2"),
                 l.max_acc_mm_per_s2,
+                &ACC,
             ));
-            axis_named.push((
+            named.push((
                 format!("axes.{axis}.max_jerk_mm_per_s3"),
                 l.max_jerk_mm_per_s3,
+                &JERK,
             ));
+            named.push((format!("axes.{axis}.min_mm"), l.min_mm, &TRAVEL));
+            named.push((format!("axes.{axis}.max_mm"), l.max_mm, &TRAVEL));
         }
-        let named = named.iter().map(|(n, v)| (n.to_string(), *v));
-        for (name, v) in named.chain(axis_named) {
-            if !v.is_finite() || v <= 0.0 {
-                return Err(format!("{name} must be a positive number, got {v}"));
-            }
+        for (name, v, range) in named {
+            range.check(&name, v)?;
         }
         for (axis, l) in ["x", "y", "z"].iter().zip(self.axes.as_array()) {
-            if !l.min_mm.is_finite() || !l.max_mm.is_finite() || l.min_mm >= l.max_mm {
+            if l.min_mm >= l.max_mm {
                 return Err(format!(
-                    "axes.{axis}: the travel min_mm ({}) must be below max_mm ({}), both \
-                     finite",
+                    "axes.{axis}: the travel min_mm ({}) must be below max_mm ({})",
                     l.min_mm, l.max_mm
                 ));
             }
+        }
+        if self.max_period_us > MAX_PERIOD_US {
+            return Err(format!(
+                "max_period_us must be at most {MAX_PERIOD_US} (a tenth of a second), got {}",
+                self.max_period_us
+            ));
         }
         if self.min_period_us == 0 || self.min_period_us > self.max_period_us {
             return Err(format!(
@@ -280,26 +322,15 @@ impl Machine {
                 self.lookahead_blocks
             ));
         }
-        let non_negative = [
-            ("servo.motor_inertia_kg", s.motor_inertia_kg),
-            ("servo.load_kg", s.load_kg),
-            ("servo.viscous_n_per_mm_s", s.viscous_n_per_mm_s),
-            ("servo.coulomb_n", s.coulomb_n),
-        ];
-        for (name, v) in non_negative {
-            if !v.is_finite() || v < 0.0 {
-                return Err(format!("{name} must be zero or positive, got {v}"));
-            }
-        }
-        for (name, v) in [("servo.vel_ff", s.vel_ff), ("servo.acc_ff", s.acc_ff)] {
-            if !(0.0..=1.0).contains(&v) {
-                return Err(format!(
-                    "{name} is a feed-forward gain from 0 (off) to 1 (on), got {v}"
-                ));
-            }
-        }
-        if s.substeps == 0 {
-            return Err("servo.substeps must be at least 1".into());
+        let budget = (self.min_period_us * 1000 / 2 / SUBSTEP_NS).min(MAX_SUBSTEPS as u64);
+        if s.substeps == 0 || s.substeps as u64 > budget {
+            return Err(format!(
+                "servo.substeps must be from 1 to {budget}, got {}: the servo-sim integrates \
+                 its axes substeps times a period, about {SUBSTEP_NS} ns each, and must \
+                 answer within half of the shortest period (min_period_us = {} µs), and \
+                 at most {MAX_SUBSTEPS}",
+                s.substeps, self.min_period_us
+            ));
         }
         Ok(())
     }
@@ -356,6 +387,116 @@ impl Machine {
         toml::to_string_pretty(self).unwrap_or_default()
     }
 }
+
+/// The slowest feed a program may command, mm/min: 0.1 mm/min, the floor LinuxCNC
+/// 2.9 puts under an inverse-time feed (linuxcnc#2410). Slower, a move of a millimetre
+/// takes more than ten minutes, and the step of a cycle shrinks towards the rounding of
+/// a position (1e-11 mm at 100 m): the machine would stand still mid-move. The planner
+/// refuses a slower feed, and so the fastest feeds of a machine file start above it.
+pub const MIN_FEED_MM_PER_MIN: f64 = 0.1;
+
+/// The largest travel limit, in mm either way: 100 m, longer than the longest machine
+/// axes built. Positions stay where a `f64` resolves far below a nanometre.
+pub const MAX_TRAVEL_MM: f64 = 100_000.0;
+
+/// Most servo-sim sub-steps per period.
+pub const MAX_SUBSTEPS: u32 = 1000;
+
+/// What one servo-sim sub-step of the three axes costs, ns: measured with `cnc run
+/// --clock sim` of a 60 013-cycle line at `substeps` 1000 and 10, release build, on the
+/// project's 2-vCPU VM: 3.83 s more user time for 59.4 million more sub-steps, 64 ns
+/// each. The servo-sim must answer a set-point well within the shortest period the
+/// machine runs, so `substeps` of them may take at most half of `min_period_us`: 769 at
+/// the built-in 100 µs (10 built in).
+pub const SUBSTEP_NS: u64 = 65;
+
+/// The longest period a machine file may allow, µs (a tenth of a second).
+pub const MAX_PERIOD_US: u64 = 100_000;
+
+/// The values a number of the machine file may take: from `lo` (included unless
+/// `lo_open`) to `hi` (included), finite.
+pub struct Range {
+    pub lo: f64,
+    pub lo_open: bool,
+    pub hi: f64,
+    pub unit: &'static str,
+}
+
+/// `v` as a message shows it: in exponent form when very large or very small (a key
+/// read as `1e-300` is not shown as three hundred zeros).
+pub fn shown(v: f64) -> String {
+    let a = v.abs();
+    if a.is_finite() && (a >= 1e7 || (a < 1e-4 && a != 0.0)) {
+        format!("{v:e}")
+    } else {
+        format!("{v}")
+    }
+}
+
+impl Range {
+    fn check(&self, name: &str, v: f64) -> Result<(), String> {
+        let above_lo = if self.lo_open {
+            v > self.lo
+        } else {
+            v >= self.lo
+        };
+        if v.is_finite() && above_lo && v <= self.hi {
+            return Ok(());
+        }
+        let from = if self.lo_open { "above" } else { "from" };
+        Err(format!(
+            "{name} must be {from} {} to {} {}, got {}",
+            shown(self.lo),
+            shown(self.hi),
+            self.unit,
+            shown(v)
+        ))
+    }
+}
+
+const fn range(lo: f64, hi: f64, unit: &'static str) -> Range {
+    Range {
+        lo,
+        lo_open: false,
+        hi,
+        unit,
+    }
+}
+
+const fn above(lo: f64, hi: f64, unit: &'static str) -> Range {
+    Range {
+        lo,
+        lo_open: true,
+        hi,
+        unit,
+    }
+}
+
+/// Feeds and velocities: 1 mm/min (ten times the slowest feed a program may use) to
+/// 1 000 000 mm/min (1 km/min, five times the fastest linear-motor machines).
+pub const FEED: Range = range(1.0, 1e6, "mm/min");
+/// Accelerations: 1 mm/s² to 1e6 mm/s² (100 g).
+pub const ACC: Range = range(1.0, 1e6, "mm/s²");
+/// Jerks: 1 mm/s³ to 1e9 mm/s³ (a thousand times a stiff machine's).
+pub const JERK: Range = range(1.0, 1e9, "mm/s³");
+/// Chord tolerance: a nanometre to 10 mm.
+pub const CHORD: Range = range(1e-6, 10.0, "mm");
+/// Corner angle: more than 0 (every kink a stop would be 0) to 180 degrees (a reversal).
+pub const CORNER: Range = above(0.0, 180.0, "degrees");
+/// Following-error limit: a nanometre to a metre.
+pub const FOLLOWING: Range = range(1e-6, 1000.0, "mm");
+/// Travel limits.
+pub const TRAVEL: Range = range(-MAX_TRAVEL_MM, MAX_TRAVEL_MM, "mm");
+const KV: Range = above(0.0, 10_000.0, "1/s");
+const VEL_KP: Range = above(0.0, 1e9, "N per mm/s");
+const VEL_TI: Range = above(0.0, 1e6, "ms");
+const FORCE: Range = above(0.0, 1e9, "N");
+const ENCODER: Range = range(1e-9, 1.0, "mm");
+const PART_MASS: Range = range(0.0, 1e6, "kg");
+const MASS: Range = range(1e-3, 1e6, "kg");
+const VISCOUS: Range = range(0.0, 1e9, "N per mm/s");
+const COULOMB: Range = range(0.0, 1e9, "N");
+const GAIN: Range = range(0.0, 1.0, "(0 = off, 1 = on)");
 
 /// One comment per key of the default machine file.
 const KEY_DOCS: &[(&str, &str)] = &[
@@ -519,6 +660,47 @@ mod tests {
         assert!(m.axes.x.within_travel(300.0) && !m.axes.x.within_travel(300.001));
         let e = Machine::from_toml("[axes.z]\nmin_mm = 10.0\nmax_mm = 10.0\n").unwrap_err();
         assert!(e.contains("axes.z") && e.contains("min_mm"), "{e}");
+    }
+
+    /// Issue #22: each of these passed the loader and faulted the run (a stall at a
+    /// feed of 1e-300, a servo-sim late at its first cycle) or made no sense.
+    #[test]
+    fn every_key_has_a_range_and_the_error_names_it() {
+        for (text, key) in [
+            ("corner_angle_deg = 400.0\n", "corner_angle_deg"),
+            ("corner_angle_deg = 0.0\n", "corner_angle_deg"),
+            ("max_feed_mm_per_min = 1e-300\n", "max_feed_mm_per_min"),
+            ("rapid_mm_per_min = 1e12\n", "rapid_mm_per_min"),
+            ("path_jerk_mm_per_s3 = 1e300\n", "path_jerk_mm_per_s3"),
+            ("chord_tolerance_mm = 1e-300\n", "chord_tolerance_mm"),
+            ("max_period_us = 100000000\n", "max_period_us"),
+            ("[axes.y]\nmax_mm = 1e9\n", "axes.y.max_mm"),
+            (
+                "[axes.z]\nmax_acc_mm_per_s2 = 0.5\n",
+                "axes.z.max_acc_mm_per_s2",
+            ),
+            ("[servo]\nsubsteps = 10000\n", "servo.substeps"),
+            ("[servo]\nsubsteps = 0\n", "servo.substeps"),
+            (
+                "[servo]\nencoder_resolution_mm = 1e-300\n",
+                "servo.encoder_resolution_mm",
+            ),
+            ("[servo]\nkv_per_s = 1e300\n", "servo.kv_per_s"),
+        ] {
+            let e = Machine::from_toml(text).unwrap_err();
+            assert!(e.starts_with(key), "{text}: {e}");
+        }
+        let e = Machine::from_toml("corner_angle_deg = 400.0\n").unwrap_err();
+        assert_eq!(
+            e,
+            "corner_angle_deg must be above 0 to 180 degrees, got 400"
+        );
+        // Sub-steps: half of the shortest period at 65 ns each (769 at 100 µs).
+        assert!(Machine::from_toml("[servo]\nsubsteps = 769\n").is_ok());
+        assert!(Machine::from_toml("[servo]\nsubsteps = 770\n").is_err());
+        let m = "min_period_us = 1000\n[servo]\nsubsteps = 1000\n";
+        assert!(Machine::from_toml(m).is_ok());
+        assert!(Machine::from_toml("corner_angle_deg = 180.0\n").is_ok());
     }
 
     #[test]

@@ -3,6 +3,15 @@
 
 use std::fmt::Write as _;
 
+/// The built-in machine with X's travel as long as a machine file allows (±100 000 mm):
+/// `mixed` walks along X, 73 m in 100 000 lines, past the built-in ±1000 mm.
+pub fn long_x_machine() -> shared::Machine {
+    let mut m = shared::Machine::default();
+    m.axes.x.min_mm = -shared::machine::MAX_TRAVEL_MM;
+    m.axes.x.max_mm = shared::machine::MAX_TRAVEL_MM;
+    m
+}
+
 /// `G1` moves along a zig-zag with a wavy Z, as a surface finishing pass: every line
 /// a new X Y Z, the feed on the first. `lines` lines in all.
 pub fn plain_g1(lines: usize) -> String {

@@ -111,6 +111,16 @@ pub(super) fn arc(
         } else {
             (from[a] + ia, from[b] + ib)
         };
+        // The programmed centre, before its radii are squared (1e200 would overflow
+        // them to infinity, and every comparison below would pass).
+        let mut programmed = center;
+        programmed[a] = ca;
+        programmed[b] = cb;
+        let centre_col = lw
+            .get(OFFSETS[a])
+            .or_else(|| lw.get(OFFSETS[b]))
+            .map_or(col, |w| w.col);
+        super::within_reach(lw, centre_col, "the arc's centre", programmed)?;
         let r0 = ((from[a] - ca).powi(2) + (from[b] - cb).powi(2)).sqrt();
         let r1 = ((to[a] - ca).powi(2) + (to[b] - cb).powi(2)).sqrt();
         if r0 < 1e-9 {
@@ -157,6 +167,12 @@ pub(super) fn arc(
             }
         }
     }
+    let centre_col = lw
+        .get('R')
+        .or_else(|| lw.get(OFFSETS[a]))
+        .or_else(|| lw.get(OFFSETS[b]))
+        .map_or(col, |w| w.col);
+    super::within_reach(lw, centre_col, "the arc's centre", center)?;
     Ok(Move::Arc {
         line: lw.line,
         from,

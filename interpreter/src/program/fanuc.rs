@@ -220,8 +220,8 @@ fn only_nurbs_words(lw: &LineWords, first: bool) -> Result<(), Diagnostic> {
 fn weight(lw: &LineWords) -> Result<f64, Diagnostic> {
     match lw.get('R') {
         None => Ok(1.0),
-        Some(r) if r.value > 0.0 => Ok(r.value),
-        Some(r) => Err(lw.err("G06.2", r.col, "weight R must be > 0")),
+        Some(r) if super::weight_ok(r.value) => Ok(r.value),
+        Some(r) => Err(lw.err("G06.2", r.col, super::weight_rule('R'))),
     }
 }
 
@@ -285,7 +285,7 @@ pub(super) fn open(st: &mut State, lw: &LineWords, g: &Word, unit: f64) -> Resul
     }
     need_feed(st, lw, g.col)?;
     let w = weight(lw)?;
-    let pt = target(st, lw, unit);
+    let pt = target(st, lw, unit)?;
     let gap = shared::path::norm([pt[0] - st.pos[0], pt[1] - st.pos[1], pt[2] - st.pos[2]]);
     if gap > START_TOL_MM {
         let at = lw
@@ -346,7 +346,7 @@ fn block_inner(
         return Ok(()); // a comment or an N word alone
     }
     only_nurbs_words(lw, false)?;
-    let pt = target(st, lw, unit);
+    let pt = target(st, lw, unit)?;
     let w = weight(lw)?;
     let Some(n) = st.fanuc.as_mut() else {
         return Ok(());

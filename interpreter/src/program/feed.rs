@@ -5,10 +5,14 @@
 use super::Move;
 #[cfg(test)]
 use super::Plane;
+use shared::machine::MIN_FEED_MM_PER_MIN;
 use shared::nurbs;
 
-/// Turns the inverse-time `feed` (1/min) of each feed move into mm/min.
-pub(super) fn inverse_time(moves: &mut [Move]) {
+/// Turns the inverse-time `feed` (1/min) of each feed move into mm/min. A move whose
+/// feed comes out below [`MIN_FEED_MM_PER_MIN`] is returned as its length and feed (the
+/// first such): the caller refuses it.
+pub(super) fn inverse_time(moves: &mut [Move]) -> Option<(f64, f64)> {
+    let mut slow = None;
     for m in moves {
         let length = length_mm(m);
         match m {
@@ -16,10 +20,16 @@ pub(super) fn inverse_time(moves: &mut [Move]) {
                 rapid: false, feed, ..
             }
             | Move::Arc { feed, .. }
-            | Move::Nurbs { feed, .. } => *feed *= length,
+            | Move::Nurbs { feed, .. } => {
+                *feed *= length;
+                if (feed.is_nan() || *feed < MIN_FEED_MM_PER_MIN) && slow.is_none() {
+                    slow = Some((length, *feed));
+                }
+            }
             _ => {}
         }
     }
+    slow
 }
 
 /// The exact length of a move's path (0 for moves that do not move).

@@ -20,6 +20,8 @@ pub(super) struct G62Open {
     pub order: usize,
     ctrl: Vec<[f64; 4]>,
     knots: Vec<f64>,
+    /// Where each knot's `K` word stands (line, column), to name it when it is wrong.
+    knot_at: Vec<(u32, u32)>,
     /// Knot-only lines seen so far; `order` of them close the curve.
     pub closing: usize,
 }
@@ -81,6 +83,13 @@ pub(super) fn bezier(
         }
     };
     let p1 = [from[0] + ij[0], from[1] + ij[1], from[2], 1.0];
+    let ij_col = lw.get('I').map_or(col, |w| w.col);
+    super::within_reach(
+        lw,
+        ij_col,
+        "the first inner control point (I J)",
+        [p1[0], p1[1], p1[2]],
+    )?;
     let (ctrl, knots) = if cubic {
         let (Some(p), Some(q)) = (lw.get('P'), lw.get('Q')) else {
             return Err(lw.err(
@@ -92,6 +101,12 @@ pub(super) fn bezier(
         let pq = [p.value * unit, q.value * unit];
         st.g5_tangent = Some([-pq[0], -pq[1]]);
         let p2 = [to[0] + pq[0], to[1] + pq[1], from[2], 1.0];
+        super::within_reach(
+            lw,
+            p.col,
+            "the second inner control point (P Q)",
+            [p2[0], p2[1], p2[2]],
+        )?;
         (
             vec![
                 [from[0], from[1], from[2], 1.0],
@@ -180,11 +195,11 @@ pub(super) fn nurbs_line(
             (false, Some(p)) => p.value,
             _ => 1.0,
         };
-        if w0 <= 0.0 {
+        if !super::weight_ok(w0) {
             return Err(lw.err(
                 "G5.2",
                 lw.get('P').map(|p| p.col).unwrap_or(w.col),
-                "weight P must be > 0",
+                super::weight_rule('P'),
             ));
         }
         let p = st.pos;
@@ -224,11 +239,11 @@ pub(super) fn nurbs_line(
                     "every NURBS control point needs its weight P",
                 )
             })?;
-            if p.value <= 0.0 {
-                return Err(lw.err("G5.2", p.col, "weight P must be > 0"));
+            if !super::weight_ok(p.value) {
+                return Err(lw.err("G5.2", p.col, super::weight_rule('P')));
             }
             // The normal axis word was refused above, so this moves only the plane's two.
-            let pt = target(st, lw, unit);
+            let pt = target(st, lw, unit)?;
             if let Some(n) = st.nurbs.as_mut() {
                 n.ctrl.push([pt[0], pt[1], pt[2], p.value]);
             }
@@ -357,6 +372,7 @@ pub(super) fn g62_line(
             order,
             ctrl: vec![],
             knots: vec![],
+            knot_at: vec![],
             closing: 0,
         });
     }
@@ -371,15 +387,15 @@ pub(super) fn g62_line(
         };
         let k = knot.ok_or_else(|| lw.err("G6.2", first_col, "control point needs its knot K"))?;
         let weight = lw.get('R').map_or(1.0, |r| r.value);
-        if weight <= 0.0 {
+        if !super::weight_ok(weight) {
             return Err(lw.err(
                 "G6.2",
                 lw.get('R').map_or(first_col, |r| r.col),
-                "weight R must be > 0",
+                super::weight_rule('R'),
             ));
         }
         // The normal axis word was refused above, so this moves only the plane's two.
-        let pt = target(st, lw, unit);
+        let pt = target(st, lw, unit)?;
         let Some(n) = st.g62.as_mut() else {
             return Ok(());
         };
@@ -397,16 +413,28 @@ pub(super) fn g62_line(
         }
         n.ctrl.push([pt[0], pt[1], pt[2], weight]);
         n.knots.push(k.value);
+        n.knot_at.push((lw.line, k.col));
         st.pos = pt;
     } else if let Some(k) = knot {
         let Some(n) = st.g62.as_mut() else {
             return Ok(());
         };
         n.knots.push(k.value);
+        n.knot_at.push((lw.line, k.col));
         n.closing += 1;
         if n.closing == n.order {
             let n = st.g62.take().unwrap_or_else(|| unreachable!());
             let degree = n.order - 1;
+            if let Some(bad) = bad_knot(&n.knots, n.order) {
+                let (line, col) = n.knot_at[bad.index];
+                return Err(Diagnostic {
+                    file: None,
+                    line,
+                    col,
+                    rule: "G6.2",
+                    message: bad.message(&n.knots, n.order, n.line),
+                });
+            }
             if let Err(e) = shared::nurbs::validate(degree, &n.knots, &n.ctrl, usize::MAX) {
                 return Err(lw.err(
                     "G6.2",
@@ -425,4 +453,96 @@ pub(super) fn g62_line(
         }
     }
     Ok(())
+}
+
+/// A knot a curve of order `order` must not have, found by [`bad_knot`].
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub(super) struct BadKnot {
+    /// The knot's index in the list: the first that decreases, or the one whose run of
+    /// equal knots has become too long.
+    pub index: usize,
+    /// How many equal knots the run holds (0 for a decreasing knot).
+    pub run: usize,
+    /// The run is inside the curve (neither its first nor its last knots).
+    pub inside: bool,
+}
+
+impl BadKnot {
+    /// What is wrong with it, in words, for the curve opened on line `opened`.
+    pub fn message(&self, knots: &[f64], order: usize, opened: u32) -> String {
+        let k = knots[self.index];
+        if self.run == 0 {
+            return format!(
+                "knot K{k} is smaller than knot K{}, the one before it, in the NURBS opened on line {opened}; knots must not decrease",
+                knots[self.index - 1]
+            );
+        }
+        if self.inside {
+            format!(
+                "knot K{k} is repeated {} times inside the NURBS opened on line {opened}; at most {} (the order {order} less one) inside: {order} equal knots cut the curve in two and the tool would jump from one piece to the other",
+                self.run,
+                order - 1
+            )
+        } else {
+            format!(
+                "knot K{k} is repeated {} times at an end of the NURBS opened on line {opened}; at most {order} (its order) there: more would leave a control point out of the curve, which would not start or end where its points say",
+                self.run
+            )
+        }
+    }
+}
+
+/// The first knot that makes `knots` unfit for one continuous curve of order `order`: a
+/// knot smaller than the one before it, or a run of equal knots longer than the order
+/// (at an end) or as long as the order (inside: the curve falls in two pieces that need
+/// not meet). The knot named is the one that makes the run too long, the first that
+/// may be removed to mend it.
+pub(super) fn bad_knot(knots: &[f64], order: usize) -> Option<BadKnot> {
+    let mut start = 0;
+    for i in 0..knots.len() {
+        if i > 0 && knots[i] < knots[i - 1] {
+            return Some(BadKnot {
+                index: i,
+                run: 0,
+                inside: true,
+            });
+        }
+        if i > 0 && knots[i] != knots[i - 1] {
+            start = i;
+        }
+        let run = i + 1 - start;
+        // Whether the run can still be the last one: every knot after it equal to it.
+        let at_end = knots[i..].iter().all(|&k| k == knots[i]);
+        let inside = start > 0 && !at_end;
+        if run > order || (inside && run == order) {
+            return Some(BadKnot {
+                index: i,
+                run: knots[start..]
+                    .iter()
+                    .take_while(|&&k| k == knots[i])
+                    .count(),
+                inside,
+            });
+        }
+    }
+    None
+}
+
+#[cfg(test)]
+mod knot_tests {
+    use super::bad_knot;
+
+    #[test]
+    fn runs_as_long_as_the_order_only_at_the_ends() {
+        assert_eq!(bad_knot(&[0., 0., 0., 1., 1., 1.], 3), None);
+        assert_eq!(bad_knot(&[0., 0., 0., 0.5, 0.5, 1., 1., 1.], 3), None);
+        let b = bad_knot(&[0., 0., 0., 0.5, 0.5, 0.5, 1., 1., 1.], 3).unwrap();
+        assert_eq!((b.index, b.run, b.inside), (5, 3, true));
+        let b = bad_knot(&[0., 0., 0., 0., 1., 1., 1.], 3).unwrap();
+        assert_eq!((b.index, b.run, b.inside), (3, 4, false));
+        let b = bad_knot(&[0., 0., 0., 1., 1., 1., 1.], 3).unwrap();
+        assert_eq!((b.index, b.inside), (6, false));
+        let b = bad_knot(&[0., 0., 0., 2., 1., 3., 3., 3.], 3).unwrap();
+        assert_eq!((b.index, b.run), (4, 0));
+    }
 }

@@ -84,9 +84,24 @@ pub fn check_part(name: &str, text: &str, machine: &shared::Machine) -> Result<S
         "{name}: ok, STEP-NC, {n} free-form workingstep{}",
         if n == 1 { "" } else { "s" }
     );
+    // The passes from where the machine stands, each workingstep from where the last
+    // ended, as `part_blocks` joins them for a run: none may leave the travel.
+    let mut pos = crate::blocks::check::START_MM;
+    let mut travel: Vec<_> = crate::surface_blocks::start_travel_error(machine)
+        .into_iter()
+        .collect();
+    let mut all = Vec::new();
     for (s, p) in &planned {
-        let (cmds, _) = crate::surface_blocks::step_commands(s, p, machine, [0.0; 3])
+        let (cmds, end) = crate::surface_blocks::step_commands(s, p, machine, pos)
             .map_err(|e| format_errors(name, &[e]))?;
+        travel.extend(crate::surface_blocks::travel_errors(s, &cmds, machine));
+        pos = end;
+        all.push(cmds);
+    }
+    if !travel.is_empty() {
+        return Err(format_errors(name, &travel));
+    }
+    for ((s, p), cmds) in planned.iter().zip(all) {
         let n_surf = cmds.iter().filter(|c| c.is_surface()).count();
         let sf = &s.surface;
         let _ = writeln!(o, "  #{} '{}' (line {}):", s.id, s.name, s.line);

@@ -306,7 +306,8 @@ impl<'a> Ctx<'a> {
                 ));
             }
             let mut out = Vec::new();
-            for (m, k) in mult.iter().zip(vals) {
+            let last = mult.len().saturating_sub(1);
+            for (i, (m, k)) in mult.iter().zip(vals).enumerate() {
                 let m = match untyped(m) {
                     Param::Int(m) if (1..=64).contains(m) => *m as usize,
                     _ => {
@@ -320,6 +321,32 @@ impl<'a> Ctx<'a> {
                 let k = num(k).ok_or_else(|| {
                     err(inst, "knots", format!("{dir}_knots must be finite numbers"))
                 })?;
+                // A knot as often as the order inside cuts the surface in two along it
+                // (passes across would jump); more at an edge leaves control points out.
+                let inside = i > 0 && i < last;
+                if (inside && m > deg) || m > deg + 1 {
+                    return Err(err(
+                        inst,
+                        "knots",
+                        format!(
+                            "{dir} knot {k} has multiplicity {m}; at most {deg} (the degree) \
+                             inside the surface, where {} would cut it in two, and {} at its \
+                             edges",
+                            deg + 1,
+                            deg + 1
+                        ),
+                    ));
+                }
+                if out.last().is_some_and(|&before| k <= before) {
+                    return Err(err(
+                        inst,
+                        "knots",
+                        format!(
+                            "{dir}_knots must increase, and {k} follows {}",
+                            out[out.len() - 1]
+                        ),
+                    ));
+                }
                 out.extend(std::iter::repeat_n(k, m));
             }
             if out.len() != n + deg + 1 {

@@ -259,3 +259,32 @@ proptest! {
         prop_assert_eq!(read_part(text).is_err(), !whole, "cut at {}", cut);
     }
 }
+
+/// Issue #22: an inner knot as often as the order cuts the surface in two along it, and
+/// a pass across would jump: refused on the surface, as a G-code curve's is.
+#[test]
+fn an_inner_knot_as_often_as_the_order_is_refused_on_the_surface() {
+    let (line, surf) = instance_line(SEED, "B_SPLINE_SURFACE_WITH_KNOTS(");
+    let bad = set_attr(SEED, "B_SPLINE_SURFACE_WITH_KNOTS(", 8, "(3,1,1,3,1,1,3)");
+    let bad = set_attr(
+        &bad,
+        "B_SPLINE_SURFACE_WITH_KNOTS(",
+        10,
+        "(0.0,0.125,0.25,0.5,0.625,0.75,1.0)",
+    );
+    let text = format_errors("part.stp", &read_part(&bad).unwrap_err());
+    let want = format!(
+        "part.stp:{line}: #{}: knots: u knot 0.5 has multiplicity 3; at most 2 (the degree) \
+         inside the surface",
+        id_of(&surf)
+    );
+    assert!(text.starts_with(&want), "{text}");
+    let ok = set_attr(SEED, "B_SPLINE_SURFACE_WITH_KNOTS(", 8, "(3,1,1,2,1,1,1,3)");
+    let ok = set_attr(
+        &ok,
+        "B_SPLINE_SURFACE_WITH_KNOTS(",
+        10,
+        "(0.0,0.125,0.25,0.375,0.5,0.75,0.875,1.0)",
+    );
+    assert!(read_part(&ok).is_ok());
+}
