@@ -25,5 +25,6 @@ pub mod profile;
 pub mod protocol;
 pub mod stop;
 pub mod trace;
+pub mod travel;
 
 pub use machine::Machine;
