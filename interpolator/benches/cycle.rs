@@ -78,11 +78,9 @@ impl BlockSource for Repeat {
 
 fn lim(period_ns: u64, lookahead_blocks: usize) -> Limits {
     Limits {
-        period_ns,
-        path_acc_mm_per_s2: 2000.0,
-        path_jerk_mm_per_s3: 50_000.0,
         lookahead_blocks,
         max_following_error_mm: 1.0,
+        ..Limits::new(&shared::Machine::default(), period_ns)
     }
 }
 
