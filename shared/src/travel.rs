@@ -8,8 +8,10 @@
 //! is for the caller, off the cycle).
 //!
 //! **Curves.** A rational B-spline with positive weights lies, over each knot span, in the
-//! convex hull of that span's Bézier control points (taken in Cartesian coordinates). Each
-//! span is extracted as a rational Bézier piece (by blossoming: de Boor's algorithm with
+//! convex hull of that span's active control points, and more tightly in that of its
+//! Bézier control points (taken in Cartesian coordinates). A span whose active control
+//! points lie within the travel is accepted at once (nearly every span: a few ns each).
+//! Any other span is extracted as a rational Bézier piece (by blossoming: de Boor's algorithm with
 //! the span's end parameters as arguments, in homogeneous coordinates). Where a piece's
 //! hull lies within the travel, the piece is accepted; where it crosses a limit, the piece
 //! is halved (de Casteljau at its middle, in homogeneous coordinates) and each half judged
@@ -271,15 +273,34 @@ fn check_curve_except(
             (Some(_), Some(_)) => continue,
             _ => return Err(UNREADABLE),
         }
-        if !span_bezier(degree, knots, ctrl, k, &mut bez) {
+        // The span lies in the hull of its active control points: when they are all
+        // within the travel (nearly always), nothing needs extracting. Else its Bézier
+        // piece's hull is tighter, and that is refined.
+        let Some(active) = k.checked_sub(degree).and_then(|f| ctrl.get(f..=k)) else {
             return Err(UNREADABLE);
-        }
+        };
+        let inside = |axis: usize, s: f64, high: f64| {
+            active.iter().all(|c| {
+                let x = c.get(axis).copied().unwrap_or(f64::NAN);
+                s * x <= high + TRAVEL_TOL_MM
+            })
+        };
+        let mut extracted = false;
         for (axis, lim) in lims.iter().enumerate() {
             if skip_axis == Some(axis) {
                 continue;
             }
             for side in [Side::Max, Side::Min] {
                 let (s, limit) = signed_limit(lim, side);
+                if inside(axis, s, s * limit) {
+                    continue;
+                }
+                if !extracted {
+                    if !span_bezier(degree, knots, ctrl, k, &mut bez) {
+                        return Err(UNREADABLE);
+                    }
+                    extracted = true;
+                }
                 let at = Axis { axis, s };
                 match judge(&bez, degree, at, s * limit, &mut budget) {
                     Verdict::Inside => {}
