@@ -502,7 +502,8 @@ fn criterion_benches(c: &mut Criterion) {
     // What checking one block against the machine costs as it enters the window (once per
     // block, not per cycle): inside the travel at once, a travel that the curve touches
     // (its hull crosses the limit: the refinement must prove the curve inside), a surface
-    // pass, and a block refused with its exact reach found.
+    // pass, and a block refused with its exact reach found. Measured (release, a loaded
+    // 2-core VM): 0.30 µs, 5.8 µs, 8.3 µs and 0.15 µs.
     let mut g = c.benchmark_group("block_check");
     let machine = shared::protocol::MachineLimits::of(&shared::Machine::default());
     let deg5 = curve_deg5();

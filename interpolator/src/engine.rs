@@ -16,6 +16,17 @@
 //! running off its end. The test of each limit is the closed form of
 //! [`shared::profile::Limits::can_reach`].
 //!
+//! The engine trusts no block it was not built to: each block is validated, then checked
+//! against the machine it runs with ([`CommandBlock::validate_for`]: feeds, profile
+//! limits, a curve without jumps, the exact path within travel) and for a start where the
+//! previous motion ended, before it enters the window; a refused block is a fault raised
+//! before anything moves, so the window holds only blocks the machine can run and the
+//! stop ends on the good path. (Cost, once per block: 0.3 µs for a degree-5 block inside
+//! the travel, 6 to 8 µs when its control polygon crosses a limit; `block_check/*` in
+//! `benches/cycle.rs`.) The last guard, every cycle: a set-point that would step an axis
+//! further than its velocity allows in a period, or leave the travel, is never
+//! published (the engine holds the last one).
+//!
 //! A fault does not freeze the set-point where it is: [`Engine::stop`] starts a controlled
 //! stop, as a real control does on a following-error or peer fault. From then on no block
 //! is taken from the source; any positive acceleration is dropped at once, so the speed

@@ -808,7 +808,7 @@ impl core::fmt::Display for ProtocolError {
                     Some(p) => write!(f, "where block {p} ended")?,
                     None => write!(f, "the machine's position")?,
                 }
-                write!(f, " (more than {JOIN_TOL_MM} mm): the path would jump")
+                write!(f, " (more than {JOIN_TOL_MM:e} mm): the path would jump")
             }
         }
     }

@@ -381,3 +381,47 @@ fn measure(machine: &Machine, period_ns: u64) {
         worst_plan - 1.0
     );
 }
+
+/// The program of issue #22 itself: a LinuxCNC G6.2 of order 3 whose interior knot is
+/// repeated 3 times, the control points jumping there. Before, `cnc check` passed it and
+/// `cnc run --clock sim` moved 1.414 mm in one 1 ms cycle and reported done. Now it is
+/// refused, by `cnc check` or by the interpolator (the interpreter sends each knot span as
+/// a block, so the second starts 1.414 mm from where the first ended), and nothing jumps.
+#[test]
+fn the_broken_g62_program_never_jumps() {
+    let dir = temp_dir("safety-g62-program");
+    let prog = dir.join("g62.ngc");
+    std::fs::write(
+        &prog,
+        "G21 G90 G17\nG1 X0 Y0 F3000\nG6.2 X0 Y0 R1 K0 P3 Q1\nG6.2 X1 Y0.5 R1 K0\n\
+         G6.2 X2 Y0 R1 K0\nG6.2 X3 Y1 R1 K1\nG6.2 X4 Y1.5 R1 K1\nG6.2 X5 Y1 R1 K1\n\
+         G6.2 K2\nG6.2 K2\nG6.2 K2\nM2\n",
+    )
+    .unwrap();
+    let run = dir.join("run");
+    let out = Command::new(cnc_exe())
+        .args(["run", "--clock", "sim", "--no-report", "--out"])
+        .arg(&run)
+        .arg(&prog)
+        .output()
+        .unwrap();
+    let text = format!(
+        "{}{}",
+        String::from_utf8_lossy(&out.stdout),
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert_eq!(out.status.code(), Some(1), "refused: {text}");
+    // Refused by the interpolator: it stood still. (Refused by `cnc check`: no run.)
+    if run.join("setpoints.csv").exists() {
+        let (_, rows) = csv(&run.join("setpoints.csv"));
+        let sp: Vec<[f64; 3]> = rows.iter().map(|r| [r[2], r[3], r[4]]).collect();
+        let (most, allowed) = (largest_steps(&sp), max_axis_steps());
+        for a in 0..3 {
+            assert!(
+                most[a] <= allowed[a],
+                "axis {a}: {most:?} against {allowed:?}"
+            );
+        }
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+}
