@@ -340,7 +340,17 @@ fn measure(machine: &Machine, period_ns: u64) {
                 plan = plan.max(r);
             }
         }
-        let mut engine = Engine::new(Limits::new(machine, period_ns), [0.0; 3]);
+        // The travel widened: the R-900 arc bulges out to X = 1028 mm (a refusal of
+        // its own, not what is measured here).
+        let mut lim = Limits::new(machine, period_ns);
+        for a in [
+            &mut lim.machine.axes.x,
+            &mut lim.machine.axes.y,
+            &mut lim.machine.axes.z,
+        ] {
+            (a.min_mm, a.max_mm) = (-1e5, 1e5);
+        }
+        let mut engine = Engine::new(lim, [0.0; 3]);
         let mut src = Slice(&blocks, 0);
         let mut last = engine.position();
         let mut step = 0.0f64;
