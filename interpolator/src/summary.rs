@@ -104,15 +104,15 @@ impl MissEntry {
 /// A fault in figures: what it was, when it was noticed, and the controlled stop after it.
 #[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
 pub struct FaultInfo {
-    /// `following_error`, `peer_gone`, `peer_silent`, `bad_block`, `bad_feedback` or
-    /// `stop_requested`.
+    /// `following_error`, `peer_gone`, `peer_silent`, `bad_block`, `bad_feedback`,
+    /// `stop_requested`, `stalled`, `step_too_large` or `out_of_travel`.
     pub kind: String,
     /// The cycle the fault is about: for a following error the cycle whose set-point the
     /// drives answered with it, otherwise the cycle in which the interpolator noticed.
     pub cycle: u64,
     /// The source line that cycle ran.
     pub line: u32,
-    /// Following error: the axis (`X`, `Y`, `Z`).
+    /// Following error, a step too large or out of travel: the axis (`X`, `Y`, `Z`).
     pub axis: Option<String>,
     /// Dead or silent peer: `interpreter` or `servo-sim`.
     pub peer: Option<String>,
@@ -161,6 +161,12 @@ impl FaultInfo {
             } => (cycle, line, Some(axis_name(axis).to_string()), None),
             Fault::PeerGone { peer, cycle } => (cycle, r.line, None, Some(peer.name().into())),
             Fault::PeerSilent { cycle } => (cycle, r.line, None, Some("servo-sim".into())),
+            Fault::StepTooLarge { line, axis, .. } => {
+                (r.now, line, Some(axis_name(axis).to_string()), None)
+            }
+            Fault::OutOfTravel { line, err, .. } => {
+                (r.now, line, Some(axis_name(err.axis).to_string()), None)
+            }
             _ => (r.now, r.line, None, None),
         };
         FaultInfo {

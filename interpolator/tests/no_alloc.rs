@@ -17,7 +17,9 @@ use shared::trace::TraceWriter;
 static GLOBAL: Counting = Counting;
 
 /// A rational cubic, re-sent with rising sequence numbers (it ends where it starts), then
-/// the program end.
+/// the program end. A surface pass (which does not end where it starts) is sent there
+/// and back: every other block runs it backwards, so each starts where the last ended,
+/// as the engine checks.
 struct Loop {
     block: CommandBlock,
     next_seq: u64,
@@ -36,6 +38,11 @@ impl BlockSource for Loop {
         }
         let mut b = self.block;
         b.seq = seq;
+        if b.is_surface() && seq % 2 == 1 {
+            let sp = &mut b.surface;
+            (sp.uv_start, sp.uv_end) = (sp.uv_end, sp.uv_start);
+            sp.uv_inner = [sp.uv_inner[1], sp.uv_inner[0]];
+        }
         Some(b)
     }
 }
@@ -73,11 +80,9 @@ struct Rec(u64, [f64; 3]);
 #[test]
 fn cycle_work_does_not_allocate() {
     let lim = Limits {
-        period_ns: 1_000_000,
-        path_acc_mm_per_s2: 2000.0,
-        path_jerk_mm_per_s3: 50_000.0,
         lookahead_blocks: 16,
         max_following_error_mm: 1.0,
+        ..Limits::new(&shared::Machine::default(), 1_000_000)
     };
     let mut engine = Engine::new(lim, [0.0; 3]);
     let mut src = Loop {
@@ -186,11 +191,9 @@ fn cycle_work_does_not_allocate() {
 #[test]
 fn controlled_stop_does_not_allocate() {
     let lim = Limits {
-        period_ns: 1_000_000,
-        path_acc_mm_per_s2: 2000.0,
-        path_jerk_mm_per_s3: 50_000.0,
         lookahead_blocks: 16,
         max_following_error_mm: 1.0,
+        ..Limits::new(&shared::Machine::default(), 1_000_000)
     };
     let mut engine = Engine::new(lim, [0.0; 3]);
     let mut src = Loop {
@@ -280,11 +283,9 @@ fn surface_cycles_do_not_allocate() {
 
 fn surface_cycles_of(block: CommandBlock) {
     let lim = Limits {
-        period_ns: 1_000_000,
-        path_acc_mm_per_s2: 2000.0,
-        path_jerk_mm_per_s3: 50_000.0,
         lookahead_blocks: 16,
         max_following_error_mm: 1.0,
+        ..Limits::new(&shared::Machine::default(), 1_000_000)
     };
     block.validate().unwrap();
     let mut engine = Engine::new(lim, shared::path::eval(&block, 0.0).p);
@@ -306,4 +307,100 @@ fn surface_cycles_of(block: CommandBlock) {
     let allocs = count();
     assert!(cycles >= 100_000, "only {cycles} cycles");
     assert_eq!(allocs, 0, "{allocs} allocations in {cycles} cycles");
+}
+
+/// The checks of every block against the machine and the last guard on each set-point,
+/// including their refusals and the stop after them, allocate nothing: a run of the closed
+/// curve is fed a bad block (a curve broken at a knot, one starting 5 mm away, a feed of
+/// 1e6 mm/min, a path out of travel that must be refined and its reach found), or made to
+/// trip the step guard, and stopped to rest.
+#[test]
+fn block_checks_and_refusals_do_not_allocate() {
+    let good = closed_curve();
+    let mut broken = CommandBlock::empty(BlockKind::Motion, 0, 8);
+    broken.degree = 1;
+    broken.n_ctrl = 4;
+    broken.knots[..6].copy_from_slice(&[0.0, 0.0, 1.0, 1.0, 2.0, 2.0]);
+    for (i, p) in [[0.0, 0.0], [10.0, 0.0], [10.0, 5.0], [0.0, 0.0]]
+        .iter()
+        .enumerate()
+    {
+        broken.ctrl[i] = [p[0], p[1], 0.0, 1.0];
+    }
+    broken.feed_mm_per_min = 3000.0;
+    broken.length_mm = 30.0;
+    broken.acc_mm_per_s2 = 2000.0;
+    broken.jerk_mm_per_s3 = 50_000.0;
+    let mut away = good;
+    for c in away.ctrl.iter_mut().take(7) {
+        c[1] += 5.0;
+    }
+    let mut fast = good;
+    fast.feed_mm_per_min = 1e6;
+    let base = Limits {
+        lookahead_blocks: 4,
+        max_following_error_mm: 1.0,
+        ..Limits::new(&shared::Machine::default(), 1_000_000)
+    };
+    let mut narrow = base;
+    narrow.machine.axes.x.max_mm = 22.0;
+    narrow.machine.axes.y.min_mm = -1.5;
+    let mut slow_axis = base;
+    slow_axis.max_step_mm[1] = 0.001;
+    let cases = [
+        (base, Some(broken)),
+        (base, Some(away)),
+        (base, Some(fast)),
+        (narrow, None),
+        (slow_axis, None),
+    ];
+    for (lim, bad) in cases {
+        let mut engine = Engine::new(lim, [0.0; 3]);
+        let mut src = Bad {
+            good,
+            bad,
+            at: 3,
+            next_seq: 0,
+        };
+        let mut faults = 0;
+        arm(true);
+        for _ in 0..100_000 {
+            match engine.tick(&mut src) {
+                Ok(t) => {
+                    if engine.at_rest() || t.state == TickState::Done {
+                        break;
+                    }
+                }
+                Err(_) => {
+                    faults += 1;
+                    engine.stop();
+                }
+            }
+        }
+        arm(false);
+        assert_eq!(faults, 1, "{bad:?}");
+        assert!(engine.at_rest());
+        assert_eq!(count(), 0, "allocations");
+    }
+}
+
+/// The good block re-sent, with the bad one (if any) in place of block `at`.
+struct Bad {
+    good: CommandBlock,
+    bad: Option<CommandBlock>,
+    at: u64,
+    next_seq: u64,
+}
+
+impl BlockSource for Bad {
+    fn next_block(&mut self) -> Option<CommandBlock> {
+        let seq = self.next_seq;
+        self.next_seq += 1;
+        let mut b = match self.bad {
+            Some(bad) if seq == self.at => bad,
+            _ => self.good,
+        };
+        b.seq = seq;
+        Some(b)
+    }
 }

@@ -8,8 +8,10 @@
 //! is for the caller, off the cycle).
 //!
 //! **Curves.** A rational B-spline with positive weights lies, over each knot span, in the
-//! convex hull of that span's Bézier control points (taken in Cartesian coordinates). Each
-//! span is extracted as a rational Bézier piece (by blossoming: de Boor's algorithm with
+//! convex hull of that span's active control points, and more tightly in that of its
+//! Bézier control points (taken in Cartesian coordinates). A span whose active control
+//! points lie within the travel is accepted at once (nearly every span: a few ns each).
+//! Any other span is extracted as a rational Bézier piece (by blossoming: de Boor's algorithm with
 //! the span's end parameters as arguments, in homogeneous coordinates). Where a piece's
 //! hull lies within the travel, the piece is accepted; where it crosses a limit, the piece
 //! is halved (de Casteljau at its middle, in homogeneous coordinates) and each half judged
@@ -271,15 +273,34 @@ fn check_curve_except(
             (Some(_), Some(_)) => continue,
             _ => return Err(UNREADABLE),
         }
-        if !span_bezier(degree, knots, ctrl, k, &mut bez) {
+        // The span lies in the hull of its active control points: when they are all
+        // within the travel (nearly always), nothing needs extracting. Else its Bézier
+        // piece's hull is tighter, and that is refined.
+        let Some(active) = k.checked_sub(degree).and_then(|f| ctrl.get(f..=k)) else {
             return Err(UNREADABLE);
-        }
+        };
+        let inside = |axis: usize, s: f64, high: f64| {
+            active.iter().all(|c| {
+                let x = c.get(axis).copied().unwrap_or(f64::NAN);
+                s * x <= high + TRAVEL_TOL_MM
+            })
+        };
+        let mut extracted = false;
         for (axis, lim) in lims.iter().enumerate() {
             if skip_axis == Some(axis) {
                 continue;
             }
             for side in [Side::Max, Side::Min] {
                 let (s, limit) = signed_limit(lim, side);
+                if inside(axis, s, s * limit) {
+                    continue;
+                }
+                if !extracted {
+                    if !span_bezier(degree, knots, ctrl, k, &mut bez) {
+                        return Err(UNREADABLE);
+                    }
+                    extracted = true;
+                }
                 let at = Axis { axis, s };
                 match judge(&bez, degree, at, s * limit, &mut budget) {
                     Verdict::Inside => {}
@@ -545,6 +566,68 @@ fn halve(pts: &[H; ORD], degree: usize) -> ([H; ORD], [H; ORD]) {
         }
     }
     (left, right)
+}
+
+/// Where a curve breaks apart: the interior knot and the distance between the curve's
+/// end on the span before it and its start on the span after it.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Jump {
+    pub knot: f64,
+    pub gap_mm: f64,
+}
+
+/// The largest jump of the clamped NURBS `(degree, knots, ctrl)` at an interior knot, if
+/// it has any knot that may break it: one repeated more than `degree` times (with at most
+/// `degree` repeats a B-spline is continuous there by construction, and nothing is
+/// computed). Allocation-free and panic-free; on a curve that is not valid, `None` or a
+/// gap of infinity.
+pub fn largest_jump(degree: usize, knots: &[f64], ctrl: &[[f64; 4]]) -> Option<Jump> {
+    let n = ctrl.len();
+    let mut worst: Option<Jump> = None;
+    let mut bez = [[0.0; 4]; ORD];
+    // The last non-empty span before the current knot run, and its end point.
+    let mut prev: Option<usize> = None;
+    for k in degree..n {
+        let (Some(&a), Some(&b)) = (knots.get(k), knots.get(k + 1)) else {
+            return None;
+        };
+        if b <= a {
+            continue;
+        }
+        if let Some(pk) = prev {
+            let mult = knots.iter().filter(|&&t| t == a).count();
+            if mult > degree {
+                let end = if span_bezier(degree, knots, ctrl, pk, &mut bez) {
+                    bez.get(degree).map(cartesian)
+                } else {
+                    None
+                };
+                let start = if span_bezier(degree, knots, ctrl, k, &mut bez) {
+                    Some(cartesian(&bez[0]))
+                } else {
+                    None
+                };
+                let gap = match (end, start) {
+                    (Some(e), Some(s)) => path::norm([e[0] - s[0], e[1] - s[1], e[2] - s[2]]),
+                    _ => f64::INFINITY,
+                };
+                let gap = if gap.is_nan() { f64::INFINITY } else { gap };
+                if worst.is_none_or(|w| gap > w.gap_mm) {
+                    worst = Some(Jump {
+                        knot: a,
+                        gap_mm: gap,
+                    });
+                }
+            }
+        }
+        prev = Some(k);
+    }
+    worst
+}
+
+#[inline]
+fn cartesian(h: &H) -> [f64; 3] {
+    [h[0] / h[3], h[1] / h[3], h[2] / h[3]]
 }
 
 /// A surface block: the conservative bound of the module's page, then its exact ends.
@@ -850,6 +933,37 @@ mod tests {
         let e = check_block(&b, &a).unwrap_err();
         assert!(!e.exact && (e.reach_mm - 13.0).abs() < 1e-12, "{e:?}");
         assert!(e.to_string().contains("may take X up to 13 mm"), "{e}");
+    }
+
+    #[test]
+    fn a_knot_repeated_more_than_the_degree_may_break_the_curve() {
+        // Order 3, knots 0 0 0 1 1 1 2 2 2: two parabolas, the second starting 1.414 mm
+        // from where the first ends (the LinuxCNC G6.2 of issue #22).
+        let knots = [0.0, 0.0, 0.0, 1.0, 1.0, 1.0, 2.0, 2.0, 2.0];
+        let ctrl = [
+            [0.0, 0.0, 0.0, 1.0],
+            [1.0, 1.0, 0.0, 1.0],
+            [2.0, 0.0, 0.0, 1.0],
+            [3.0, 1.0, 0.0, 1.0],
+            [4.0, 0.0, 0.0, 1.0],
+            [5.0, 1.0, 0.0, 1.0],
+        ];
+        let j = largest_jump(2, &knots, &ctrl).unwrap();
+        assert_eq!(j.knot, 1.0);
+        assert!((j.gap_mm - 2f64.sqrt()).abs() < 1e-12, "{j:?}");
+        // Joined there (the second parabola starting at (2, 0)): no jump.
+        let mut joined = ctrl;
+        joined[3] = [2.0, 0.0, 0.0, 1.0];
+        assert_eq!(largest_jump(2, &knots, &joined).unwrap().gap_mm, 0.0);
+        // A knot repeated `degree` times is continuous by construction: not even looked at.
+        let knots = [0.0, 0.0, 0.0, 1.0, 1.0, 2.0, 2.0, 2.0];
+        assert_eq!(largest_jump(2, &knots, &ctrl[..5]), None);
+        // Weights count: the end of a rational span is its last control point.
+        let knots = [0.0, 0.0, 0.0, 1.0, 1.0, 1.0, 2.0, 2.0, 2.0];
+        let mut heavy = joined;
+        heavy[1][3] = 5.0;
+        heavy[4][3] = 0.2;
+        assert_eq!(largest_jump(2, &knots, &heavy).unwrap().gap_mm, 0.0);
     }
 
     #[test]

@@ -35,11 +35,8 @@ impl BlockSource for Blocks {
 
 fn limits() -> Limits {
     Limits {
-        period_ns: 1_000_000,
-        path_acc_mm_per_s2: 2000.0,
-        path_jerk_mm_per_s3: 50_000.0,
-        lookahead_blocks: 256,
         max_following_error_mm: 1.0,
+        ..Limits::new(&Machine::default(), 1_000_000)
     }
 }
 
@@ -457,4 +454,341 @@ fn a_chain_of_tiny_segments_slowing_to_a_stop_does_not_crawl() {
         top <= planned_top * (1.0 + 1e-9),
         "top {top} mm/s of {planned_top} planned"
     );
+}
+
+// ---- Blocks checked against the machine as they enter the window (issue #22) ----
+
+/// A LinuxCNC `G6.2` of order 3 with knots `0 0 0 1 1 1 2 2 2` starting at `from`: two
+/// parabolas, the second starting (1, 1) mm from where the first ends. The planner's
+/// values are plausible; only the curve breaks apart.
+fn broken_g62(seq: u64, from: [f64; 3]) -> CommandBlock {
+    let mut b = line(seq, from, from, 3000.0, 0.0, 0.0);
+    b.degree = 2;
+    b.n_ctrl = 6;
+    b.knots[..9].copy_from_slice(&[0.0, 0.0, 0.0, 1.0, 1.0, 1.0, 2.0, 2.0, 2.0]);
+    let [x, y, z] = from;
+    for (i, (dx, dy)) in [
+        (0.0, 0.0),
+        (1.0, 0.5),
+        (2.0, 0.0),
+        (3.0, 1.0),
+        (4.0, 1.5),
+        (5.0, 1.0),
+    ]
+    .into_iter()
+    .enumerate()
+    {
+        b.ctrl[i] = [x + dx, y + dy, z, 1.0];
+    }
+    b.length_mm = 5.0;
+    b
+}
+
+/// Ticks until the first fault (which must come), then stops and ticks to rest, as the
+/// cycle does. Returns the published set-points (from `start`), and the fault.
+fn run_to_fault(
+    mut e: Engine,
+    src: &mut impl BlockSource,
+    start: [f64; 3],
+) -> (Vec<[f64; 3]>, Fault) {
+    let mut sp = vec![start];
+    let mut fault = None;
+    for _ in 0..1_000_000 {
+        match e.tick(src) {
+            Ok(t) => {
+                sp.push(t.pos_mm);
+                if fault.is_some() && e.at_rest() {
+                    break;
+                }
+                assert!(
+                    fault.is_some() || t.state != TickState::Done,
+                    "the run ended without a fault: {t:?}"
+                );
+            }
+            Err(f) => {
+                assert!(fault.is_none(), "a second fault {f} after {fault:?}");
+                fault = Some(f);
+                e.stop();
+            }
+        }
+    }
+    (sp, fault.unwrap())
+}
+
+/// No set-point step above `max_vel·period` on any axis (the default machine at 1 ms).
+fn assert_no_jump(sp: &[[f64; 3]]) {
+    let lim = limits().max_step_mm;
+    for (i, w) in sp.windows(2).enumerate() {
+        for a in 0..3 {
+            assert!(
+                (w[1][a] - w[0][a]).abs() <= lim[a],
+                "set-point {i}: {} moves {} mm in one period ({:?} -> {:?})",
+                axis_name(a),
+                (w[1][a] - w[0][a]).abs(),
+                w[0],
+                w[1]
+            );
+        }
+    }
+}
+
+/// Blocks delivered no earlier than `every` ticks apart: the window fills as a slow
+/// interpreter would, so a bad block arrives while the machine moves.
+struct Trickle(Vec<CommandBlock>, usize, u32, u32);
+impl BlockSource for Trickle {
+    fn next_block(&mut self) -> Option<CommandBlock> {
+        self.3 += 1;
+        if self.3 < self.2 {
+            return None;
+        }
+        self.3 = 0;
+        let b = self.0.get(self.1).copied();
+        self.1 += b.is_some() as usize;
+        b
+    }
+}
+
+/// Ten lines of 2 mm along X at F3000 from the origin, flowing into each other.
+fn good_lines() -> Vec<CommandBlock> {
+    (0..10)
+        .map(|i| {
+            let (a, b) = (2.0 * i as f64, 2.0 * (i + 1) as f64);
+            line(i, [a, 0.0, 0.0], [b, 0.0, 0.0], 3000.0, 3000.0, 3000.0)
+        })
+        .collect()
+}
+
+#[test]
+fn a_curve_broken_at_a_knot_is_refused_before_the_jump() {
+    // Issue #22: on the old engine this moved 1.414 mm in one 1 ms cycle.
+    let mut blocks = good_lines();
+    blocks.push(broken_g62(10, [20.0, 0.0, 0.0]));
+    blocks.push(CommandBlock::empty(BlockKind::ProgramEnd, 11, 12));
+    // Blocks every 20 ticks: the machine is at speed when the bad one comes.
+    let mut src = Trickle(blocks, 0, 20, 0);
+    let (sp, fault) = run_to_fault(Engine::new(limits(), [0.0; 3]), &mut src, [0.0; 3]);
+    match fault {
+        Fault::Protocol(ProtocolError::CurveJump {
+            seq: 10,
+            line: 11,
+            knot,
+            gap_mm,
+        }) => {
+            assert_eq!(knot, 1.0);
+            assert!((gap_mm - 2f64.sqrt()).abs() < 1e-12, "{gap_mm}");
+        }
+        f => panic!("{f:?}"),
+    }
+    let msg = fault.to_string();
+    assert!(
+        msg.contains("block 10 (line 11): knots: the curve jumps 1.414 mm at the knot 1"),
+        "{msg}"
+    );
+    assert_no_jump(&sp);
+    // Stopped on the good path, moving when the fault came, and never onto the bad block.
+    let last = *sp.last().unwrap();
+    assert!(
+        last[0] > 0.0 && last[0] <= 20.0 && last[1] == 0.0,
+        "{last:?}"
+    );
+}
+
+#[test]
+fn a_block_that_starts_away_from_the_last_end_is_refused() {
+    // An edited log: block 3 starts 5 mm (in Y) from where block 2 ended.
+    let mut blocks = good_lines();
+    blocks[3] = line(3, [6.0, 5.0, 0.0], [8.0, 5.0, 0.0], 3000.0, 3000.0, 3000.0);
+    let mut src = Trickle(blocks, 0, 20, 0);
+    let (sp, fault) = run_to_fault(Engine::new(limits(), [0.0; 3]), &mut src, [0.0; 3]);
+    assert_eq!(
+        fault,
+        Fault::Protocol(ProtocolError::StartGap {
+            seq: 3,
+            line: 4,
+            prev: Some(2),
+            gap_mm: 5.0
+        })
+    );
+    let msg = fault.to_string();
+    assert!(
+        msg.contains("block 3 (line 4): start: the path starts 5.000 mm from where block 2 ended"),
+        "{msg}"
+    );
+    assert_no_jump(&sp);
+    assert!(sp.iter().all(|p| p[1] == 0.0 && p[0] <= 6.0));
+    // The very first motion must start where the machine is.
+    let mut e = Engine::new(limits(), [0.0; 3]);
+    let b = line(0, [0.0, 0.0, 1e-6], [1.0, 0.0, 0.0], 3000.0, 0.0, 0.0);
+    match e.tick(&mut Blocks(vec![b], 0)) {
+        Err(Fault::Protocol(ProtocolError::StartGap {
+            prev: None, gap_mm, ..
+        })) => {
+            assert!((gap_mm - 1e-6).abs() < 1e-15)
+        }
+        t => panic!("{t:?}"),
+    }
+    // Rounding is not a gap: 1e-10 mm (the largest measured on real programs is 6.3e-13).
+    let mut e = Engine::new(limits(), [0.0; 3]);
+    let b = line(0, [0.0, 1e-10, 0.0], [1.0, 0.0, 0.0], 3000.0, 0.0, 0.0);
+    assert!(e.tick(&mut Blocks(vec![b], 0)).is_ok());
+}
+
+#[test]
+fn planned_values_above_the_machine_are_refused_naming_the_field() {
+    type Edit = fn(&mut CommandBlock);
+    let cases: [(&str, Edit, &str); 6] = [
+        (
+            "feed_mm_per_min",
+            |b| b.feed_mm_per_min = 1e6,
+            "max_feed_mm_per_min",
+        ),
+        (
+            "feed_mm_per_min",
+            |b| {
+                b.flags = shared::protocol::FLAG_RAPID;
+                b.feed_mm_per_min = 10_001.0
+            },
+            "rapid_mm_per_min",
+        ),
+        (
+            "start_feed_mm_per_min",
+            |b| b.start_feed_mm_per_min = 3001.0,
+            "feed_mm_per_min",
+        ),
+        (
+            "end_feed_mm_per_min",
+            |b| b.end_feed_mm_per_min = 3e4,
+            "feed_mm_per_min",
+        ),
+        (
+            "acc_mm_per_s2",
+            |b| b.acc_mm_per_s2 = 2000.1,
+            "path_acc_mm_per_s2",
+        ),
+        (
+            "jerk_mm_per_s3",
+            |b| b.jerk_mm_per_s3 = 1e9,
+            "path_jerk_mm_per_s3",
+        ),
+    ];
+    for (field, edit, key) in cases {
+        let mut b = line(0, [0.0; 3], [10.0, 0.0, 0.0], 3000.0, 0.0, 0.0);
+        edit(&mut b);
+        let mut e = Engine::new(limits(), [0.0; 3]);
+        let f = e.tick(&mut Blocks(vec![b], 0)).unwrap_err();
+        match f {
+            Fault::Protocol(ProtocolError::AboveMachine {
+                seq: 0,
+                line: 1,
+                field: got,
+                key: k,
+                ..
+            }) => assert_eq!((got, k), (field, key)),
+            f => panic!("{field}: {f:?}"),
+        }
+        assert!(f
+            .to_string()
+            .starts_with(&format!("bad command block: block 0 (line 1): {field}: ")));
+        assert_eq!(e.position(), [0.0; 3]);
+    }
+    // Exactly at the limits, and within rounding of them: accepted.
+    let mut b = line(
+        0,
+        [0.0; 3],
+        [10.0, 0.0, 0.0],
+        10_000.0,
+        0.0,
+        10_000.0 * (1.0 + 1e-12),
+    );
+    b.acc_mm_per_s2 = 2000.0;
+    b.jerk_mm_per_s3 = 50_000.0;
+    assert!(Engine::new(limits(), [0.0; 3])
+        .tick(&mut Blocks(vec![b], 0))
+        .is_ok());
+    let msg = Fault::Protocol(ProtocolError::AboveMachine {
+        seq: 4,
+        line: 9,
+        field: "feed_mm_per_min",
+        value: 1e6,
+        key: "max_feed_mm_per_min",
+        limit: 1e4,
+    })
+    .to_string();
+    assert_eq!(
+        msg,
+        "bad command block: block 4 (line 9): feed_mm_per_min: 1000000 is above the \
+         machine's max_feed_mm_per_min of 10000: not planned for this machine"
+    );
+}
+
+#[test]
+fn a_path_out_of_travel_is_refused_as_it_enters_the_window() {
+    // An arc bulging past X = 1000 mm whose ends are inside: the exact extreme is named.
+    let w = core::f64::consts::FRAC_1_SQRT_2;
+    let mut b = line(1, [990.0, 0.0, 0.0], [990.0, 20.0, 0.0], 3000.0, 0.0, 0.0);
+    b.degree = 2;
+    b.n_ctrl = 5;
+    b.knots[..8].copy_from_slice(&[0.0, 0.0, 0.0, 1.0, 1.0, 2.0, 2.0, 2.0]);
+    // Half a circle of radius 10 about (990, 10), through (1000, 10).
+    let pts = [
+        [990.0, 0.0, 0.0, 1.0],
+        [1000.0, 0.0, 0.0, w],
+        [1000.0, 10.0, 0.0, 1.0],
+        [1000.0, 20.0, 0.0, w],
+        [990.0, 20.0, 0.0, 1.0],
+    ];
+    b.ctrl[..5].copy_from_slice(&pts);
+    b.length_mm = core::f64::consts::PI * 10.0;
+    let first = line(0, [0.0; 3], [990.0, 0.0, 0.0], 3000.0, 0.0, 0.0);
+    let mut lim = limits();
+    lim.machine.axes.x.max_mm = 999.5;
+    let mut e = Engine::new(lim, [0.0; 3]);
+    match e.tick(&mut Blocks(vec![first, b], 0)) {
+        Err(Fault::Protocol(ProtocolError::Travel {
+            seq: 1,
+            line: 2,
+            err,
+        })) => {
+            assert_eq!((err.axis, err.limit_mm), (0, 999.5));
+            assert!((err.reach_mm - 1000.0).abs() < 1e-9, "{err:?}");
+        }
+        t => panic!("{t:?}"),
+    }
+    // The same arc within the default travel runs.
+    let first = line(0, [0.0; 3], [990.0, 0.0, 0.0], 3000.0, 0.0, 0.0);
+    let mut e = Engine::new(limits(), [0.0; 3]);
+    assert!(e.tick(&mut Blocks(vec![first, b], 0)).is_ok());
+}
+
+#[test]
+fn a_step_beyond_the_axis_velocity_is_never_published() {
+    // The last guard, with a machine whose X may move only 0.01 mm per period while the
+    // block asks for 0.05 (F3000): the first step that would pass it is held back.
+    let mut lim = limits();
+    lim.max_step_mm[0] = 0.01;
+    let mut src = Blocks(
+        vec![
+            line(0, [0.0; 3], [30.0, 0.0, 0.0], 3000.0, 0.0, 0.0),
+            CommandBlock::empty(BlockKind::ProgramEnd, 1, 2),
+        ],
+        0,
+    );
+    let (sp, fault) = run_to_fault(Engine::new(lim, [0.0; 3]), &mut src, [0.0; 3]);
+    match fault {
+        Fault::StepTooLarge {
+            line: 1,
+            seq: 0,
+            axis: 0,
+            step_mm,
+            limit_mm,
+        } => assert!(step_mm > 0.01 && limit_mm == 0.01),
+        f => panic!("{f:?}"),
+    }
+    assert_eq!(fault.kind(), "step_too_large");
+    for w in sp.windows(2) {
+        assert!((w[1][0] - w[0][0]).abs() <= 0.01, "{w:?}");
+    }
+    // Held: the last set-points repeat the last good one.
+    let n = sp.len();
+    assert_eq!(sp[n - 1], sp[n - 2]);
 }
