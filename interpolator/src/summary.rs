@@ -105,7 +105,8 @@ impl MissEntry {
 #[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
 pub struct FaultInfo {
     /// `following_error`, `peer_gone`, `peer_silent`, `bad_block`, `bad_feedback`,
-    /// `stop_requested`, `stalled`, `step_too_large` or `out_of_travel`.
+    /// `stop_requested` (the operator: Ctrl-C or SIGTERM), `launcher_gone` (`cnc run`
+    /// died), `stalled`, `step_too_large` or `out_of_travel`.
     pub kind: String,
     /// The cycle the fault is about: for a following error the cycle whose set-point the
     /// drives answered with it, otherwise the cycle in which the interpolator noticed.
