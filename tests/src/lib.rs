@@ -166,3 +166,21 @@ pub fn signal(pid: u32, signal: i32) {
         "kill({pid}, {signal})"
     );
 }
+
+/// A valid command block: the 10 mm line from the origin along X at F3000 (the built-in
+/// machine's path acceleration and jerk), block `seq` of source line `source_line`, from
+/// rest to rest. Tests spoil or extend it field by field.
+pub fn line_block(seq: u64, source_line: u32) -> shared::protocol::CommandBlock {
+    use shared::protocol::{BlockKind, CommandBlock};
+    let mut b = CommandBlock::empty(BlockKind::Motion, seq, source_line);
+    b.degree = 1;
+    b.n_ctrl = 2;
+    b.knots[..4].copy_from_slice(&[0.0, 0.0, 1.0, 1.0]);
+    b.ctrl[0] = [0.0, 0.0, 0.0, 1.0];
+    b.ctrl[1] = [10.0, 0.0, 0.0, 1.0];
+    b.feed_mm_per_min = 3000.0;
+    b.length_mm = 10.0;
+    b.acc_mm_per_s2 = 2000.0;
+    b.jerk_mm_per_s3 = 50_000.0;
+    b
+}

@@ -232,17 +232,7 @@ fn killed_interpolator_is_noticed_and_the_drives_hold() {
 
 /// A valid one-block line from the origin, to be spoiled field by field.
 fn good_block() -> CommandBlock {
-    let mut b = CommandBlock::empty(BlockKind::Motion, 0, 1);
-    b.degree = 1;
-    b.n_ctrl = 2;
-    b.knots[..4].copy_from_slice(&[0.0, 0.0, 1.0, 1.0]);
-    b.ctrl[0] = [0.0, 0.0, 0.0, 1.0];
-    b.ctrl[1] = [10.0, 0.0, 0.0, 1.0];
-    b.feed_mm_per_min = 3000.0;
-    b.length_mm = 10.0;
-    b.acc_mm_per_s2 = 2000.0;
-    b.jerk_mm_per_s3 = 50_000.0;
-    b
+    tests::line_block(0, 1)
 }
 
 /// What an injection left: the interpolator's exit status, its stderr and fault, its

@@ -87,6 +87,18 @@ fn max_axis_steps() -> [f64; 3] {
         .map(|a| a.max_vel_mm_per_min / 60.0 * 1e-3 * (1.0 + 1e-9))
 }
 
+/// No set-point step of `sp` is larger than an axis of the default machine can make in
+/// one 1 ms period.
+fn assert_no_step_beyond_the_axes(sp: &[[f64; 3]]) {
+    let (most, allowed) = (largest_steps(sp), max_axis_steps());
+    for a in 0..3 {
+        assert!(
+            most[a] <= allowed[a],
+            "axis {a}: {most:?} against {allowed:?}"
+        );
+    }
+}
+
 #[test]
 fn a_log_edited_to_feed_1e6_is_refused_naming_the_block_and_field() {
     let dir = temp_dir("safety-feed");
@@ -140,13 +152,7 @@ fn a_log_edited_to_start_5_mm_away_is_refused_before_the_jump() {
             .contains("block 1 (line 3): start: the path starts 5.000 mm from where block 0 ended"),
         "{fault}"
     );
-    let (most, allowed) = (largest_steps(&sp), max_axis_steps());
-    for a in 0..3 {
-        assert!(
-            most[a] <= allowed[a],
-            "axis {a}: {most:?} against {allowed:?}"
-        );
-    }
+    assert_no_step_beyond_the_axes(&sp);
     assert!(
         sp.iter().all(|p| p[0] <= 60.0 && p[1] == 0.0),
         "left the first side"
@@ -161,17 +167,8 @@ fn a_g62_curve_broken_at_a_knot_is_refused_as_a_command_block() {
     // first ends, after a line to its start. Made by hand, whatever `cnc check` thinks.
     let dir = temp_dir("safety-g62");
     let machine = Machine::default();
-    let mut line = CommandBlock::empty(BlockKind::Motion, 0, 2);
-    line.degree = 1;
-    line.n_ctrl = 2;
-    line.knots[..4].copy_from_slice(&[0.0, 0.0, 1.0, 1.0]);
-    line.ctrl[0] = [0.0, 0.0, 0.0, 1.0];
-    line.ctrl[1] = [10.0, 0.0, 0.0, 1.0];
-    line.feed_mm_per_min = 3000.0;
+    let mut line = tests::line_block(0, 2);
     line.end_feed_mm_per_min = 3000.0;
-    line.length_mm = 10.0;
-    line.acc_mm_per_s2 = 2000.0;
-    line.jerk_mm_per_s3 = 50_000.0;
     let mut g62 = line;
     g62.seq = 1;
     g62.source_line = 3;
@@ -214,13 +211,7 @@ fn a_g62_curve_broken_at_a_knot_is_refused_as_a_command_block() {
         fault.contains("block 1 (line 3): knots: the curve jumps 1.414 mm at the knot 1"),
         "{fault}"
     );
-    let (most, allowed) = (largest_steps(&sp), max_axis_steps());
-    for a in 0..3 {
-        assert!(
-            most[a] <= allowed[a],
-            "axis {a}: {most:?} against {allowed:?}"
-        );
-    }
+    assert_no_step_beyond_the_axes(&sp);
     assert!(
         sp.iter().all(|p| p[0] <= 10.0 && p[1] == 0.0),
         "left the line"
@@ -425,13 +416,7 @@ fn the_broken_g62_program_never_jumps() {
     if run.join("setpoints.csv").exists() {
         let (_, rows) = csv(&run.join("setpoints.csv"));
         let sp: Vec<[f64; 3]> = rows.iter().map(|r| [r[2], r[3], r[4]]).collect();
-        let (most, allowed) = (largest_steps(&sp), max_axis_steps());
-        for a in 0..3 {
-            assert!(
-                most[a] <= allowed[a],
-                "axis {a}: {most:?} against {allowed:?}"
-            );
-        }
+        assert_no_step_beyond_the_axes(&sp);
     }
     let _ = std::fs::remove_dir_all(&dir);
 }
