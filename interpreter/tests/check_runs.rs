@@ -158,12 +158,7 @@ proptest! {
         which in any::<prop::sample::Index>(),
         edits in proptest::collection::vec(mutation(), 1..6),
     ) {
-        let peers = peers();
-        let (_, text) = &peers[which.index(peers.len())];
-        let mut bytes = text.clone().into_bytes();
-        for m in &edits {
-            apply(&mut bytes, m);
-        }
+        let bytes = mutated_peer(which, &edits);
         assert_runs(&String::from_utf8_lossy(&bytes))?;
     }
 }

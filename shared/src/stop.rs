@@ -116,10 +116,11 @@ pub fn die_with_parent(parent: libc::pid_t) -> std::io::Result<()> {
         {
             return Err(std::io::Error::last_os_error());
         }
+        // The launcher died before this process started. No message is built here:
+        // between fork and exec an allocation may deadlock on a lock another thread of
+        // the launcher held at the fork.
         if libc::getppid() != parent {
-            return Err(std::io::Error::other(
-                "the launcher died before this process started",
-            ));
+            return Err(std::io::Error::from_raw_os_error(libc::ESRCH));
         }
     }
     Ok(())

@@ -400,19 +400,27 @@ fn judge(bez: &[H; ORD], degree: usize, at: Axis, high: f64, budget: &mut usize)
             return Verdict::Bound;
         }
         *budget -= 1;
-        let (l, r) = halve(&piece.pts, degree);
-        // Right below left: the left half is judged first.
-        for half in [r, l] {
-            if let Some(slot) = stack.get_mut(len) {
-                *slot = Piece {
-                    pts: half,
-                    depth: piece.depth + 1,
-                };
-                len += 1;
-            }
-        }
+        len = push_halves(&mut stack, len, &piece, degree);
     }
     Verdict::Inside
+}
+
+/// Halves `piece` (de Casteljau at its middle) and pushes both halves on `stack` above
+/// its first `len` pieces, right below left so the left half is judged first; the new
+/// length. The callers leave room for two.
+fn push_halves(stack: &mut [Piece], len: usize, piece: &Piece, degree: usize) -> usize {
+    let (l, r) = halve(&piece.pts, degree);
+    let mut len = len;
+    for half in [r, l] {
+        if let Some(slot) = stack.get_mut(len) {
+            *slot = Piece {
+                pts: half,
+                depth: piece.depth + 1,
+            };
+            len += 1;
+        }
+    }
+    len
 }
 
 /// The curve's highest signed coordinate on `at`, to [`TRAVEL_TOL_MM`] (branch and bound
@@ -453,16 +461,7 @@ fn extreme(degree: usize, knots: &[f64], ctrl: &[[f64; 4]], at: Axis) -> (f64, b
                 continue;
             }
             budget -= 1;
-            let (l, r) = halve(&piece.pts, degree);
-            for half in [r, l] {
-                if let Some(slot) = stack.get_mut(len) {
-                    *slot = Piece {
-                        pts: half,
-                        depth: piece.depth + 1,
-                    };
-                    len += 1;
-                }
-            }
+            len = push_halves(&mut stack, len, &piece, degree);
         }
     }
     if bound > best + TRAVEL_TOL_MM {

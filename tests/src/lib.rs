@@ -184,3 +184,44 @@ pub fn line_block(seq: u64, source_line: u32) -> shared::protocol::CommandBlock 
     b.jerk_mm_per_s3 = 50_000.0;
     b
 }
+
+/// Path speed per cycle (mm per cycle) from set-point rows.
+pub fn steps(rows: &[Vec<f64>]) -> Vec<f64> {
+    rows.windows(2)
+        .map(|w| ((w[1][2] - w[0][2]).powi(2) + (w[1][3] - w[0][3]).powi(2)).sqrt())
+        .collect()
+}
+
+/// The set-points from the cycle the stop began to the end: on the diagonal, moving at
+/// first, then slowing every cycle down to standing still.
+pub fn assert_decelerated_on_the_diagonal(sp: &[Vec<f64>], info: &serde_json::Value) {
+    let from = info["stop_from_cycle"].as_u64().unwrap() as usize;
+    let to = info["stopped_cycle"].as_u64().unwrap() as usize;
+    assert_eq!(
+        to + 1,
+        sp.len(),
+        "the stop's last cycle is the last set-point"
+    );
+    assert!(
+        info["speed_at_fault_mm_per_min"].as_f64().unwrap() > 100.0,
+        "moving when the fault or stop came: {info}"
+    );
+    let tail = &sp[from.saturating_sub(1)..];
+    for r in tail {
+        assert!(
+            (r[3] - 0.75 * r[2]).abs() < 1e-9,
+            "set-point off the path: {r:?}"
+        );
+    }
+    let d = steps(tail);
+    assert!(
+        d.len() > 3,
+        "a controlled stop takes cycles, not an instant hold: {d:?}"
+    );
+    assert!(d[0] > 0.0);
+    for w in d.windows(2) {
+        assert!(w[1] <= w[0] + 1e-12, "speed rose during the stop: {w:?}");
+    }
+    // The jerk-limited stop ends inside a cycle: the last step is what is left of it.
+    assert!(*d.last().unwrap() < 1e-3, "ends standing still: {d:?}");
+}

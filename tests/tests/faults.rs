@@ -11,7 +11,10 @@ use shared::protocol::{BlockKind, CommandBlock, RunState, Services};
 use std::path::Path;
 use std::process::{Child, Command, Stdio};
 use std::time::Duration;
-use tests::{cnc_exe, complete_csv, report, role_pids, temp_dir, wait_until};
+use tests::{
+    assert_decelerated_on_the_diagonal, cnc_exe, complete_csv, report, role_pids, steps, temp_dir,
+    wait_until,
+};
 
 /// A straight feed move along `y = 0.75 x`: 150 mm at F3000, three seconds of motion.
 const DIAGONAL: &str = "G21 G90\nG1 X120 Y90 F3000\nM2\n";
@@ -29,47 +32,6 @@ fn wait_exit(child: &mut Child, what: &str) -> std::process::ExitStatus {
         status.is_some()
     });
     status.unwrap()
-}
-
-/// Path speed per cycle (mm per cycle) from set-point rows.
-fn steps(rows: &[Vec<f64>]) -> Vec<f64> {
-    rows.windows(2)
-        .map(|w| ((w[1][2] - w[0][2]).powi(2) + (w[1][3] - w[0][3]).powi(2)).sqrt())
-        .collect()
-}
-
-/// The set-points from the cycle the stop began to the end: on the diagonal, moving at
-/// first, then slowing every cycle down to standing still.
-fn assert_decelerated_on_the_diagonal(sp: &[Vec<f64>], info: &Value) {
-    let from = info["stop_from_cycle"].as_u64().unwrap() as usize;
-    let to = info["stopped_cycle"].as_u64().unwrap() as usize;
-    assert_eq!(
-        to + 1,
-        sp.len(),
-        "the stop's last cycle is the last set-point"
-    );
-    assert!(
-        info["speed_at_fault_mm_per_min"].as_f64().unwrap() > 100.0,
-        "moving when the fault came: {info}"
-    );
-    let tail = &sp[from.saturating_sub(1)..];
-    for r in tail {
-        assert!(
-            (r[3] - 0.75 * r[2]).abs() < 1e-9,
-            "set-point off the path: {r:?}"
-        );
-    }
-    let d = steps(tail);
-    assert!(
-        d.len() > 3,
-        "a controlled stop takes cycles, not an instant hold: {d:?}"
-    );
-    assert!(d[0] > 0.0);
-    for w in d.windows(2) {
-        assert!(w[1] <= w[0] + 1e-12, "speed rose during the stop: {w:?}");
-    }
-    // The jerk-limited stop ends inside a cycle: the last step is what is left of it.
-    assert!(*d.last().unwrap() < 1e-3, "ends standing still: {d:?}");
 }
 
 /// After a killed run: a fresh run works, with nothing cleaned by hand, and no iceoryx2

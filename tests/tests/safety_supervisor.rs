@@ -10,7 +10,8 @@ use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
 use std::time::Duration;
 use tests::{
-    cnc_exe, complete_csv, process_ended, report, role_pids, signal, temp_dir, wait_until,
+    assert_decelerated_on_the_diagonal, cnc_exe, complete_csv, process_ended, report, role_pids,
+    signal, steps, temp_dir, wait_until,
 };
 
 /// A straight feed move along `y = 0.75 x`: 600 mm at F3000, twelve seconds of motion,
@@ -85,13 +86,6 @@ fn json(path: &Path) -> Value {
     .unwrap_or_else(|e| panic!("{}: {e}", path.display()))
 }
 
-/// Path step per cycle (mm) from set-point rows.
-fn steps(rows: &[Vec<f64>]) -> Vec<f64> {
-    rows.windows(2)
-        .map(|w| ((w[1][2] - w[0][2]).powi(2) + (w[1][3] - w[0][3]).powi(2)).sqrt())
-        .collect()
-}
-
 /// The whole set-point trace: on the diagonal, never a step above the feed, and from the
 /// cycle the stop began to the end slowing every cycle down to standing still, long
 /// before the program's end.
@@ -114,23 +108,15 @@ fn assert_braked_on_the_path(sp: &[Vec<f64>], info: &Value) {
         biggest <= MAX_STEP_MM * (1.0 + 1e-9),
         "a step of {biggest} mm in one cycle, above the feed's {MAX_STEP_MM}"
     );
-    let from = info["stop_from_cycle"].as_u64().unwrap() as usize;
-    let to = info["stopped_cycle"].as_u64().unwrap() as usize;
-    assert_eq!(
-        to + 1,
-        sp.len(),
-        "the stop's last cycle is the last set-point"
+    assert_decelerated_on_the_diagonal(sp, info);
+    println!(
+        "braked on the path from {:.1} mm/min in cycle {} to rest in cycle {}",
+        info["speed_at_fault_mm_per_min"]
+            .as_f64()
+            .unwrap_or(f64::NAN),
+        info["stop_from_cycle"],
+        info["stopped_cycle"]
     );
-    assert!(
-        info["speed_at_fault_mm_per_min"].as_f64().unwrap() > 100.0,
-        "moving when the stop came: {info}"
-    );
-    let d = steps(&sp[from.saturating_sub(1)..]);
-    assert!(d.len() > 3, "a controlled stop takes cycles: {d:?}");
-    for w in d.windows(2) {
-        assert!(w[1] <= w[0] + 1e-12, "speed rose during the stop: {w:?}");
-    }
-    assert!(*d.last().unwrap() < 1e-3, "ends standing still: {d:?}");
 }
 
 /// Item 5: `kill -9` of `cnc run` mid-run. Before, its three processes went on as
@@ -141,6 +127,7 @@ fn a_killed_launcher_makes_the_stack_brake_on_the_path_and_say_why() {
     let (child, run) = start_run(&dir, &["--sched", "other"]);
     let roles = moving(&child, &run);
     signal(child.id(), libc::SIGKILL);
+    let killed = std::time::Instant::now();
     let _ = finish(child);
     // All three end by themselves, well before the program would have.
     for (role, pid) in &roles {
@@ -150,6 +137,11 @@ fn a_killed_launcher_makes_the_stack_brake_on_the_path_and_say_why() {
             || process_ended(*pid),
         );
     }
+    // A figure for the README (`--nocapture`), never asserted: timing is noisy here.
+    println!(
+        "every process gone {:.2} s after the launcher's kill (at most, polled)",
+        killed.elapsed().as_secs_f64()
+    );
     // The interpolator said why, and so does the report the interpreter wrote in the
     // launcher's place.
     let ipol = json(&run.join("interpolator.json"));

@@ -258,6 +258,17 @@ pub fn apply(text: &mut Vec<u8>, m: &Mutation) {
     }
 }
 
+/// Peer program `which` with `edits` applied, as bytes.
+pub fn mutated_peer(which: proptest::sample::Index, edits: &[Mutation]) -> Vec<u8> {
+    let peers = peers();
+    let (_, text) = &peers[which.index(peers.len())];
+    let mut bytes = text.clone().into_bytes();
+    for m in edits {
+        apply(&mut bytes, m);
+    }
+    bytes
+}
+
 /// Cases per property: modest for CI; `ROBUSTNESS_CASES=100000` for a deep search.
 pub fn cases(ci: u32) -> ProptestConfig {
     let n = std::env::var("ROBUSTNESS_CASES")
