@@ -20,6 +20,7 @@
 
 pub mod block;
 pub mod check;
+pub mod speed;
 
 pub use block::{commands, Block, Straight};
 
@@ -292,7 +293,11 @@ pub fn build(moves: &[Move], machine: &Machine) -> Vec<Block> {
                 // worst of the whole curve.
                 for span in nurbs::split_to_capacity(curve, (*degree + 1).min(MAX_CTRL)) {
                     for piece in split_at_cusps(span, machine) {
-                        out.push(curve_block(*line, &piece, Helix::NONE, f).into());
+                        // And where its speed limit changes: each block's cap is then
+                        // that of its own stretch of the curve.
+                        for part in speed::split_by_speed(piece, machine, f) {
+                            out.push(curve_block(*line, &part, Helix::NONE, f).into());
+                        }
                     }
                 }
             }
@@ -393,6 +398,15 @@ impl Shape {
 /// speed, and of the jerk; the rest is left to the speed profile along the path.
 const NORMAL_SHARE: f64 = 0.5;
 
+/// The share of the acceleration and jerk a curved block's curvature may take at its
+/// cap when the speed planned there stays at that cap (the block is a valley of the
+/// speed, where the profile needs little along the path): its cap is then
+/// `sqrt(0.9) = 0.95` of the curvature's own limit, and `sqrt(1 - 0.9²) = 0.44` of the
+/// path's acceleration is left to the profile. Every other curved block keeps
+/// [`NORMAL_SHARE`], so that where the speed climbs or falls it has most of the
+/// acceleration to do it with. (See [`plan_and`].)
+const VALLEY_SHARE: f64 = 0.9;
+
 /// The block's speed cap and profile limits. At every sample of the curve, for the
 /// speed `v`, tangential acceleration `a_t` and jerk `j_t` of the profile, the
 /// set-points' acceleration is `a_t·T + v²·k` and their jerk `j_t·T + 3·v·a_t·k +
@@ -401,7 +415,7 @@ const NORMAL_SHARE: f64 = 0.5;
 /// axis's velocity share `v·|T_i|` within its limit, and one period's chord within the
 /// chord tolerance (exact form: a chord `c` of a circle of radius `r` deviates
 /// `r - sqrt(r² - c²/4)`). The tangential limits are what is left at the cap speed.
-fn shape(g: Geometry, machine: &Machine, period_s: f64, feed_mm_s: f64) -> Shape {
+fn shape(g: Geometry, machine: &Machine, period_s: f64, feed_mm_s: f64, share: f64) -> Shape {
     let axes = machine.axes.as_array();
     let a_path = machine.path_acc_mm_per_s2;
     let j_path = machine.path_jerk_mm_per_s3;
@@ -447,7 +461,7 @@ fn shape(g: Geometry, machine: &Machine, period_s: f64, feed_mm_s: f64) -> Shape
     let mut v = feed_mm_s;
     for jump in jumps {
         if *jump > 1e-9 {
-            v = v.min((NORMAL_SHARE * j_path * period_s / jump).sqrt());
+            v = v.min((share * j_path * period_s / jump).sqrt());
         }
     }
     for ((t, k), dk) in pts.iter().zip(dk) {
@@ -458,21 +472,21 @@ fn shape(g: Geometry, machine: &Machine, period_s: f64, feed_mm_s: f64) -> Shape
             let chord = 2.0 * (tol * (2.0 * rho - tol)).sqrt();
             v = v
                 .min(chord / period_s)
-                .min((NORMAL_SHARE * a_path / kappa).sqrt());
+                .min((share * a_path / kappa).sqrt());
         }
         let dkn = path::norm(*dk);
         if dkn > 1e-12 {
-            v = min_cbrt(v, NORMAL_SHARE * j_path / dkn);
+            v = min_cbrt(v, share * j_path / dkn);
         }
         for (i, ax) in axes.iter().enumerate() {
             if t[i].abs() > 1e-12 {
                 v = v.min(ax.max_vel_mm_per_min / 60.0 / t[i].abs());
             }
             if k[i].abs() > 1e-12 {
-                v = v.min((NORMAL_SHARE * ax.max_acc_mm_per_s2 / k[i].abs()).sqrt());
+                v = v.min((share * ax.max_acc_mm_per_s2 / k[i].abs()).sqrt());
             }
             if dk[i].abs() > 1e-12 {
-                v = min_cbrt(v, NORMAL_SHARE * ax.max_jerk_mm_per_s3 / dk[i].abs());
+                v = min_cbrt(v, share * ax.max_jerk_mm_per_s3 / dk[i].abs());
             }
         }
     }
@@ -1447,6 +1461,8 @@ pub trait Plannable {
     fn set_caps(&mut self, length_mm: f64, feed_mm_per_min: f64, limits: Jerk);
     /// Sets the planned feeds at the start and the end.
     fn set_feeds(&mut self, start_mm_per_min: f64, end_mm_per_min: f64);
+    /// The planned start and end speeds and the cap, in mm/s.
+    fn planned_mm_s(&self) -> (f64, f64, f64);
 }
 
 /// Plans one motion block standing alone (from rest to rest) at `feed` mm/min.
@@ -1473,6 +1489,71 @@ pub fn plan_and<B: Plannable>(
     blocks: &mut [B],
     machine: &Machine,
     period_ns: u64,
+    done: impl FnMut(usize, &B),
+) {
+    let curved = |b: &B| b.is_motion() && matches!(b.geometry(), Geometry::Curve(c) if !c.is_surface());
+    if !blocks.iter().any(curved) {
+        plan_round(blocks, machine, period_ns, &|_| NORMAL_SHARE, done);
+        return;
+    }
+    // Two rounds: the first with every curved block at `NORMAL_SHARE` finds the valleys,
+    // the blocks whose planned speed reaches their cap; the second gives those
+    // `VALLEY_SHARE`. (The first round's caps are undone: each round starts from the
+    // programmed feeds.)
+    let feeds: Vec<f64> = blocks.iter().map(|b| b.feed_mm_per_min()).collect();
+    plan_round(blocks, machine, period_ns, &|_| NORMAL_SHARE, |_, _| {});
+    let valley = valleys(blocks);
+    for (b, f) in blocks.iter_mut().zip(&feeds) {
+        if b.is_motion() {
+            let (length, limits) = (b.length_mm(), b.limits());
+            b.set_caps(length, *f, limits);
+        }
+    }
+    let share = |i: usize| {
+        if valley[i] {
+            VALLEY_SHARE
+        } else {
+            NORMAL_SHARE
+        }
+    };
+    plan_round(blocks, machine, period_ns, &share, done);
+}
+
+/// Which planned blocks are curves whose speed reaches their cap: a forward pass (the
+/// speed each block can reach from its start under its limits, as the interpolator
+/// accelerates) meets the backward pass's start and end speeds, and the highest speed
+/// both allow within the block is at its cap.
+fn valleys<B: Plannable>(blocks: &[B]) -> Vec<bool> {
+    let mut out = vec![false; blocks.len()];
+    let mut reached = 0.0f64;
+    for (i, b) in blocks.iter().enumerate() {
+        if !b.is_motion() {
+            reached = 0.0;
+            continue;
+        }
+        let (start, end, cap) = b.planned_mm_s();
+        let (lim, len) = (b.limits(), b.length_mm());
+        let from = start.min(reached);
+        let peak = lim
+            .reachable_speed(from, len)
+            .min(lim.reachable_speed(end, len));
+        reached = end.min(lim.reachable_speed(from, len));
+        if b.flags() & FLAG_STOP_AT_END != 0 {
+            reached = 0.0;
+        }
+        out[i] = matches!(b.geometry(), Geometry::Curve(c) if !c.is_surface())
+            && peak >= cap * (1.0 - 1e-3);
+    }
+    out
+}
+
+/// One round of [`plan_and`], each curved block `i` shaped with the normal share
+/// `share(i)` of the limits.
+fn plan_round<B: Plannable>(
+    blocks: &mut [B],
+    machine: &Machine,
+    period_ns: u64,
+    share: &dyn Fn(usize) -> f64,
     mut done: impl FnMut(usize, &B),
 ) {
     let period_s = period_ns as f64 * 1e-9;
@@ -1509,7 +1590,7 @@ pub fn plan_and<B: Plannable>(
                 _ => false,
             };
             if !fast {
-                *shp = shape(g, machine, period_s, feed / 60.0);
+                *shp = shape(g, machine, period_s, feed / 60.0, share(i));
             }
             let limits = Jerk {
                 acc: shp.acc,
