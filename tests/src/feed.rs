@@ -34,6 +34,9 @@ pub struct Worst {
     pub chord: f64,
     /// Largest distance of a set-point from the exact curve, mm.
     pub off_curve_mm: f64,
+    /// Where the worst acceleration and jerk were: cycle (from 1) and source line.
+    pub acc_at: (u64, u32),
+    pub jerk_at: (u64, u32),
 }
 
 /// One run measured.
@@ -75,27 +78,51 @@ fn point_d1(b: &CommandBlock, u: f64) -> ([f64; 3], [f64; 3]) {
     (e.p, sub(pc, pa).map(|x| x / (c - a)))
 }
 
-/// The foot of `p` on block `b`, from the guess `u`, within the block's domain.
-fn project(b: &CommandBlock, p: [f64; 3], mut u: f64) -> (f64, f64) {
+/// The foot of `p` on block `b`, from the guess `u`, within the block's domain:
+/// Gauss–Newton, stepping off a point where the parametric speed vanishes; if that ends
+/// off the curve, the nearest of 256 samples from the guess on, refined the same way.
+fn project(b: &CommandBlock, p: [f64; 3], u: f64) -> (f64, f64) {
     let (u0, u1) = path::domain(b);
-    let mut dist = f64::INFINITY;
-    for _ in 0..30 {
+    let (u, dist) = newton(b, p, u);
+    if dist <= 1e-9 {
+        return (u, dist);
+    }
+    let n = 256;
+    let best = (0..=n)
+        .map(|j| u + (u1 - u) * j as f64 / n as f64)
+        .map(|x| (x, path::norm(sub(path::eval(b, x).p, p))))
+        .fold((u, f64::INFINITY), |a, c| if c.1 < a.1 { c } else { a });
+    let (v, d) = newton(b, p, best.0.max(u0));
+    if d < dist {
+        (v, d)
+    } else {
+        (u, dist)
+    }
+}
+
+fn newton(b: &CommandBlock, p: [f64; 3], mut u: f64) -> (f64, f64) {
+    let (u0, u1) = path::domain(b);
+    let width = (u1 - u0).max(1e-300);
+    for _ in 0..40 {
         let (q, d1) = point_d1(b, u);
         let r = sub(q, p);
-        dist = path::norm(r);
-        let g = dot(d1, d1);
-        if g == 0.0 || dist == 0.0 {
+        if path::norm(r) == 0.0 {
             break;
         }
-        let next = (u - dot(r, d1) / g).clamp(u0, u1);
-        let done = (next - u).abs() <= 1e-15 * (u1 - u0).max(1.0);
+        let g = dot(d1, d1);
+        let next = if g <= 1e-24 {
+            // The parametric speed vanishes here (a repeated control point): step off.
+            (u + 1e-7 * width).min(u1)
+        } else {
+            (u - dot(r, d1) / g).clamp(u0, u1)
+        };
+        let done = (next - u).abs() <= 1e-15 * width.max(1.0);
         u = next;
         if done {
-            dist = path::norm(sub(path::eval(b, u).p, p));
             break;
         }
     }
-    (u, dist)
+    (u, path::norm(sub(path::eval(b, u).p, p)))
 }
 
 /// Distance of `q` from the segment `a`–`c`.
@@ -167,17 +194,23 @@ pub fn measure(
         if n >= 2 {
             let d2 = sub(d1, sub(p[2], p[1]));
             let acc = d2.map(|x| x / (t_s * t_s));
-            w.acc = w.acc.max(path::norm(acc) / machine.path_acc_mm_per_s2);
-            for k in 0..3 {
-                w.acc = w.acc.max(acc[k].abs() / axes[k].max_acc_mm_per_s2);
+            let a = (0..3).fold(path::norm(acc) / machine.path_acc_mm_per_s2, |m, k| {
+                m.max(acc[k].abs() / axes[k].max_acc_mm_per_s2)
+            });
+            if a > w.acc {
+                w.acc = a;
+                w.acc_at = (cycles, t.source_line);
             }
             let near_kink = (1..4).any(|k| (seqs[k - 1] + 1..=seqs[k]).any(|s| kinks.contains(&s)));
             if n >= 3 && !near_kink {
                 let d3 = sub(d2, sub(sub(p[2], p[1]), sub(p[1], p[0])));
                 let jerk = d3.map(|x| x / (t_s * t_s * t_s));
-                w.jerk = w.jerk.max(path::norm(jerk) / machine.path_jerk_mm_per_s3);
-                for k in 0..3 {
-                    w.jerk = w.jerk.max(jerk[k].abs() / axes[k].max_jerk_mm_per_s3);
+                let j = (0..3).fold(path::norm(jerk) / machine.path_jerk_mm_per_s3, |m, k| {
+                    m.max(jerk[k].abs() / axes[k].max_jerk_mm_per_s3)
+                });
+                if j > w.jerk {
+                    w.jerk = j;
+                    w.jerk_at = (cycles, t.source_line);
                 }
             }
         }
@@ -247,10 +280,15 @@ fn chord_deviation(
     worst
 }
 
+/// The most cells [`row`] puts on a path at its coarser grid (by length).
+pub const MAX_CELLS: f64 = 100_000.0;
+
 /// One program on one machine: our time (the engine, as `cnc check --estimate`), the
 /// acceleration-only optimum at the grid step and at half of it, and the worst figures.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Row {
+    /// The grid step used, mm (see [`row`]).
+    pub step_mm: f64,
     pub time_s: f64,
     pub optimum_s: f64,
     /// The optimum on the grid of half the step.
@@ -273,7 +311,9 @@ impl Row {
 }
 
 /// Compiles `text` (G-code or STEP-NC, told apart by its name and text) for `machine`,
-/// steps it, measures it and computes its optimum on a grid of `step_mm`.
+/// steps it, measures it and computes its optimum on a grid of `step_mm`, or of
+/// [`MAX_CELLS`] cells over the path if that is coarser (a long part's grid stays
+/// affordable; the table reports the step and the change at half of it).
 pub fn row(
     name: &str,
     text: &str,
@@ -294,9 +334,12 @@ pub fn row(
     }
     let feeds = topp::programmed_feeds(name, text, machine, period_ns, &blocks)?;
     let lim = RefLimits::of(machine, period_ns);
+    let length: f64 = blocks.iter().map(|b| b.length_mm).sum();
+    let step_mm = step_mm.max(length / MAX_CELLS);
     let coarse = topp::optimum(&blocks, &feeds, &lim, step_mm);
     let fine = topp::optimum(&blocks, &feeds, &lim, step_mm / 2.0);
     Ok(Row {
+        step_mm,
         time_s: est.time_s,
         optimum_s: coarse.time_s,
         optimum_half_s: fine.time_s,

@@ -259,11 +259,8 @@ fn local(b: &CommandBlock, u: f64) -> Local {
     // The tool point's derivatives by a three-point stencil inside the pass's [0, 1].
     let h = 1e-4;
     let c = u.clamp(h, 1.0 - h);
-    let (pm, p0, pp) = (
-        path::eval(b, c - h).p,
-        path::eval(b, c).p,
-        path::eval(b, c + h).p,
-    );
+    let p0 = if c == u { e.p } else { path::eval(b, c).p };
+    let (pm, pp) = (path::eval(b, c - h).p, path::eval(b, c + h).p);
     let r = u - c;
     let mut d1 = [0.0; 3];
     let mut d2 = [0.0; 3];
@@ -279,12 +276,23 @@ fn local(b: &CommandBlock, u: f64) -> Local {
     }
 }
 
+/// The set-point path's parametric speed `|dM/du|` (for a surface block by central
+/// differences of the tool point, within the pass's `[0, 1]`).
+fn speed(b: &CommandBlock, u: f64) -> f64 {
+    if !b.is_surface() {
+        return path::norm(path::eval(b, u).d1);
+    }
+    let h = 1e-5;
+    let (a, c) = ((u - h).max(0.0), (u + h).min(1.0));
+    path::norm(sub(path::eval(b, c).p, path::eval(b, a).p)) / (c - a)
+}
+
 /// Unit tangent and curvature vector from parametric derivatives (the tangent of a
 /// vanishing derivative from the chord towards `toward`).
-fn frame(l: &Local, toward: [f64; 3]) -> ([f64; 3], [f64; 3], f64) {
+fn frame(l: &Local, toward: impl Fn() -> [f64; 3]) -> ([f64; 3], [f64; 3], f64) {
     let sp = path::norm(l.d1);
     if sp < 1e-12 {
-        let d = sub(toward, l.p);
+        let d = sub(toward(), l.p);
         let n = path::norm(d).max(1e-300);
         return (d.map(|x| x / n), [0.0; 3], sp);
     }
@@ -311,7 +319,7 @@ fn cell_length(b: &CommandBlock, u0: f64, u1: f64) -> f64 {
     let (m, h) = (0.5 * (u0 + u1), 0.5 * (u1 - u0));
     X.iter()
         .zip(W)
-        .map(|(x, w)| w * path::norm(local(b, m + h * x).d1))
+        .map(|(x, w)| w * speed(b, m + h * x))
         .sum::<f64>()
         * h
 }
@@ -328,7 +336,7 @@ fn refine(
     let len = cell_length(b, u0, u1);
     let um = 0.5 * (u0 + u1);
     let lm = local(b, um);
-    let (tm, _, _) = frame(&lm, local(b, u1).p);
+    let (tm, _, _) = frame(&lm, || path::eval(b, u1).p);
     let turn = angle(t0, tm) + angle(tm, t1);
     let split = (len > step || turn > MAX_TURN_RAD) && len > MIN_CELL_MM && depth < 60;
     if split {
@@ -411,7 +419,7 @@ pub fn grid(
         breaks.dedup();
         let first = pts.len();
         let mut cells: Vec<(f64, f64, bool)> = Vec::new();
-        let tan = |u: f64, toward: f64| frame(&local(b, u), local(b, toward).p).0;
+        let tan = |u: f64, toward: f64| frame(&local(b, u), || path::eval(b, toward).p).0;
         for w in breaks.windows(2) {
             let (a, c) = (w[0], w[1]);
             if c <= a {
@@ -435,7 +443,7 @@ pub fn grid(
             let uu = u.clamp(u0 + 1e-12 * (u1 - u0), u1 - 1e-12 * (u1 - u0));
             let l = local(b, uu);
             let toward = if u < 0.5 * (u0 + u1) { u1 } else { u0 };
-            let (mut t, k, sp) = frame(&l, local(b, toward).p);
+            let (mut t, k, sp) = frame(&l, || path::eval(b, toward).p);
             if sp < 1e-12 && toward < u {
                 t = t.map(|x| -x);
             }
