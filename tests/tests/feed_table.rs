@@ -10,7 +10,7 @@
 //! cargo test --release -p tests --test feed_table -- --ignored --nocapture
 //! ```
 //!
-//! prints the markdown table of `interpreter/BENCHMARKS.md` ("Feed against the optimum").
+//! prints the markdown table of `BENCHMARKS.md` ("Feed against the optimum").
 //! The small test beside it runs the same machinery on one short program so it cannot
 //! rot; it asserts correctness only (never a timing): our time is not below the optimum
 //! (which would be wrong in one of the two) and the limits hold.
