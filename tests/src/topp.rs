@@ -519,12 +519,13 @@ pub fn optimum(
     }
 }
 
-/// The programmed feed of each block, mm/s: the feed cap the planner gives a block on a
-/// machine whose acceleration, jerk, chord and axis-velocity limits never bind (so it is
-/// the programmed feed capped at `max_feed_mm_per_min`, or the rapid rate for a rapid),
-/// matched by sequence number when the two plans have the same blocks, else the largest
-/// of the blocks of the same source line. Only public APIs: works on any planner that
-/// caps a block's feed by the programmed one.
+/// The programmed feed of each block, mm/s, capped at `max_feed_mm_per_min` (the rapid
+/// rate for a rapid). For G-code, from the interpreter's moves (the F in force on the
+/// block's source line, `G93` already turned into mm/min), independent of the planner.
+/// For a STEP-NC part (and any block whose line has no move): the feed cap the planner
+/// gives the block on a machine whose acceleration, jerk, chord and axis-velocity limits
+/// never bind, matched by sequence number when the two plans have the same blocks, else
+/// the largest of the blocks of the same source line. Only public APIs.
 pub fn programmed_feeds(
     name: &str,
     text: &str,
@@ -532,6 +533,45 @@ pub fn programmed_feeds(
     period_ns: u64,
     blocks: &[CommandBlock],
 ) -> Result<Vec<f64>, String> {
+    use interpreter::program::Move;
+    use std::collections::HashMap;
+    let opts = interpreter::program::Options::default();
+    let cap = |b: &CommandBlock, f: f64| {
+        let m = if b.flags & FLAG_RAPID != 0 {
+            machine.rapid_mm_per_min
+        } else {
+            machine.max_feed_mm_per_min
+        };
+        f.min(m) / 60.0
+    };
+    let mut by_line: HashMap<u32, f64> = HashMap::new();
+    if !interpreter::step::check::is_step_file(name, text) {
+        let prog = interpreter::program::interpret_with(text, &opts)
+            .map_err(|d| interpreter::process::format_diagnostics(name, &d))?;
+        for m in &prog.moves {
+            let (line, feed) = match m {
+                Move::Line {
+                    line, rapid: true, ..
+                } => (*line, machine.rapid_mm_per_min),
+                Move::Line { line, feed, .. }
+                | Move::Arc { line, feed, .. }
+                | Move::Nurbs { line, feed, .. } => (*line, *feed),
+                _ => continue,
+            };
+            let e = by_line.entry(line).or_insert(0.0);
+            *e = e.max(feed);
+        }
+    }
+    let motion = |b: &CommandBlock| b.kind == BlockKind::Motion as u32;
+    if blocks
+        .iter()
+        .all(|b| !motion(b) || by_line.contains_key(&b.source_line))
+    {
+        return Ok(blocks
+            .iter()
+            .map(|b| cap(b, by_line.get(&b.source_line).copied().unwrap_or(0.0)))
+            .collect());
+    }
     let mut free = machine.clone();
     free.path_acc_mm_per_s2 = 1e9;
     free.path_jerk_mm_per_s3 = 1e12;
@@ -541,35 +581,29 @@ pub fn programmed_feeds(
         a.max_acc_mm_per_s2 = 1e9;
         a.max_jerk_mm_per_s3 = 1e12;
     }
-    let opts = interpreter::program::Options::default();
     let other = interpreter::process::compile_source(name, text, &opts, &free, period_ns)?.blocks;
-    let cap = |b: &CommandBlock, f: f64| {
-        let m = if b.flags & FLAG_RAPID != 0 {
-            machine.rapid_mm_per_min
-        } else {
-            machine.max_feed_mm_per_min
-        };
-        f.min(m) / 60.0
-    };
     let same = other.len() == blocks.len()
         && other
             .iter()
             .zip(blocks)
             .all(|(a, b)| a.source_line == b.source_line && a.kind == b.kind);
-    if same {
-        return Ok(blocks
-            .iter()
-            .zip(&other)
-            .map(|(b, o)| cap(b, o.feed_mm_per_min))
-            .collect());
-    }
-    let mut by_line = std::collections::HashMap::new();
+    let mut planned: HashMap<u32, f64> = HashMap::new();
     for o in &other {
-        let e = by_line.entry(o.source_line).or_insert(0.0f64);
+        let e = planned.entry(o.source_line).or_insert(0.0f64);
         *e = e.max(o.feed_mm_per_min);
     }
     Ok(blocks
         .iter()
-        .map(|b| cap(b, by_line.get(&b.source_line).copied().unwrap_or(0.0)))
+        .enumerate()
+        .map(|(i, b)| {
+            let f = by_line.get(&b.source_line).copied().unwrap_or_else(|| {
+                if same {
+                    other[i].feed_mm_per_min
+                } else {
+                    planned.get(&b.source_line).copied().unwrap_or(0.0)
+                }
+            });
+            cap(b, f)
+        })
         .collect())
 }
