@@ -3,13 +3,14 @@
 //! command blocks, written from the textbook method (Bobrow; Shin and McKay; the
 //! "numerical integration" family), not from the planner's code.
 //!
-//! The path is the set-point path the engine follows ([`shared::path::eval`]), cut into a
-//! grid in its arc length `s`: every cell at most `step_mm` long and turning its tangent
-//! by at most [`MAX_TURN_RAD`] (so a bend of 2 µm radius gets cells of a fraction of a
-//! micrometre), down to [`MIN_CELL_MM`]. At each grid point the state is `x = v²` (`v`
-//! the set-point's path speed) and the control is the path acceleration `a = dv/dt =
-//! ½ dx/ds`; the set-point's acceleration is `t·a + κ·x` (`t` the unit tangent, `κ =
-//! d²M/ds²` the curvature vector). The limits it keeps, each at every grid point:
+//! The path is the set-point path the engine follows ([`shared::path::eval`]) through the
+//! blocks as planned (a `G64 P` blend is part of it: the reference does not choose
+//! blends), cut into a grid in its arc length `s`: every cell at most `step_mm` long and
+//! turning its tangent by at most [`MAX_TURN_RAD`] (so a bend of 2 µm radius gets cells
+//! of a fraction of a micrometre), down to [`MIN_CELL_MM`]. At each grid point the state
+//! is `x = v²` (`v` the set-point's path speed) and the control is the path acceleration
+//! `a = dv/dt = ½ dx/ds`; the set-point's acceleration is `t·a + κ·x` (`t` the unit
+//! tangent, `κ = d²M/ds²` the curvature vector). The limits it keeps, each at every grid point:
 //!
 //! * **programmed feed**: `v ≤ F`, `F` the block's programmed feed capped at
 //!   `max_feed_mm_per_min` (the rapid rate for a rapid); see [`programmed_feeds`];
