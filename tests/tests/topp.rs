@@ -1,7 +1,8 @@
 //! The time-optimal reference ([`tests::topp`]) against closed forms: each case is a
 //! program whose optimal time is known exactly, on a machine whose limits make one
 //! constraint bind. Tolerances are stated per case; the grid is the table's
-//! ([`DEFAULT_STEP_MM`]) unless said. Measured: within 2.7e-6 of every closed form.
+//! ([`DEFAULT_STEP_MM`]) unless said. Measured: within 2.7e-6 of every closed form; within
+//! 0.3 % of the issue's independent TOPP-RA figure.
 
 use shared::Machine;
 use tests::topp::{self, RefLimits, DEFAULT_STEP_MM};
@@ -54,7 +55,7 @@ fn trapezoid(l: f64, v0: f64, v1: f64, f: f64, a: f64) -> f64 {
 
 fn assert_rel(what: &str, got: f64, want: f64, tol: f64) {
     let rel = (got - want).abs() / want;
-    println!("{what}: reference {got:.6}, closed form {want:.6}, relative {rel:.1e}");
+    println!("{what}: reference {got:.6}, expected {want:.6}, relative {rel:.1e}");
     assert!(
         rel <= tol,
         "{what}: {got} vs {want} ({rel:.2e} > {tol:.0e})"
@@ -195,4 +196,56 @@ fn halving_the_grid_changes_the_optimum_by_less_than_a_thousandth() {
         b.grid.len()
     );
     assert!(rel < 1e-3, "{rel}");
+}
+
+/// A second, independent algorithm: issue #23 reports a TOPP-RA parameterization
+/// (another implementation, converged to 0.01 % in grid size) of the butterfly's curves
+/// at F6000 on the LinuxCNC machine, under the feed, each axis's velocity and
+/// acceleration, rest to rest at the corners, of 4.52 s. This reference under the same
+/// limits (no path acceleration beyond the axes', no chord limit, no kink bound; each
+/// run of `G5.2` blocks rest to rest) agrees within 1 % (measured: 4.507 s, 0.3 %). With
+/// every limit of the machine it is 4.71 s.
+#[test]
+fn agrees_with_the_issues_topp_ra_on_the_butterfly_curves() {
+    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR"));
+    let text = std::fs::read_to_string(dir.join("peers/linuxcnc/g5_butterfly-xy.ngc"))
+        .unwrap()
+        .replace("F300", "F6000");
+    let m =
+        shared::machine::load(Some(&dir.join("../examples/machine-linuxcnc-sim.toml"))).unwrap();
+    let blocks = interpreter::process::compile(&text, &m, PERIOD_NS)
+        .unwrap()
+        .1;
+    let feeds = topp::programmed_feeds("b.ngc", &text, &m, PERIOD_NS, &blocks).unwrap();
+    let nurbs_lines: std::collections::HashSet<u32> = interpreter::program::interpret(&text)
+        .unwrap()
+        .moves
+        .iter()
+        .filter_map(|mv| match mv {
+            interpreter::program::Move::Nurbs { line, .. } => Some(*line),
+            _ => None,
+        })
+        .collect();
+    let curve = |b: &shared::protocol::CommandBlock| {
+        b.kind == shared::protocol::BlockKind::Motion as u32 && nurbs_lines.contains(&b.source_line)
+    };
+    let mut lim = RefLimits::of(&m, PERIOD_NS);
+    lim.path_acc = 1e12;
+    lim.chord_tol = 1e12;
+    lim.period_s = 1e6; // no one-period kink bound
+    let (mut t, mut i, mut runs) = (0.0, 0, 0);
+    while i < blocks.len() {
+        if !curve(&blocks[i]) {
+            i += 1;
+            continue;
+        }
+        let j = (i..blocks.len())
+            .find(|&j| !curve(&blocks[j]))
+            .unwrap_or(blocks.len());
+        t += topp::optimum(&blocks[i..j], &feeds[i..j], &lim, DEFAULT_STEP_MM / 2.0).time_s;
+        runs += 1;
+        i = j;
+    }
+    assert_eq!(runs, 5);
+    assert_rel("butterfly curves at F6000 against TOPP-RA", t, 4.52, 1e-2);
 }
