@@ -1,5 +1,9 @@
 //! Helpers for the end-to-end tests: finding (or building) the `cnc` executable, fresh
-//! run directories, and reading what a run leaves behind.
+//! run directories, and reading what a run leaves behind; and the feed table's
+//! time-optimal reference ([`topp`]) and measurements ([`feed`]).
+
+pub mod feed;
+pub mod topp;
 
 use std::path::{Path, PathBuf};
 use std::process::Command;

@@ -1,0 +1,350 @@
+//! The feed table's measurements: a program planned and stepped through the
+//! interpolator's engine in this process, as `cnc check --estimate` does, and its
+//! set-points measured cycle by cycle against the machine's limits, next to the
+//! time-optimal reference of [`crate::topp`].
+//!
+//! From the set-points alone (backward differences, `T` the period): each axis's velocity
+//! `Δp/T`, acceleration `Δ²p/T²` and jerk `Δ³p/T³` against that axis's limits, and the
+//! path's acceleration and jerk (the vectors' norms) against `path_acc_mm_per_s2` and
+//! `path_jerk_mm_per_s3`. The jerk leaves out the three cycles after a junction whose
+//! tangent turns (a kink, which no finite jerk follows; as `interpreter/tests/limits.rs`
+//! does). The chord: each set-point is projected onto the exact curve of the block the
+//! engine reports (Gauss–Newton from the previous foot point), and the exact curve
+//! between two consecutive feet (eight intervals on each block it crosses, block ends
+//! included) is measured against the straight step: the largest distance, against
+//! `chord_tolerance_mm`. A second algorithm to the sagitta of `limits.rs`.
+
+use crate::topp::{self, RefLimits};
+use interpolator::engine::{BlockSource, Engine, Limits, TickState};
+use shared::path;
+use shared::protocol::{BlockKind, CommandBlock};
+use shared::Machine;
+use std::collections::HashSet;
+
+/// The worst of each figure over a run, in units of its limit.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct Worst {
+    /// Largest axis velocity / that axis's limit.
+    pub vel: f64,
+    /// Largest of path acceleration / `path_acc` and axis acceleration / the axis's.
+    pub acc: f64,
+    /// The same for jerk (away from kinks).
+    pub jerk: f64,
+    /// Largest distance of the exact curve from a set-point step / `chord_tolerance_mm`.
+    pub chord: f64,
+    /// Largest distance of a set-point from the exact curve, mm.
+    pub off_curve_mm: f64,
+    /// Where the worst acceleration and jerk were: cycle (from 1) and source line.
+    pub acc_at: (u64, u32),
+    pub jerk_at: (u64, u32),
+}
+
+/// One run measured.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Measured {
+    pub cycles: u64,
+    pub time_s: f64,
+    pub worst: Worst,
+}
+
+struct Slice<'a>(&'a [CommandBlock], usize);
+
+impl BlockSource for Slice<'_> {
+    fn next_block(&mut self) -> Option<CommandBlock> {
+        let b = self.0.get(self.1).copied();
+        self.1 += usize::from(b.is_some());
+        b
+    }
+}
+
+fn sub(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
+    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
+}
+
+fn dot(a: [f64; 3], b: [f64; 3]) -> f64 {
+    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+}
+
+/// Point and parametric derivative of the set-point path (differences for a surface
+/// block, whose [`path::eval`] derivative is the contact point's).
+fn point_d1(b: &CommandBlock, u: f64) -> ([f64; 3], [f64; 3]) {
+    let e = path::eval(b, u);
+    if !b.is_surface() {
+        return (e.p, e.d1);
+    }
+    let h = 1e-6;
+    let (a, c) = ((u - h).max(0.0), (u + h).min(1.0));
+    let (pa, pc) = (path::eval(b, a).p, path::eval(b, c).p);
+    (e.p, sub(pc, pa).map(|x| x / (c - a)))
+}
+
+/// The foot of `p` on block `b`, from the guess `u`, within the block's domain:
+/// Gauss–Newton, stepping off a point where the parametric speed vanishes; if that ends
+/// off the curve, the nearest of 256 samples from the guess on, refined the same way.
+fn project(b: &CommandBlock, p: [f64; 3], u: f64) -> (f64, f64) {
+    let (u0, u1) = path::domain(b);
+    let (u, dist) = newton(b, p, u);
+    if dist <= 1e-9 {
+        return (u, dist);
+    }
+    let n = 256;
+    let best = (0..=n)
+        .map(|j| u + (u1 - u) * j as f64 / n as f64)
+        .map(|x| (x, path::norm(sub(path::eval(b, x).p, p))))
+        .fold((u, f64::INFINITY), |a, c| if c.1 < a.1 { c } else { a });
+    let (v, d) = newton(b, p, best.0.max(u0));
+    if d < dist {
+        (v, d)
+    } else {
+        (u, dist)
+    }
+}
+
+fn newton(b: &CommandBlock, p: [f64; 3], mut u: f64) -> (f64, f64) {
+    let (u0, u1) = path::domain(b);
+    let width = (u1 - u0).max(1e-300);
+    for _ in 0..40 {
+        let (q, d1) = point_d1(b, u);
+        let r = sub(q, p);
+        if path::norm(r) == 0.0 {
+            break;
+        }
+        let g = dot(d1, d1);
+        let next = if g <= 1e-24 {
+            // The parametric speed vanishes here (a repeated control point): step off.
+            (u + 1e-7 * width).min(u1)
+        } else {
+            (u - dot(r, d1) / g).clamp(u0, u1)
+        };
+        let done = (next - u).abs() <= 1e-15 * width.max(1.0);
+        u = next;
+        if done {
+            break;
+        }
+    }
+    (u, path::norm(sub(path::eval(b, u).p, p)))
+}
+
+/// Distance of `q` from the segment `a`–`c`.
+fn seg_dist(q: [f64; 3], a: [f64; 3], c: [f64; 3]) -> f64 {
+    let d = sub(c, a);
+    let l2 = dot(d, d);
+    let t = if l2 > 0.0 {
+        (dot(sub(q, a), d) / l2).clamp(0.0, 1.0)
+    } else {
+        0.0
+    };
+    path::norm(sub(q, [a[0] + t * d[0], a[1] + t * d[1], a[2] + t * d[2]]))
+}
+
+/// The sequence numbers of the blocks after a junction whose tangent turns.
+fn kinks(blocks: &[CommandBlock]) -> HashSet<u64> {
+    let motion = |b: &CommandBlock| b.kind == BlockKind::Motion as u32;
+    blocks
+        .windows(2)
+        .filter(|w| motion(&w[0]) && motion(&w[1]))
+        .filter(|w| {
+            let (u0, u1) = path::domain(&w[0]);
+            let (v0, v1) = path::domain(&w[1]);
+            let a = point_d1(&w[0], u1 - 1e-9 * (u1 - u0)).1;
+            let b = point_d1(&w[1], v0 + 1e-9 * (v1 - v0)).1;
+            let cos = dot(a, b) / (path::norm(a) * path::norm(b));
+            cos.is_nan() || cos < 1.0 - 1e-12
+        })
+        .map(|w| w[1].seq)
+        .collect()
+}
+
+/// Steps `blocks` (planned, numbered from 0) through the engine from the origin and
+/// measures every cycle (see the module page).
+pub fn measure(
+    blocks: &[CommandBlock],
+    machine: &Machine,
+    period_ns: u64,
+) -> Result<Measured, String> {
+    let t_s = period_ns as f64 * 1e-9;
+    let mut engine = Engine::new(Limits::new(machine, period_ns), [0.0; 3]);
+    let mut src = Slice(blocks, 0);
+    let by_seq: std::collections::HashMap<u64, usize> =
+        blocks.iter().enumerate().map(|(i, b)| (b.seq, i)).collect();
+    let index = |seq: u64| by_seq.get(&seq).copied();
+    let kinks = kinks(blocks);
+    let axes = machine.axes.as_array();
+    let mut w = Worst::default();
+    // The last four set-points (newest last) and the blocks of the last four cycles.
+    let mut p = [[0.0; 3]; 4];
+    let mut seqs = [0u64; 4];
+    let mut foot: Option<(usize, f64)> = None;
+    let mut cycles = 0u64;
+    loop {
+        let t = engine.tick(&mut src).map_err(|f| f.to_string())?;
+        cycles += 1;
+        p.rotate_left(1);
+        p[3] = t.pos_mm;
+        seqs.rotate_left(1);
+        seqs[3] = t.block_seq;
+        let n = cycles as usize;
+        // Backward differences.
+        let d1 = sub(p[3], p[2]);
+        for k in 0..3 {
+            w.vel = w
+                .vel
+                .max(d1[k].abs() / t_s / (axes[k].max_vel_mm_per_min / 60.0));
+        }
+        if n >= 2 {
+            let d2 = sub(d1, sub(p[2], p[1]));
+            let acc = d2.map(|x| x / (t_s * t_s));
+            let a = (0..3).fold(path::norm(acc) / machine.path_acc_mm_per_s2, |m, k| {
+                m.max(acc[k].abs() / axes[k].max_acc_mm_per_s2)
+            });
+            if a > w.acc {
+                w.acc = a;
+                w.acc_at = (cycles, t.source_line);
+            }
+            let near_kink = (1..4).any(|k| (seqs[k - 1] + 1..=seqs[k]).any(|s| kinks.contains(&s)));
+            if n >= 3 && !near_kink {
+                let d3 = sub(d2, sub(sub(p[2], p[1]), sub(p[1], p[0])));
+                let jerk = d3.map(|x| x / (t_s * t_s * t_s));
+                let j = (0..3).fold(path::norm(jerk) / machine.path_jerk_mm_per_s3, |m, k| {
+                    m.max(jerk[k].abs() / axes[k].max_jerk_mm_per_s3)
+                });
+                if j > w.jerk {
+                    w.jerk = j;
+                    w.jerk_at = (cycles, t.source_line);
+                }
+            }
+        }
+        // The chord against the exact curve.
+        if let Some(bi) = index(t.block_seq) {
+            let b = &blocks[bi];
+            if b.kind == BlockKind::Motion as u32 {
+                let (u0, _) = path::domain(b);
+                let guess = match foot {
+                    Some((fb, fu)) if fb == bi => fu,
+                    _ => u0,
+                };
+                let (u, dist) = project(b, p[3], guess);
+                w.off_curve_mm = w.off_curve_mm.max(dist);
+                if let Some((fb, fu)) = foot {
+                    let dev = chord_deviation(blocks, (fb, fu), (bi, u), p[2], p[3]);
+                    w.chord = w.chord.max(dev / machine.chord_tolerance_mm);
+                }
+                foot = Some((bi, u));
+            }
+        }
+        match t.state {
+            TickState::Done => break,
+            TickState::Running => {}
+            TickState::Starved => return Err("the program has no end block".into()),
+        }
+    }
+    Ok(Measured {
+        cycles,
+        time_s: (cycles * period_ns) as f64 * 1e-9,
+        worst: w,
+    })
+}
+
+/// The largest distance of the exact curve from `from` (block `a` at `ua`) to `to`
+/// (block `c` at `uc`) from the straight step `pa`–`pc`.
+fn chord_deviation(
+    blocks: &[CommandBlock],
+    (a, ua): (usize, f64),
+    (c, uc): (usize, f64),
+    pa: [f64; 3],
+    pc: [f64; 3],
+) -> f64 {
+    const N: usize = 8;
+    let mut worst: f64 = 0.0;
+    let mut piece = |b: &CommandBlock, x0: f64, x1: f64| {
+        for j in 0..=N {
+            let u = x0 + (x1 - x0) * j as f64 / N as f64;
+            worst = worst.max(seg_dist(path::eval(b, u).p, pa, pc));
+        }
+    };
+    if a == c {
+        if uc > ua {
+            piece(&blocks[a], ua, uc);
+        }
+        return worst;
+    }
+    for (i, b) in blocks.iter().enumerate().take(c + 1).skip(a) {
+        if b.kind != BlockKind::Motion as u32 {
+            continue;
+        }
+        let (u0, u1) = path::domain(b);
+        let x0 = if i == a { ua } else { u0 };
+        let x1 = if i == c { uc } else { u1 };
+        piece(b, x0, x1);
+    }
+    worst
+}
+
+/// The most cells [`row`] puts on a path at its coarser grid (by length).
+pub const MAX_CELLS: f64 = 100_000.0;
+
+/// One program on one machine: our time (the engine, as `cnc check --estimate`), the
+/// acceleration-only optimum at the grid step and at half of it, and the worst figures.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Row {
+    /// The grid step used, mm (see [`row`]).
+    pub step_mm: f64,
+    pub time_s: f64,
+    pub optimum_s: f64,
+    /// The optimum on the grid of half the step.
+    pub optimum_half_s: f64,
+    pub grid_points: usize,
+    pub length_mm: f64,
+    pub worst: Worst,
+}
+
+impl Row {
+    /// Our time over the optimum (at the finer grid).
+    pub fn ratio(&self) -> f64 {
+        self.time_s / self.optimum_half_s
+    }
+
+    /// Relative change of the optimum from the grid step to half of it.
+    pub fn grid_change(&self) -> f64 {
+        (self.optimum_s - self.optimum_half_s).abs() / self.optimum_half_s
+    }
+}
+
+/// Compiles `text` (G-code or STEP-NC, told apart by its name and text) for `machine`,
+/// steps it, measures it and computes its optimum on a grid of `step_mm`, or of
+/// [`MAX_CELLS`] cells over the path if that is coarser (a long part's grid stays
+/// affordable; the table reports the step and the change at half of it).
+pub fn row(
+    name: &str,
+    text: &str,
+    machine: &Machine,
+    period_ns: u64,
+    step_mm: f64,
+) -> Result<Row, String> {
+    let opts = interpreter::program::Options::default();
+    let blocks =
+        interpreter::process::compile_source(name, text, &opts, machine, period_ns)?.blocks;
+    let est = interpreter::estimate::estimate(&blocks, machine, period_ns)?;
+    let m = measure(&blocks, machine, period_ns)?;
+    if m.cycles != est.cycles {
+        return Err(format!(
+            "{name}: the measured run took {} cycles, the estimate {}",
+            m.cycles, est.cycles
+        ));
+    }
+    let feeds = topp::programmed_feeds(name, text, machine, period_ns, &blocks)?;
+    let lim = RefLimits::of(machine, period_ns);
+    let length: f64 = blocks.iter().map(|b| b.length_mm).sum();
+    let step_mm = step_mm.max(length / MAX_CELLS);
+    let coarse = topp::optimum(&blocks, &feeds, &lim, step_mm);
+    let fine = topp::optimum(&blocks, &feeds, &lim, step_mm / 2.0);
+    Ok(Row {
+        step_mm,
+        time_s: est.time_s,
+        optimum_s: coarse.time_s,
+        optimum_half_s: fine.time_s,
+        grid_points: fine.grid.len(),
+        length_mm: fine.length_mm,
+        worst: m.worst,
+    })
+}

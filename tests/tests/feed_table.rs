@@ -1,0 +1,214 @@
+//! The feed table of issue #23: every program of the LinuxCNC suite (`tests/peers`), the
+//! CAM examples and the STEP-NC parts (`examples/`), and LinuxCNC's butterfly with every
+//! F300 made F6000 and F600, each on the built-in machine and on the LinuxCNC machine
+//! (`examples/machine-linuxcnc-sim.toml`), at a 1 ms period: our machining time (the
+//! engine in this process, as `cnc check --estimate`), the acceleration-only optimum of
+//! [`tests::topp`] on the exact path, their ratio, LinuxCNC 2.9's time where it has one,
+//! and the worst acceleration, jerk and chord in units of their limits ([`tests::feed`]).
+//!
+//! ```text
+//! cargo test --release -p tests --test feed_table -- --ignored --nocapture
+//! ```
+//!
+//! prints the markdown table of `BENCHMARKS.md` ("Feed against the optimum").
+//! The small test beside it runs the same machinery on one short program so it cannot
+//! rot; it asserts correctness only (never a timing): our time is not below the optimum
+//! (which would be wrong in one of the two) and the limits hold.
+
+use shared::Machine;
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+use tests::feed::{row, Row};
+use tests::topp::DEFAULT_STEP_MM;
+
+const PERIOD_NS: u64 = 1_000_000;
+
+fn root() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("..")
+}
+
+fn machines() -> [(&'static str, Machine); 2] {
+    let file = root().join("examples/machine-linuxcnc-sim.toml");
+    [
+        ("built-in", Machine::default()),
+        ("LinuxCNC", shared::machine::load(Some(&file)).unwrap()),
+    ]
+}
+
+/// LinuxCNC 2.9's machining times on its simulated mill (the LinuxCNC machine file), as
+/// measured for issue #23 (`tests/peers/linuxcnc`'s programs; 1 ms, G64 without P).
+const LINUXCNC_S: &[(&str, f64)] = &[
+    ("g5_butterfly-xy F600", 39.251),
+    ("g5_butterfly-xy F6000", 11.095),
+    ("g5_nurbs-xy.ngc", 3.854),
+    ("g5_leto-xy.ngc", 28.860),
+    ("g5_curva_mazatrol.ngc", 110.983),
+    ("g5_curva_delfino.ngc", 134.984),
+    ("g5_curva_chitarra.ngc", 186.401),
+];
+
+/// Every program of the table: its name and text.
+fn programs() -> Vec<(String, String)> {
+    let mut files: Vec<PathBuf> = Vec::new();
+    for (dir, ext) in [
+        ("tests/peers/linuxcnc", "ngc"),
+        ("examples", "ngc"),
+        ("examples", "stp"),
+    ] {
+        let mut found: Vec<PathBuf> = std::fs::read_dir(root().join(dir))
+            .unwrap()
+            .map(|e| e.unwrap().path())
+            .filter(|p| p.extension().is_some_and(|e| e == ext))
+            .collect();
+        found.sort();
+        files.extend(found);
+    }
+    let mut out: Vec<(String, String)> = files
+        .iter()
+        .map(|p| {
+            let name = p.file_name().unwrap().to_string_lossy().to_string();
+            (name, std::fs::read_to_string(p).unwrap())
+        })
+        .collect();
+    let butterfly =
+        std::fs::read_to_string(root().join("tests/peers/linuxcnc/g5_butterfly-xy.ngc")).unwrap();
+    for f in ["F6000", "F600"] {
+        out.push((format!("g5_butterfly-xy {f}"), butterfly.replace("F300", f)));
+    }
+    out
+}
+
+fn cells(r: &Row) -> String {
+    format!(
+        "{:.3} | {:.3} | {:.3} | {:.3} | {:.3} | {:.3} | {:.3} | {:.3} | {:.1e}",
+        r.time_s,
+        r.optimum_half_s,
+        r.ratio(),
+        r.worst.acc,
+        r.worst.jerk,
+        r.worst.chord,
+        r.worst.vel,
+        r.step_mm,
+        r.grid_change()
+    )
+}
+
+#[test]
+#[ignore = "the whole feed table: minutes in release (see the module page)"]
+fn feed_table() {
+    let start = Instant::now();
+    println!(
+        "| program | machine | ours s | optimum s (acc-only) | ratio | LinuxCNC s | acc | jerk | \
+         chord | axis vel | grid mm | grid Δ |"
+    );
+    println!("|---|---|---|---|---|---|---|---|---|---|---|---|");
+    let mut over = Vec::new();
+    for (name, text) in programs() {
+        for (mname, m) in machines() {
+            let t0 = Instant::now();
+            let linuxcnc = LINUXCNC_S
+                .iter()
+                .find(|(n, _)| *n == name && mname == "LinuxCNC")
+                .map_or(String::new(), |(_, t)| format!("{t:.3}"));
+            match row(&name, &text, &m, PERIOD_NS, DEFAULT_STEP_MM) {
+                Ok(r) => {
+                    let c = cells(&r);
+                    let (ours, rest) = c.split_once(" | ").unwrap();
+                    let (opt, rest) = rest.split_once(" | ").unwrap();
+                    let (ratio, rest) = rest.split_once(" | ").unwrap();
+                    println!(
+                        "| {name} | {mname} | {ours} | {opt} | {ratio} | {linuxcnc} | {rest} |"
+                    );
+                    let w = r.worst;
+                    for (what, v, (cycle, line)) in [
+                        ("acceleration", w.acc, w.acc_at),
+                        ("jerk", w.jerk, w.jerk_at),
+                    ] {
+                        if v > 1.0 + 1e-3 {
+                            over.push(format!(
+                                "* {name} on {mname}: {what} {v:.3} × its limit at cycle {cycle} \
+                                 (source line {line})"
+                            ));
+                        }
+                    }
+                }
+                Err(e) => {
+                    let first = e.lines().next().unwrap_or("").to_string();
+                    println!("| {name} | {mname} | refused: {first} | | | | | | | | | |");
+                }
+            }
+            eprintln!("{name} on {mname}: {:.1} s", t0.elapsed().as_secs_f64());
+        }
+    }
+    if !over.is_empty() {
+        println!("\nAbove a limit (by more than 1e-3):\n{}", over.join("\n"));
+    }
+    println!(
+        "\nOptimum on the grid of half the step shown (grid Δ: its change from the step to \
+         half); the table took {:.0} s.",
+        start.elapsed().as_secs_f64()
+    );
+}
+
+/// The table's machinery on LinuxCNC's small NURBS program on both machines: our time
+/// is never below the optimum (relative tolerance 1e-3, the grid's convergence), and the
+/// measured acceleration and chord stay within their limits (1e-3, as
+/// `interpreter/tests/limits.rs`), the set-points on the curve (1e-6 mm).
+#[test]
+fn the_table_machinery_runs_on_a_short_program() {
+    let text =
+        std::fs::read_to_string(root().join("tests/peers/linuxcnc/g5_nurbs-xy.ngc")).unwrap();
+    for (mname, m) in machines() {
+        let r = row("g5_nurbs-xy.ngc", &text, &m, PERIOD_NS, DEFAULT_STEP_MM).unwrap();
+        println!("g5_nurbs-xy on {mname}: {r:?}");
+        assert!(r.ratio() >= 1.0 - 1e-3, "{mname}: {r:?}");
+        assert!(r.grid_change() < 1e-3, "{mname}: {r:?}");
+        assert!(r.worst.acc <= 1.0 + 1e-3, "{mname}: {r:?}");
+        assert!(r.worst.chord <= 1.0 + 1e-3, "{mname}: {r:?}");
+        assert!(r.worst.off_curve_mm <= 1e-6, "{mname}: {r:?}");
+    }
+}
+
+/// The chord measure against a closed form: on a circle of radius `r` every set-point
+/// lies on the curve, so a step of length `c` deviates `r − sqrt(r² − c²/4)` from it.
+/// The largest over a run, from the engine's own set-points, equals the measured worst
+/// chord (projection on the exact curve, samples between the feet) to 1e-3 relative
+/// (the eight samples of a step miss its middle by at most 1/16 of its length).
+#[test]
+fn the_chord_measure_is_the_sagitta_on_a_circle() {
+    use interpolator::engine::{BlockSource, Engine, Limits, TickState};
+    struct Src(Vec<shared::protocol::CommandBlock>, usize);
+    impl BlockSource for Src {
+        fn next_block(&mut self) -> Option<shared::protocol::CommandBlock> {
+            let b = self.0.get(self.1).copied();
+            self.1 += usize::from(b.is_some());
+            b
+        }
+    }
+    let m = Machine::default();
+    let r: f64 = 2.0;
+    let blocks = interpreter::process::compile("G2 X0 Y0 I2 J0 F6000\nM2\n", &m, PERIOD_NS)
+        .unwrap()
+        .1;
+    let mut engine = Engine::new(Limits::new(&m, PERIOD_NS), [0.0; 3]);
+    let mut src = Src(blocks.clone(), 0);
+    let (mut last, mut sag) = ([0.0; 3], 0.0f64);
+    loop {
+        let t = engine.tick(&mut src).unwrap();
+        let c = shared::path::norm([
+            t.pos_mm[0] - last[0],
+            t.pos_mm[1] - last[1],
+            t.pos_mm[2] - last[2],
+        ]);
+        sag = sag.max(r - (r * r - c * c / 4.0).sqrt());
+        last = t.pos_mm;
+        if t.state == TickState::Done {
+            break;
+        }
+    }
+    let w = tests::feed::measure(&blocks, &m, PERIOD_NS).unwrap().worst;
+    let measured = w.chord * m.chord_tolerance_mm;
+    println!("circle r2: sagitta {sag:.6e} mm, measured {measured:.6e} mm");
+    assert!((measured - sag).abs() <= 1e-3 * sag, "{measured} vs {sag}");
+    assert!(w.off_curve_mm <= 1e-9, "{w:?}");
+}
