@@ -1463,12 +1463,20 @@ pub trait Plannable {
     fn set_feeds(&mut self, start_mm_per_min: f64, end_mm_per_min: f64);
     /// The planned start and end speeds and the cap, in mm/s.
     fn planned_mm_s(&self) -> (f64, f64, f64);
+    /// A straight block split at the share `t` (strictly between 0 and 1) of its
+    /// length into two that join exactly, the second keeping the stop flag; `None` for
+    /// anything else, which is not split.
+    fn split_straight(&self, t: f64) -> Option<(Self, Self)>
+    where
+        Self: Sized;
 }
 
 /// Plans one motion block standing alone (from rest to rest) at `feed` mm/min.
 pub fn plan_alone(b: &mut CommandBlock, machine: &Machine, feed: f64) {
     b.feed_mm_per_min = feed;
-    plan(std::slice::from_mut(b), machine, 1_000_000);
+    let mut one = vec![*b];
+    plan(&mut one, machine, 1_000_000);
+    *b = one[0];
 }
 
 /// Fills in lengths, feed caps, profile limits and start/end speeds of every motion
@@ -1477,7 +1485,7 @@ pub fn plan_alone(b: &mut CommandBlock, machine: &Machine, feed: f64) {
 /// [`CloseKinks`]), then a backward pass with the jerk-limited distances of
 /// [`shared::profile`], make every block able to slow to its end speed; the
 /// interpolator accelerates as its limits allow by itself (no forward pass).
-pub fn plan<B: Plannable>(blocks: &mut [B], machine: &Machine, period_ns: u64) {
+pub fn plan<B: Plannable>(blocks: &mut Vec<B>, machine: &Machine, period_ns: u64) {
     plan_and(blocks, machine, period_ns, |_, _| {});
 }
 
@@ -1486,13 +1494,13 @@ pub fn plan<B: Plannable>(blocks: &mut [B], machine: &Machine, period_ns: u64) {
 /// block (`cnc check` validates them) then finds it still in the cache, instead of
 /// going over the whole list again.
 pub fn plan_and<B: Plannable>(
-    blocks: &mut [B],
+    blocks: &mut Vec<B>,
     machine: &Machine,
     period_ns: u64,
     done: impl FnMut(usize, &B),
 ) {
-    let curved = |b: &B| b.is_motion() && matches!(b.geometry(), Geometry::Curve(c) if !c.is_surface());
-    if !blocks.iter().any(curved) {
+    split_at_kinks(blocks, machine, period_ns);
+    if !blocks.iter().any(is_curve) {
         plan_round(blocks, machine, period_ns, &|_| NORMAL_SHARE, done);
         return;
     }
@@ -1502,47 +1510,136 @@ pub fn plan_and<B: Plannable>(
     // programmed feeds.)
     let feeds: Vec<f64> = blocks.iter().map(|b| b.feed_mm_per_min()).collect();
     plan_round(blocks, machine, period_ns, &|_| NORMAL_SHARE, |_, _| {});
-    let valley = valleys(blocks);
+    let shares = shares(blocks);
     for (b, f) in blocks.iter_mut().zip(&feeds) {
         if b.is_motion() {
             let (length, limits) = (b.length_mm(), b.limits());
             b.set_caps(length, *f, limits);
         }
     }
-    let share = |i: usize| {
-        if valley[i] {
-            VALLEY_SHARE
-        } else {
-            NORMAL_SHARE
-        }
-    };
+    let share = |i: usize| shares[i];
     plan_round(blocks, machine, period_ns, &share, done);
 }
 
-/// Which planned blocks are curves whose speed reaches their cap: a forward pass (the
-/// speed each block can reach from its start under its limits, as the interpolator
-/// accelerates) meets the backward pass's start and end speeds, and the highest speed
-/// both allow within the block is at its cap.
-fn valleys<B: Plannable>(blocks: &[B]) -> Vec<bool> {
-    let mut out = vec![false; blocks.len()];
+/// Straight blocks split next to their kinks: a kink's direction change in one period
+/// takes most of the acceleration there (see [`junction_leaves`]), and the blocks on
+/// either side keep only what it leaves, each along its whole length. So a straight
+/// block much longer than the path a kink's steps can reach gives that stretch a block
+/// of its own: `KINK_STEPS` steps at the highest speed the kink can be passed at
+/// (its direction change within the weakest axis's acceleration), and the rest of the
+/// block keeps its full limits. The pieces lie exactly on the line (the point between
+/// them is worked out once and is the end of one and the start of the other).
+fn split_at_kinks<B: Plannable>(blocks: &mut Vec<B>, machine: &Machine, period_ns: u64) {
+    const KINK_STEPS: f64 = 4.0;
+    let period_s = period_ns as f64 * 1e-9;
+    let fixed = PlanLimits::new(machine);
+    let n = blocks.len();
+    // The stretch to split off at each block's start and end (0: none).
+    let mut head = vec![0.0f64; n];
+    let mut tail = vec![0.0f64; n];
+    let chord = |b: &B| match b.geometry() {
+        Geometry::Straight(d) if b.is_motion() => Some(d),
+        _ => None,
+    };
+    for i in 1..n {
+        let (a, b) = (&blocks[i - 1], &blocks[i]);
+        let (Some(da), Some(db)) = (chord(a), chord(b)) else {
+            continue;
+        };
+        if (a.flags() ^ b.flags()) & FLAG_RAPID != 0 || a.flags() & FLAG_STOP_AT_END != 0 {
+            continue;
+        }
+        let (la, lb) = (path::norm(da), path::norm(db));
+        if !(la > 0.0 && lb > 0.0) {
+            continue;
+        }
+        let cos = (dot(da, db) / (la * lb)).clamp(-1.0, 1.0);
+        let half_sin = half_turn_sin(cos);
+        if cos < fixed.corner_cos || !is_kink(half_sin) {
+            continue;
+        }
+        let v = (fixed.weakest_acc * period_s / (2.0 * half_sin))
+            .min(a.feed_mm_per_min() / 60.0)
+            .min(b.feed_mm_per_min() / 60.0);
+        let stretch = KINK_STEPS * v * period_s;
+        if la > 4.0 * stretch {
+            tail[i - 1] = stretch;
+        }
+        if lb > 4.0 * stretch {
+            head[i] = stretch;
+        }
+    }
+    if head.iter().chain(&tail).all(|x| *x == 0.0) {
+        return;
+    }
+    let old = std::mem::take(blocks);
+    blocks.reserve(old.len() + old.len() / 2);
+    for (i, b) in old.into_iter().enumerate() {
+        let len = chord(&b).map_or(0.0, path::norm);
+        let mut rest = b;
+        if head[i] > 0.0 {
+            if let Some((h, r)) = rest.split_straight(head[i] / len) {
+                blocks.push(h);
+                rest = r;
+            }
+        }
+        if tail[i] > 0.0 {
+            let left = len - head[i];
+            if let Some((r, t)) = rest.split_straight((left - tail[i]) / left) {
+                blocks.push(r);
+                rest = t;
+            }
+        }
+        blocks.push(rest);
+    }
+}
+
+/// A motion block along a curve (not a line, not a surface pass): where the share of
+/// the limits its curvature takes is chosen.
+fn is_curve<B: Plannable>(b: &B) -> bool {
+    b.is_motion() && matches!(b.geometry(), Geometry::Curve(c) if !c.is_surface())
+}
+
+/// The share of the limits each block's curvature takes in the second round of
+/// [`plan_and`], from the speeds the first round (every curve at [`NORMAL_SHARE`])
+/// planned. A forward pass (the speed each block can reach from its start under its
+/// limits, as the interpolator accelerates) meets the backward pass's start and end
+/// speeds: the highest speed both allow within a block is its peak.
+/// A curve whose peak is its cap gets [`VALLEY_SHARE`]: there the speed stays at the
+/// cap, and a higher cap is worth more than acceleration along the path. Every other
+/// block keeps [`NORMAL_SHARE`], most of the acceleration for a speed that climbs or
+/// falls.
+fn shares<B: Plannable>(blocks: &[B]) -> Vec<f64> {
+    let n = blocks.len();
+    let mut out = vec![NORMAL_SHARE; n];
     let mut reached = 0.0f64;
     for (i, b) in blocks.iter().enumerate() {
         if !b.is_motion() {
             reached = 0.0;
             continue;
         }
-        let (start, end, cap) = b.planned_mm_s();
+        let (start, end, c) = b.planned_mm_s();
         let (lim, len) = (b.limits(), b.length_mm());
         let from = start.min(reached);
         let peak = lim
             .reachable_speed(from, len)
-            .min(lim.reachable_speed(end, len));
+            .min(lim.reachable_speed(end, len))
+            .min(c);
         reached = end.min(lim.reachable_speed(from, len));
         if b.flags() & FLAG_STOP_AT_END != 0 {
             reached = 0.0;
         }
-        out[i] = matches!(b.geometry(), Geometry::Curve(c) if !c.is_surface())
-            && peak >= cap * (1.0 - 1e-3);
+        if !is_curve(b) || !(c > 0.0) {
+            continue;
+        }
+        // A curve whose speed reaches its cap gets the higher share there. (Tried on
+        // LinuxCNC's programs: also lowering the share of the curves below their cap,
+        // to their peak, or keeping the higher share to the valleys between higher
+        // caps, were each slower: the first round's peaks then hold the second round
+        // back where its valleys rose.)
+        if peak >= c * (1.0 - 1e-3) {
+            out[i] = VALLEY_SHARE;
+        }
     }
     out
 }

@@ -10,7 +10,8 @@
 use super::{Geometry, Plannable};
 use shared::profile::Limits as Jerk;
 use shared::protocol::{
-    validate_plan, BlockKind, CommandBlock, Helix, ProtocolError, FLAG_RAPID, FLAG_SURFACE,
+    validate_plan, BlockKind, CommandBlock, Helix, ProtocolError, FLAG_RAPID, FLAG_STOP_AT_END,
+    FLAG_SURFACE,
 };
 
 /// A straight motion block (a `G0` or `G1` move): as a [`CommandBlock`], the degree-1
@@ -233,6 +234,23 @@ macro_rules! planned_fields {
     };
 }
 
+impl Straight {
+    /// [`Plannable::split_straight`].
+    fn split(&self, t: f64) -> Option<(Straight, Straight)> {
+        if !(t > 0.0 && t < 1.0) {
+            return None;
+        }
+        let mid: [f64; 3] = core::array::from_fn(|i| self.from[i] + t * (self.to[i] - self.from[i]));
+        let first = Straight {
+            to: mid,
+            flags: self.flags & !FLAG_STOP_AT_END,
+            ..*self
+        };
+        let second = Straight { from: mid, ..*self };
+        Some((first, second))
+    }
+}
+
 impl Plannable for CommandBlock {
     fn is_motion(&self) -> bool {
         self.kind == BlockKind::Motion as u32
@@ -246,6 +264,9 @@ impl Plannable for CommandBlock {
             None => Geometry::Curve(self),
         }
     }
+    fn split_straight(&self, _t: f64) -> Option<(Self, Self)> {
+        None
+    }
     planned_fields!();
 }
 
@@ -258,6 +279,9 @@ impl Plannable for Straight {
     }
     fn geometry(&self) -> Geometry<'_> {
         Geometry::Straight(self.chord())
+    }
+    fn split_straight(&self, t: f64) -> Option<(Self, Self)> {
+        self.split(t)
     }
     planned_fields!();
 }
@@ -299,5 +323,13 @@ impl Plannable for Block {
     }
     fn planned_mm_s(&self) -> (f64, f64, f64) {
         either!(self, b => b.planned_mm_s())
+    }
+    fn split_straight(&self, t: f64) -> Option<(Self, Self)> {
+        match self {
+            Block::Straight(s) => s
+                .split(t)
+                .map(|(a, b)| (Block::Straight(a), Block::Straight(b))),
+            Block::Whole(_) => None,
+        }
     }
 }

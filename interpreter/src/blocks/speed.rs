@@ -26,7 +26,7 @@ use shared::nurbs::{split_at, CurvePoint, SplitCurve};
 use shared::Machine;
 
 /// Ratio of one speed level to the next below it.
-const LEVEL: f64 = 0.85;
+const LEVEL: f64 = 0.8;
 /// Uniform samples of a piece's limit.
 const SAMPLES: usize = 64;
 /// Most blocks one piece is split into.
