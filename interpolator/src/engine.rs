@@ -14,7 +14,13 @@
 //! source every cycle), and a stop at the end of the last block held: the machine can
 //! always stop on the known path, so a starved interpolator stops on the path instead of
 //! running off its end. The test of each limit is the closed form of
-//! [`shared::profile::Limits::can_reach`].
+//! [`shared::profile::Limits::can_reach`]. Up to `MAX_AHEAD` limits are tested one by
+//! one; the further ones are folded into the last of them. The walk that finds them reads
+//! each block's few figures from a packed array beside the ring (not from its 1.5 KB
+//! block), and its searches use square-root-free comparisons
+//! ([`shared::profile::Limits::change_within`]): on a window of hundreds of tiny
+//! blocks this walk was two thirds of a cycle's cost (`cycle/profile_worst` in
+//! `benches/cycle.rs`, `BENCHMARKS.md`).
 //!
 //! The engine trusts no block it was not built to: each block is validated, then checked
 //! against the machine it runs with ([`CommandBlock::validate_for`]: feeds, profile
