@@ -14,7 +14,13 @@
 //! source every cycle), and a stop at the end of the last block held: the machine can
 //! always stop on the known path, so a starved interpolator stops on the path instead of
 //! running off its end. The test of each limit is the closed form of
-//! [`shared::profile::Limits::can_reach`].
+//! [`shared::profile::Limits::can_reach`]. Up to `MAX_AHEAD` limits are tested one by
+//! one; the further ones are folded into the last of them. The walk that finds them reads
+//! each block's few figures from a packed array beside the ring (not from its 1.5 KB
+//! block), and its searches use square-root-free comparisons
+//! ([`shared::profile::Limits::change_within`]): on a window of hundreds of tiny
+//! blocks this walk was two thirds of a cycle's cost (`cycle/profile_worst` in
+//! `benches/cycle.rs`, `BENCHMARKS.md`).
 //!
 //! The engine trusts no block it was not built to: each block is validated, then checked
 //! against the machine it runs with ([`CommandBlock::validate_for`]: feeds, profile
@@ -328,17 +334,44 @@ impl Limits {
 }
 
 /// The validated blocks in hand after the current one, oldest first: a ring allocated
-/// once, when the engine is made.
+/// once, when the engine is made. Beside each block, the few figures the profile step
+/// reads of every block ahead in every cycle ([`BlockFigs`]), packed together: walking a
+/// hundred blocks' figures then touches a few cache lines, not a few hundred.
 struct Window {
     buf: Vec<CommandBlock>,
+    figs: Vec<BlockFigs>,
     head: usize,
     len: usize,
 }
 
+/// What the profile step needs of a block in the window.
+#[derive(Debug, Clone, Copy)]
+struct BlockFigs {
+    motion: bool,
+    length_mm: f64,
+    feed_mm_per_s: f64,
+    end_mm_per_s: f64,
+    lim: Jerk,
+}
+
+impl BlockFigs {
+    fn of(b: &CommandBlock) -> Self {
+        BlockFigs {
+            motion: is_motion(b),
+            length_mm: b.length_mm,
+            feed_mm_per_s: b.feed_mm_per_min / 60.0,
+            end_mm_per_s: b.end_feed_mm_per_min / 60.0,
+            lim: block_jerk(b),
+        }
+    }
+}
+
 impl Window {
     fn new(capacity: usize) -> Self {
+        let empty = CommandBlock::empty(BlockKind::ProgramEnd, 0, 0);
         Window {
-            buf: vec![CommandBlock::empty(BlockKind::ProgramEnd, 0, 0); capacity.max(1)],
+            buf: vec![empty; capacity.max(1)],
+            figs: vec![BlockFigs::of(&empty); capacity.max(1)],
             head: 0,
             len: 0,
         }
@@ -348,17 +381,48 @@ impl Window {
         self.len >= self.buf.len()
     }
 
+    /// The ring index of the `i`-th block held (`i < len`): no division in the cycle.
+    #[inline]
+    fn slot(&self, i: usize) -> usize {
+        let k = self.head + i;
+        if k >= self.buf.len() {
+            k - self.buf.len()
+        } else {
+            k
+        }
+    }
+
     fn get(&self, i: usize) -> Option<&CommandBlock> {
         if i < self.len {
-            self.buf.get((self.head + i) % self.buf.len())
+            self.buf.get(self.slot(i))
         } else {
             None
         }
     }
 
+    /// The figures of the `i`-th block held.
+    #[inline]
+    fn fig(&self, i: usize) -> Option<&BlockFigs> {
+        if i < self.len {
+            self.figs.get(self.slot(i))
+        } else {
+            None
+        }
+    }
+
+    /// The figures of the `i`-th block held if it is a motion.
+    #[inline]
+    fn motion(&self, i: usize) -> Option<&BlockFigs> {
+        self.fig(i).filter(|f| f.motion)
+    }
+
     fn push(&mut self, b: CommandBlock) {
-        let n = self.buf.len();
-        if let Some(slot) = self.buf.get_mut((self.head + self.len) % n) {
+        if self.is_full() {
+            return;
+        }
+        let k = self.slot(self.len);
+        if let (Some(slot), Some(fig)) = (self.buf.get_mut(k), self.figs.get_mut(k)) {
+            *fig = BlockFigs::of(&b);
             *slot = b;
             self.len += 1;
         }
@@ -366,7 +430,7 @@ impl Window {
 
     fn pop(&mut self) -> Option<CommandBlock> {
         let b = self.get(0).copied()?;
-        self.head = (self.head + 1) % self.buf.len();
+        self.head = self.slot(1);
         self.len -= 1;
         Some(b)
     }
@@ -405,13 +469,19 @@ fn reach_within(lim: Jerk, v: f64, d: f64) -> f64 {
     }
     // Upper bracket: the speed change whose distance alone at the higher speed is `d`
     // cannot exceed reaching it at jerk and acceleration limits from rest.
+    // (The cube root, costly, only where it is the larger: rooms over `8·acc³/jerk²`.)
+    let (sat, cub) = ((2.0 * lim.acc * d).sqrt(), lim.jerk * d * d);
     let (mut lo, mut hi) = (
         v,
-        v + (2.0 * lim.acc * d).sqrt().max((lim.jerk * d * d).cbrt()),
+        v + if sat * sat * sat >= cub {
+            sat
+        } else {
+            cub.cbrt()
+        },
     );
     for _ in 0..10 {
         let mid = 0.5 * (lo + hi);
-        if lim.change_distance(mid, v) <= d {
+        if lim.change_within(mid, v, d) {
             lo = mid;
         } else {
             hi = mid;
@@ -841,6 +911,12 @@ impl Engine {
         // harder, and could look lost long before it is.
         let mut last_low: Option<(f64, f64)> = None;
         let mut since_low: Option<Jerk> = None;
+        // The stopping distance under `reach_lim` (none yet).
+        let mut reach_lim = Jerk {
+            acc: f64::NAN,
+            jerk: f64::NAN,
+        };
+        let mut reach_d = 0.0;
         let mut i = 0usize;
         loop {
             if v < lowest {
@@ -849,17 +925,16 @@ impl Engine {
                     // With two cycles' travel to spare: the braking for it then starts
                     // a full cycle after the last low is passed, not inside the cycle
                     // that crosses it.
+                    // (The spare first: on tiny blocks it alone exceeds the room.)
                     (Some((dl, vl)), Some(seg)) => {
-                        seg.change_distance(v, vl) + self.spare(vl, lim, seg) <= d - dl
+                        let room = d - dl - self.spare(vl, lim, seg);
+                        room >= 0.0 && seg.change_within(v, vl, room)
                     }
                     _ => false,
                 };
                 last_low = Some((d, v));
                 since_low = None;
-                let next = match self.window.get(i) {
-                    Some(b) if is_motion(b) => block_jerk(b),
-                    _ => lim,
-                };
+                let next = self.window.motion(i).map_or(lim, |f| f.lim);
                 let a = Ahead { d, v, lim, next };
                 if implied {
                     // Kept by keeping the last low.
@@ -875,7 +950,8 @@ impl Engine {
                     // it to this one's speed would be safe too, but on a long chain of
                     // tiny blocks slowing down to a stop it makes the machine crawl.
                     let room = d - last.d - self.spare(last.v, lim, lim);
-                    last.v = last.v.min(reach_within(lim, v, room));
+                    let r = reach_within(lim, v, room);
+                    last.v = last.v.min(r);
                     last.lim = min_lim(last.lim, lim);
                     last.next = min_lim(last.next, next);
                 }
@@ -883,22 +959,27 @@ impl Engine {
             // Beyond the stopping distance nothing can bind, and nothing is below zero.
             // (From `v_top` to rest, after this cycle and after the time it takes to
             // bring a positive acceleration back to zero.)
-            let easing = self.acc.max(0.0) / lim.jerk;
-            if v <= 0.0 || d > lim.change_distance(v_top, 0.0) + v_top * (self.t_s + easing) {
+            if v <= 0.0 {
                 break;
             }
-            let Some(b) = self.window.get(i) else {
+            if lim != reach_lim {
+                // The same for every block end until the limits fall again.
+                reach_lim = lim;
+                let easing = self.acc.max(0.0) / lim.jerk;
+                reach_d = lim.change_distance(v_top, 0.0) + v_top * (self.t_s + easing);
+            }
+            if d > reach_d {
+                break;
+            }
+            let Some(b) = self.window.motion(i) else {
                 break;
             };
-            if !is_motion(b) {
-                break;
-            }
-            lim = min_lim(lim, block_jerk(b));
-            since_low = Some(since_low.map_or(block_jerk(b), |l| min_lim(l, block_jerk(b))));
+            lim = min_lim(lim, b.lim);
+            since_low = Some(since_low.map_or(b.lim, |l| min_lim(l, b.lim)));
             d += b.length_mm;
-            v = match self.window.get(i + 1) {
-                Some(nb) if is_motion(nb) => b.end_feed_mm_per_min / 60.0,
-                _ => 0.0,
+            v = match self.window.motion(i + 1) {
+                Some(_) => b.end_mm_per_s,
+                None => 0.0,
             };
             i += 1;
         }
@@ -974,11 +1055,11 @@ impl Engine {
             }
             let mut d = end_here;
             let mut i = 0;
-            while let Some(b) = self.window.get(i).filter(|b| is_motion(b)) {
+            while let Some(b) = self.window.motion(i) {
                 d += b.length_mm;
-                let last = !self.window.get(i + 1).is_some_and(is_motion);
+                let last = self.window.motion(i + 1).is_none();
                 if x.s <= d || last {
-                    return (b.feed_mm_per_min / 60.0, block_jerk(b));
+                    return (b.feed_mm_per_s, b.lim);
                 }
                 i += 1;
             }
@@ -1042,21 +1123,24 @@ impl Engine {
         // the block it leaves, and come back down before its end.) Returns the moment
         // judged and the room there. Along an accelerating piece the room only shrinks,
         // along a braking one it only grows, so those moments are where it is least.
-        let cap_left = |at: &dyn Fn(f64) -> profile::Motion, t0: f64, end: profile::Motion| {
+        let cap_left = |at: &dyn Fn(f64) -> profile::Motion,
+                        cross: &dyn Fn(f64) -> f64,
+                        t0: f64,
+                        end: profile::Motion| {
             let from = at(t0).s;
             let mut d = end_here;
             let mut i = 0;
             while end.s > d {
                 if d >= from {
-                    let tc = latest_ok(t0, t, tol, |tau| d - at(tau).s);
+                    let tc = cross(d);
                     let r = room(0, at(tc));
                     if r < -eps {
                         return (tc, r);
                     }
                 }
-                match self.window.get(i) {
-                    Some(b) if is_motion(b) => d += b.length_mm,
-                    _ => break,
+                match self.window.motion(i) {
+                    Some(b) => d += b.length_mm,
+                    None => break,
                 }
                 i += 1;
             }
@@ -1070,6 +1154,22 @@ impl Engine {
         for _ in 0..=n + 1 {
             let at = |tau: f64| profile::follow(x_start, &phases, tau - t0);
             let end = at(t);
+            // When the motion of this round passes the point `d` mm on: the feed cap and
+            // the limit at a block end both ask it, so the last few answers are kept.
+            let crossed = core::cell::Cell::new([(f64::NAN, 0.0); 4]);
+            let cross = |d: f64| {
+                let mut memo = crossed.get();
+                if let Some(&(_, tau)) = memo.iter().find(|m| m.0 == d) {
+                    return tau;
+                }
+                let tau = latest_ok(t0, t, tol, |tau| d - at(tau).s);
+                memo.rotate_right(1);
+                if let Some(first) = memo.first_mut() {
+                    *first = (d, tau);
+                }
+                crossed.set(memo);
+                tau
+            };
             let mut first: Option<(usize, f64, f64)> = None;
             for c in 0..=n {
                 if braking_for == Some(c) {
@@ -1085,14 +1185,14 @@ impl Engine {
                     .and_then(|i| ahead.get(i))
                     .filter(|l| end.s > l.d)
                     .map(|l| {
-                        let lo = latest_ok(t0, t, tol, |tau| l.d - at(tau).s);
+                        let lo = cross(l.d);
                         let x = at(lo);
                         let peak = x.v + x.a.max(0.0).powi(2) / (2.0 * l.next.jerk);
                         (lo, l.v - peak)
                     });
                 let (t_end, room_end) = match passed {
                     Some((tp, r)) => (tp, r),
-                    None if c == 0 => cap_left(&at, t0, end),
+                    None if c == 0 => cap_left(&at, &cross, t0, end),
                     None => (t, room(c, end)),
                 };
                 if room_end >= -eps {

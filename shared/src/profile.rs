@@ -37,6 +37,23 @@ impl Limits {
         0.5 * (v0 + v1) * self.change_time((v0 - v1).abs())
     }
 
+    /// `change_distance(v0, v1) <= d` for speeds `v0, v1 >= 0`, without the square root
+    /// and divisions (squared and multiplied out): the same answer up to rounding, for
+    /// the searches that ask it many times a cycle.
+    #[inline]
+    pub fn change_within(&self, v0: f64, v1: f64, d: f64) -> bool {
+        let (acc, jerk) = (self.acc, self.jerk);
+        let dv = (v0 - v1).abs();
+        let sum = v0 + v1;
+        if dv * jerk >= acc * acc {
+            // ½·sum·(dv/acc + acc/jerk) <= d
+            0.5 * sum * (dv * jerk + acc * acc) <= d * (acc * jerk)
+        } else {
+            // sum·√(dv/jerk) <= d
+            d >= 0.0 && sum * sum * dv <= d * d * jerk
+        }
+    }
+
     /// The highest speed (zero acceleration) from which `v_end` is reached within `d` mm,
     /// or equally the highest speed reachable from `v_end` within `d` mm: the inverse of
     /// [`change_distance`](Self::change_distance), in closed form (the planner calls it
@@ -282,6 +299,33 @@ mod tests {
                 (got - want).abs() < 1e-3 * want + 1e-6,
                 "{v0}->{v1}: {got} vs {want}"
             );
+        }
+    }
+
+    #[test]
+    fn change_within_agrees_with_change_distance() {
+        // Both branches, up and down, at and around the boundary: the same answer as the
+        // closed form except within 1e-12 (relative) of `d`, where rounding decides.
+        for lim in [
+            LIM,
+            Limits {
+                acc: 118.1,
+                jerk: 13_362.0,
+            },
+        ] {
+            for v0 in [0.0, 1e-3, 0.7, 10.0, 26.2, 80.0, 500.0] {
+                for v1 in [0.0, 0.5, 9.9, 40.0, 300.0] {
+                    let cd = lim.change_distance(v0, v1);
+                    for f in [0.0, 0.5, 0.999, 1.0 - 1e-9, 1.0, 1.0 + 1e-9, 1.001, 2.0] {
+                        for d in [cd * f, cd * f - 1e-9, -1.0] {
+                            let want = cd <= d;
+                            if lim.change_within(v0, v1, d) != want {
+                                assert!((cd - d).abs() <= 1e-12 * cd.max(1e-300), "{v0} {v1} {d}");
+                            }
+                        }
+                    }
+                }
+            }
         }
     }
 

@@ -792,3 +792,127 @@ fn a_step_beyond_the_axis_velocity_is_never_published() {
     let n = sp.len();
     assert_eq!(sp[n - 1], sp[n - 2]);
 }
+
+// ---- The profile step's cost cuts (issue #23) ----
+
+#[test]
+fn the_window_keeps_each_blocks_figures_beside_it_as_the_ring_wraps() {
+    // The figures the profile step reads every cycle are packed beside the ring; they
+    // must stay those of the block at the same place, through many wraps.
+    let mut w = Window::new(3);
+    let mut next = 0u64;
+    let mut popped = 0u64;
+    for round in 0..20 {
+        while !w.is_full() {
+            let mut b = line(
+                next,
+                [0.0; 3],
+                [1.0 + next as f64, 0.0, 0.0],
+                600.0,
+                0.0,
+                0.0,
+            );
+            b.end_feed_mm_per_min = 60.0 * next as f64;
+            b.acc_mm_per_s2 = 100.0 + next as f64;
+            if next % 4 == 3 {
+                b.kind = BlockKind::Dwell as u32;
+            }
+            w.push(b);
+            next += 1;
+        }
+        for i in 0..w.len {
+            let (b, f) = (w.get(i).unwrap(), w.fig(i).unwrap());
+            assert_eq!(f.motion, is_motion(b), "round {round}, {i}");
+            assert_eq!(f.length_mm, b.length_mm);
+            assert_eq!(f.end_mm_per_s, b.end_feed_mm_per_min / 60.0);
+            assert_eq!(f.lim, block_jerk(b));
+            assert_eq!(w.motion(i).is_some(), is_motion(b));
+        }
+        assert!(w.fig(w.len).is_none());
+        for _ in 0..=(round % 3) {
+            assert_eq!(w.pop().unwrap().seq, popped);
+            popped += 1;
+        }
+    }
+}
+
+#[test]
+fn sub_blocks_with_varying_caps_and_limits_keep_every_feed_and_stop() {
+    // What the feed planner of issue #23 sends: a curve split into short sub-blocks whose
+    // caps follow a velocity-limit curve, each with its own tangential acc and jerk, the
+    // end speeds from forward and backward passes. At 100 µs with a 256-block window
+    // (many limits ahead, folded past the 16th), the speed never exceeds the feed of the
+    // block it is in (to 1e-9 relative), and the machine stops exactly at the end.
+    let n = 300usize;
+    let step = 0.02;
+    let lims: Vec<Jerk> = (0..n)
+        .map(|i| {
+            let f = 0.5 + 0.5 * (i as f64 * 0.37).cos().abs();
+            Jerk {
+                acc: 2000.0 * f,
+                jerk: 50_000.0 * (0.3 + 0.7 * f),
+            }
+        })
+        .collect();
+    let caps: Vec<f64> = (0..n)
+        .map(|i| 15.0 + 25.0 * (0.5 + 0.5 * (i as f64 * 0.11).sin()))
+        .collect();
+    let mut vj = vec![0.0; n + 1];
+    for i in 1..n {
+        vj[i] = caps[i - 1].min(caps[i]);
+    }
+    for i in 1..=n {
+        vj[i] = vj[i].min(lims[i - 1].reachable_speed(vj[i - 1], step));
+    }
+    for i in (0..n).rev() {
+        vj[i] = vj[i].min(lims[i].reachable_speed(vj[i + 1], step));
+    }
+    let mut blocks: Vec<CommandBlock> = (0..n)
+        .map(|i| {
+            let (a, b) = (i as f64 * step, (i + 1) as f64 * step);
+            let mut bl = line(
+                i as u64,
+                [a, 0.0, 0.0],
+                [b, 0.0, 0.0],
+                caps[i] * 60.0,
+                vj[i] * 60.0,
+                vj[i + 1] * 60.0,
+            );
+            bl.acc_mm_per_s2 = lims[i].acc;
+            bl.jerk_mm_per_s3 = lims[i].jerk;
+            bl
+        })
+        .collect();
+    blocks.push(CommandBlock::empty(BlockKind::ProgramEnd, n as u64, 0));
+    let lim = Limits {
+        lookahead_blocks: 256,
+        max_following_error_mm: 1.0,
+        ..Limits::new(&Machine::default(), 100_000)
+    };
+    let mut e = Engine::new(lim, [0.0; 3]);
+    let mut src = Blocks(blocks, 0);
+    let mut last = None;
+    for _ in 0..2_000_000 {
+        let t = e.tick(&mut src).unwrap();
+        if t.state == TickState::Running && t.block_seq < n as u64 {
+            let cap = caps[t.block_seq as usize];
+            assert!(
+                t.speed_mm_per_s <= cap * (1.0 + 1e-9),
+                "block {}: {} over {cap}",
+                t.block_seq,
+                t.speed_mm_per_s
+            );
+        }
+        last = Some(t);
+        if t.state != TickState::Running {
+            break;
+        }
+    }
+    let t = last.unwrap();
+    assert_eq!(t.state, TickState::Done);
+    assert!(
+        (t.pos_mm[0] - n as f64 * step).abs() < 1e-9,
+        "{:?}",
+        t.pos_mm
+    );
+}
