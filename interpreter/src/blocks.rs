@@ -226,6 +226,15 @@ fn split_at_cusps(c: SplitCurve, machine: &Machine) -> Vec<SplitCurve> {
 /// Turns moves into unplanned blocks (feeds are the caps, speeds not yet set), numbered
 /// in order when they become [`CommandBlock`]s ([`commands`]).
 pub fn build(moves: &[Move], machine: &Machine) -> Vec<Block> {
+    // The lines that program a NURBS (a blend below is one too, on a feed line's number:
+    // one motion a line), whose blocks are split where their speed limit changes.
+    let programmed: std::collections::HashSet<u32> = moves
+        .iter()
+        .filter_map(|m| match m {
+            Move::Nurbs { line, .. } => Some(*line),
+            _ => None,
+        })
+        .collect();
     // `G64 P`: corners between feed lines blended first (see [`blend`]).
     let blended = blend::corners(moves);
     let moves: &[Move] = &blended;
@@ -294,8 +303,16 @@ pub fn build(moves: &[Move], machine: &Machine) -> Vec<Block> {
                 for span in nurbs::split_to_capacity(curve, (*degree + 1).min(MAX_CTRL)) {
                     for piece in split_at_cusps(span, machine) {
                         // And where its speed limit changes: each block's cap is then
-                        // that of its own stretch of the curve.
-                        for part in speed::split_by_speed(piece, machine, f) {
+                        // that of its own stretch of the curve. (Not a `G64 P` blend:
+                        // split, its pieces broke the speed by 0.4 % on a random chain
+                        // in `limits.rs`; they are short, and held to their slowest
+                        // point as before.)
+                        let parts = if programmed.contains(line) {
+                            speed::split_by_speed(piece, machine, f)
+                        } else {
+                            vec![piece]
+                        };
+                        for part in parts {
                             out.push(curve_block(*line, &part, Helix::NONE, f).into());
                         }
                     }
@@ -398,15 +415,6 @@ impl Shape {
 /// speed, and of the jerk; the rest is left to the speed profile along the path.
 const NORMAL_SHARE: f64 = 0.5;
 
-/// The share of the acceleration and jerk a curved block's curvature may take at its
-/// cap when the speed planned there stays at that cap (the block is a valley of the
-/// speed, where the profile needs little along the path): its cap is then
-/// `sqrt(0.9) = 0.95` of the curvature's own limit, and `sqrt(1 - 0.9²) = 0.44` of the
-/// path's acceleration is left to the profile. Every other curved block keeps
-/// [`NORMAL_SHARE`], so that where the speed climbs or falls it has most of the
-/// acceleration to do it with. (See [`plan_and`].)
-const VALLEY_SHARE: f64 = 0.9;
-
 /// The block's speed cap and profile limits. At every sample of the curve, for the
 /// speed `v`, tangential acceleration `a_t` and jerk `j_t` of the profile, the
 /// set-points' acceleration is `a_t·T + v²·k` and their jerk `j_t·T + 3·v·a_t·k +
@@ -470,9 +478,7 @@ fn shape(g: Geometry, machine: &Machine, period_s: f64, feed_mm_s: f64, share: f
             let rho = 1.0 / kappa;
             let tol = machine.chord_tolerance_mm.min(rho);
             let chord = 2.0 * (tol * (2.0 * rho - tol)).sqrt();
-            v = v
-                .min(chord / period_s)
-                .min((share * a_path / kappa).sqrt());
+            v = v.min(chord / period_s).min((share * a_path / kappa).sqrt());
         }
         let dkn = path::norm(*dk);
         if dkn > 1e-12 {
@@ -1461,8 +1467,6 @@ pub trait Plannable {
     fn set_caps(&mut self, length_mm: f64, feed_mm_per_min: f64, limits: Jerk);
     /// Sets the planned feeds at the start and the end.
     fn set_feeds(&mut self, start_mm_per_min: f64, end_mm_per_min: f64);
-    /// The planned start and end speeds and the cap, in mm/s.
-    fn planned_mm_s(&self) -> (f64, f64, f64);
     /// A straight block split at the share `t` (strictly between 0 and 1) of its
     /// length into two that join exactly, the second keeping the stop flag; `None` for
     /// anything else, which is not split.
@@ -1500,25 +1504,7 @@ pub fn plan_and<B: Plannable>(
     done: impl FnMut(usize, &B),
 ) {
     split_at_kinks(blocks, machine, period_ns);
-    if !blocks.iter().any(is_curve) {
-        plan_round(blocks, machine, period_ns, &|_| NORMAL_SHARE, done);
-        return;
-    }
-    // Two rounds: the first with every curved block at `NORMAL_SHARE` finds the valleys,
-    // the blocks whose planned speed reaches their cap; the second gives those
-    // `VALLEY_SHARE`. (The first round's caps are undone: each round starts from the
-    // programmed feeds.)
-    let feeds: Vec<f64> = blocks.iter().map(|b| b.feed_mm_per_min()).collect();
-    plan_round(blocks, machine, period_ns, &|_| NORMAL_SHARE, |_, _| {});
-    let shares = shares(blocks);
-    for (b, f) in blocks.iter_mut().zip(&feeds) {
-        if b.is_motion() {
-            let (length, limits) = (b.length_mm(), b.limits());
-            b.set_caps(length, *f, limits);
-        }
-    }
-    let share = |i: usize| shares[i];
-    plan_round(blocks, machine, period_ns, &share, done);
+    plan_round(blocks, machine, period_ns, done);
 }
 
 /// Straight blocks split next to their kinks: a kink's direction change in one period
@@ -1526,8 +1512,9 @@ pub fn plan_and<B: Plannable>(
 /// either side keep only what it leaves, each along its whole length. So a straight
 /// block much longer than the path a kink's steps can reach gives that stretch a block
 /// of its own: `KINK_STEPS` steps at the highest speed the kink can be passed at
-/// (its direction change within the weakest axis's acceleration), and the rest of the
-/// block keeps its full limits. The pieces lie exactly on the line (the point between
+/// (its direction change within the weakest axis's acceleration), plus the path the
+/// interpolator covers at that speed while it eases a full acceleration down to the
+/// stretch's (`A/J`), and the rest of the block keeps its full limits. The pieces lie exactly on the line (the point between
 /// them is worked out once and is the end of one and the start of the other).
 fn split_at_kinks<B: Plannable>(blocks: &mut Vec<B>, machine: &Machine, period_ns: u64) {
     const KINK_STEPS: f64 = 4.0;
@@ -1561,7 +1548,10 @@ fn split_at_kinks<B: Plannable>(blocks: &mut Vec<B>, machine: &Machine, period_n
         let v = (fixed.weakest_acc * period_s / (2.0 * half_sin))
             .min(a.feed_mm_per_min() / 60.0)
             .min(b.feed_mm_per_min() / 60.0);
-        let stretch = KINK_STEPS * v * period_s;
+        // The kink's steps, and before them the time the interpolator takes to ease a
+        // full acceleration down to what the kink leaves (at the jerk of the line).
+        let ease = fixed.acc[PATH] / machine.path_jerk_mm_per_s3;
+        let stretch = v * (KINK_STEPS * period_s + ease);
         if la > 4.0 * stretch {
             tail[i - 1] = stretch;
         }
@@ -1600,57 +1590,11 @@ fn is_curve<B: Plannable>(b: &B) -> bool {
     b.is_motion() && matches!(b.geometry(), Geometry::Curve(c) if !c.is_surface())
 }
 
-/// The share of the limits each block's curvature takes in the second round of
-/// [`plan_and`], from the speeds the first round (every curve at [`NORMAL_SHARE`])
-/// planned. A forward pass (the speed each block can reach from its start under its
-/// limits, as the interpolator accelerates) meets the backward pass's start and end
-/// speeds: the highest speed both allow within a block is its peak.
-/// A curve whose peak is its cap gets [`VALLEY_SHARE`]: there the speed stays at the
-/// cap, and a higher cap is worth more than acceleration along the path. Every other
-/// block keeps [`NORMAL_SHARE`], most of the acceleration for a speed that climbs or
-/// falls.
-fn shares<B: Plannable>(blocks: &[B]) -> Vec<f64> {
-    let n = blocks.len();
-    let mut out = vec![NORMAL_SHARE; n];
-    let mut reached = 0.0f64;
-    for (i, b) in blocks.iter().enumerate() {
-        if !b.is_motion() {
-            reached = 0.0;
-            continue;
-        }
-        let (start, end, c) = b.planned_mm_s();
-        let (lim, len) = (b.limits(), b.length_mm());
-        let from = start.min(reached);
-        let peak = lim
-            .reachable_speed(from, len)
-            .min(lim.reachable_speed(end, len))
-            .min(c);
-        reached = end.min(lim.reachable_speed(from, len));
-        if b.flags() & FLAG_STOP_AT_END != 0 {
-            reached = 0.0;
-        }
-        if !is_curve(b) || !(c > 0.0) {
-            continue;
-        }
-        // A curve whose speed reaches its cap gets the higher share there. (Tried on
-        // LinuxCNC's programs: also lowering the share of the curves below their cap,
-        // to their peak, or keeping the higher share to the valleys between higher
-        // caps, were each slower: the first round's peaks then hold the second round
-        // back where its valleys rose.)
-        if peak >= c * (1.0 - 1e-3) {
-            out[i] = VALLEY_SHARE;
-        }
-    }
-    out
-}
-
-/// One round of [`plan_and`], each curved block `i` shaped with the normal share
-/// `share(i)` of the limits.
+/// [`plan_and`] once the blocks are split at their kinks.
 fn plan_round<B: Plannable>(
     blocks: &mut [B],
     machine: &Machine,
     period_ns: u64,
-    share: &dyn Fn(usize) -> f64,
     mut done: impl FnMut(usize, &B),
 ) {
     let period_s = period_ns as f64 * 1e-9;
@@ -1687,7 +1631,7 @@ fn plan_round<B: Plannable>(
                 _ => false,
             };
             if !fast {
-                *shp = shape(g, machine, period_s, feed / 60.0, share(i));
+                *shp = shape(g, machine, period_s, feed / 60.0, NORMAL_SHARE);
             }
             let limits = Jerk {
                 acc: shp.acc,
@@ -1740,6 +1684,24 @@ fn plan_round<B: Plannable>(
             if end[j] <= 0.0 {
                 close.stop();
             }
+        }
+    }
+    // The interpolator may carry a block's whole tangential acceleration into the next
+    // (it eases down to a lower limit only once it is there, under that block's jerk),
+    // so a curve passed at speed into a curve whose limit is lower keeps to that lower
+    // limit: the speed and the curvature there then stay within what the later block
+    // was planned for. (Lines into lines, and anything into a line, need not: a line's
+    // limit is the machine's own.)
+    for i in (1..n).rev() {
+        if end[i - 1] > 0.0 && is_curve(&blocks[i - 1]) && is_curve(&blocks[i]) {
+            let next = blocks[i].limits();
+            keep_within(
+                &mut blocks[i - 1],
+                Jerk {
+                    acc: next.acc,
+                    jerk: f64::INFINITY,
+                },
+            );
         }
     }
     // Backward pass: every block must be able to slow to its end speed. A block's end

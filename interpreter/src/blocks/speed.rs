@@ -206,7 +206,14 @@ fn boundaries(c: &SplitCurve, machine: &Machine, feed_mm_per_min: f64) -> Option
 
 /// The samples strictly between `a` and `b`, in order, pushed onto `out`: the midpoint
 /// while the two are more than a level apart and further than `gap`.
-fn fill(lim: &mut Limit, a: Sample, b: Sample, gap: f64, budget: &mut usize, out: &mut Vec<Sample>) {
+fn fill(
+    lim: &mut Limit,
+    a: Sample,
+    b: Sample,
+    gap: f64,
+    budget: &mut usize,
+    out: &mut Vec<Sample>,
+) {
     if a.level.abs_diff(b.level) <= 1 || b.u - a.u <= gap || *budget == 0 {
         return;
     }

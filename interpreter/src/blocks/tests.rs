@@ -94,15 +94,14 @@ fn plan_stops_at_corners_and_flows_through_tangent_joins() {
 
 #[test]
 fn curvature_limits_the_feed() {
-    // r = 1 mm at 6000 mm/min (100 mm/s) needs 10 000 mm/s² centripetal. The circle's
-    // speed stays at its cap (a valley: see `plan_and`), so the planner gives the
-    // curvature 0.9 of the path acceleration (v²/r <= 1800 mm/s²: 42.4 mm/s) and of the
-    // jerk; on a circle the jerk at constant speed is v³/r² <= 45 000 mm/s³: 35.6 mm/s,
-    // the lower.
+    // r = 1 mm at 6000 mm/min (100 mm/s) needs 10 000 mm/s² centripetal. The planner
+    // gives the curvature half the path acceleration (v²/r <= 1000 mm/s²: 31.6 mm/s)
+    // and half the jerk; on a circle the jerk at constant speed is v³/r² <= 25 000
+    // mm/s³: 29.24 mm/s, the lower.
     let b = planned("G0 X1\nG3 X1 Y0 I-1 J0 F6000\n");
-    let want = (VALLEY_SHARE * 2000.0f64 * 1.0)
+    let want = (0.5 * 2000.0f64 * 1.0)
         .sqrt()
-        .min((VALLEY_SHARE * 50_000.0f64 * 1.0).cbrt());
+        .min((0.5 * 50_000.0f64 * 1.0).cbrt());
     assert!(
         (b[1].feed_mm_per_min / 60.0 - want).abs() < 0.01,
         "{}",
