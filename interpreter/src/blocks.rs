@@ -14,6 +14,11 @@
 //! which the machine follows (`set_point_eval`), scaled to the contact point feed the
 //! block's speeds are in.
 //!
+//! The caps follow the curve, not its sharpest point: a program's NURBS spans are split
+//! exactly where their speed limit crosses a level ([`speed`]), and a straight block
+//! next to a kink gives the few steps around the kink a block of their own
+//! (`split_at_kinks`), so what a bend or a kink takes holds only where it is.
+//!
 //! A program's blocks are held as [`Block`]s until they are sent: a straight move in a
 //! few numbers, anything else whole (see [`block`]); the planner takes either form
 //! ([`Plannable`]) and [`commands`] gives the [`CommandBlock`]s.

@@ -58,7 +58,7 @@ fn norm(v: [f64; 3]) -> f64 {
 /// Unit tangent and curvature vector of a point; `None` where the curve (nearly) stops.
 fn frame(e: &CurvePoint) -> Option<([f64; 3], [f64; 3])> {
     let sp = norm(e.d1);
-    if !(sp > 1e-12) {
+    if sp.is_nan() || sp <= 1e-12 {
         return None;
     }
     let t = e.d1.map(|x| x / sp);
@@ -163,7 +163,7 @@ fn boundaries(c: &SplitCurve, machine: &Machine, feed_mm_per_min: f64) -> Option
     }
     let curve = FastCurve::new(c.degree, &c.knots, &c.ctrl).ok()?;
     let (u0, u1) = curve.domain();
-    if !(u1 > u0) {
+    if u1.is_nan() || u0.is_nan() || u1 <= u0 {
         return None;
     }
     let mut lim = Limit {
