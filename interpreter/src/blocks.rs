@@ -14,10 +14,9 @@
 //! which the machine follows (`set_point_eval`), scaled to the contact point feed the
 //! block's speeds are in.
 //!
-//! The caps follow the curve, not its sharpest point: a program's NURBS spans are split
-//! exactly where their speed limit crosses a level ([`speed`]), and a straight block
-//! next to a kink gives the few steps around the kink a block of their own
-//! (`split_at_kinks`), so what a bend or a kink takes holds only where it is.
+//! A straight block next to a kink gives the few steps around the kink a block of their
+//! own (`split_at_kinks`), so what the kink takes of the acceleration holds only there,
+//! not along the whole line.
 //!
 //! A program's blocks are held as [`Block`]s until they are sent: a straight move in a
 //! few numbers, anything else whole (see [`block`]); the planner takes either form
@@ -25,7 +24,6 @@
 
 pub mod block;
 pub mod check;
-pub mod speed;
 
 pub use block::{commands, Block, Straight};
 
@@ -231,15 +229,6 @@ fn split_at_cusps(c: SplitCurve, machine: &Machine) -> Vec<SplitCurve> {
 /// Turns moves into unplanned blocks (feeds are the caps, speeds not yet set), numbered
 /// in order when they become [`CommandBlock`]s ([`commands`]).
 pub fn build(moves: &[Move], machine: &Machine) -> Vec<Block> {
-    // The lines that program a NURBS (a blend below is one too, on a feed line's number:
-    // one motion a line), whose blocks are split where their speed limit changes.
-    let programmed: std::collections::HashSet<u32> = moves
-        .iter()
-        .filter_map(|m| match m {
-            Move::Nurbs { line, .. } => Some(*line),
-            _ => None,
-        })
-        .collect();
     // `G64 P`: corners between feed lines blended first (see [`blend`]).
     let blended = blend::corners(moves);
     let moves: &[Move] = &blended;
@@ -307,19 +296,7 @@ pub fn build(moves: &[Move], machine: &Machine) -> Vec<Block> {
                 // worst of the whole curve.
                 for span in nurbs::split_to_capacity(curve, (*degree + 1).min(MAX_CTRL)) {
                     for piece in split_at_cusps(span, machine) {
-                        // And where its speed limit changes: each block's cap is then
-                        // that of its own stretch of the curve. (Not a `G64 P` blend:
-                        // split, its pieces broke the speed by 0.4 % on a random chain
-                        // in `limits.rs`; they are short, and held to their slowest
-                        // point as before.)
-                        let parts = if programmed.contains(line) {
-                            speed::split_by_speed(piece, machine, f)
-                        } else {
-                            vec![piece]
-                        };
-                        for part in parts {
-                            out.push(curve_block(*line, &part, Helix::NONE, f).into());
-                        }
+                        out.push(curve_block(*line, &piece, Helix::NONE, f).into());
                     }
                 }
             }
@@ -1589,12 +1566,6 @@ fn split_at_kinks<B: Plannable>(blocks: &mut Vec<B>, machine: &Machine, period_n
     }
 }
 
-/// A motion block along a curve (not a line, not a surface pass): where the share of
-/// the limits its curvature takes is chosen.
-fn is_curve<B: Plannable>(b: &B) -> bool {
-    b.is_motion() && matches!(b.geometry(), Geometry::Curve(c) if !c.is_surface())
-}
-
 /// [`plan_and`] once the blocks are split at their kinks.
 fn plan_round<B: Plannable>(
     blocks: &mut [B],
@@ -1689,24 +1660,6 @@ fn plan_round<B: Plannable>(
             if end[j] <= 0.0 {
                 close.stop();
             }
-        }
-    }
-    // The interpolator may carry a block's whole tangential acceleration into the next
-    // (it eases down to a lower limit only once it is there, under that block's jerk),
-    // so a curve passed at speed into a curve whose limit is lower keeps to that lower
-    // limit: the speed and the curvature there then stay within what the later block
-    // was planned for. (Lines into lines, and anything into a line, need not: a line's
-    // limit is the machine's own.)
-    for i in (1..n).rev() {
-        if end[i - 1] > 0.0 && is_curve(&blocks[i - 1]) && is_curve(&blocks[i]) {
-            let next = blocks[i].limits();
-            keep_within(
-                &mut blocks[i - 1],
-                Jerk {
-                    acc: next.acc,
-                    jerk: f64::INFINITY,
-                },
-            );
         }
     }
     // Backward pass: every block must be able to slow to its end speed. A block's end
