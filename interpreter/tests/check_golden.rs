@@ -204,8 +204,8 @@ M2
 /// diagnostics, the first still the `G2.2`). No plan changed.
 /// Renewed for issue #23, on purpose: a straight block next to a kink now gives the
 /// steps around the kink a block of their own (`blocks::split_at_kinks`) where the line
-/// is long enough. Only g5_curva_delfino changed (71 -> 73 blocks: two of its rapids
-/// meet at a 2.3° kink); on the LinuxCNC machine it takes 142.077 s instead of 142.413.
+/// is long enough. Only g5_curva_delfino changed (71 -> 73 blocks: one kink between two
+/// of its rapids); on the LinuxCNC machine it takes 142.077 s instead of 142.413.
 const GOLDEN_BLOCKS: &[(&str, usize, u64)] = &[
     ("plain_g1", 99999, 0x2314c695b1663686),
     ("mixed", 694, 0xfb6127445041df11),
