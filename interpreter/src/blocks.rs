@@ -405,7 +405,7 @@ const NORMAL_SHARE: f64 = 0.5;
 /// axis's velocity share `v·|T_i|` within its limit, and one period's chord within the
 /// chord tolerance (exact form: a chord `c` of a circle of radius `r` deviates
 /// `r - sqrt(r² - c²/4)`). The tangential limits are what is left at the cap speed.
-fn shape(g: Geometry, machine: &Machine, period_s: f64, feed_mm_s: f64, share: f64) -> Shape {
+fn shape(g: Geometry, machine: &Machine, period_s: f64, feed_mm_s: f64) -> Shape {
     let axes = machine.axes.as_array();
     let a_path = machine.path_acc_mm_per_s2;
     let j_path = machine.path_jerk_mm_per_s3;
@@ -451,7 +451,7 @@ fn shape(g: Geometry, machine: &Machine, period_s: f64, feed_mm_s: f64, share: f
     let mut v = feed_mm_s;
     for jump in jumps {
         if *jump > 1e-9 {
-            v = v.min((share * j_path * period_s / jump).sqrt());
+            v = v.min((NORMAL_SHARE * j_path * period_s / jump).sqrt());
         }
     }
     for ((t, k), dk) in pts.iter().zip(dk) {
@@ -460,21 +460,23 @@ fn shape(g: Geometry, machine: &Machine, period_s: f64, feed_mm_s: f64, share: f
             let rho = 1.0 / kappa;
             let tol = machine.chord_tolerance_mm.min(rho);
             let chord = 2.0 * (tol * (2.0 * rho - tol)).sqrt();
-            v = v.min(chord / period_s).min((share * a_path / kappa).sqrt());
+            v = v
+                .min(chord / period_s)
+                .min((NORMAL_SHARE * a_path / kappa).sqrt());
         }
         let dkn = path::norm(*dk);
         if dkn > 1e-12 {
-            v = min_cbrt(v, share * j_path / dkn);
+            v = min_cbrt(v, NORMAL_SHARE * j_path / dkn);
         }
         for (i, ax) in axes.iter().enumerate() {
             if t[i].abs() > 1e-12 {
                 v = v.min(ax.max_vel_mm_per_min / 60.0 / t[i].abs());
             }
             if k[i].abs() > 1e-12 {
-                v = v.min((share * ax.max_acc_mm_per_s2 / k[i].abs()).sqrt());
+                v = v.min((NORMAL_SHARE * ax.max_acc_mm_per_s2 / k[i].abs()).sqrt());
             }
             if dk[i].abs() > 1e-12 {
-                v = min_cbrt(v, share * ax.max_jerk_mm_per_s3 / dk[i].abs());
+                v = min_cbrt(v, NORMAL_SHARE * ax.max_jerk_mm_per_s3 / dk[i].abs());
             }
         }
     }
@@ -1486,22 +1488,27 @@ pub fn plan_and<B: Plannable>(
     done: impl FnMut(usize, &B),
 ) {
     split_at_kinks(blocks, machine, period_ns);
-    plan_round(blocks, machine, period_ns, done);
+    plan_split(blocks, machine, period_ns, done);
 }
 
 /// Straight blocks split next to their kinks: a kink's direction change in one period
 /// takes most of the acceleration there (see [`junction_leaves`]), and the blocks on
 /// either side keep only what it leaves, each along its whole length. So a straight
 /// block much longer than the path a kink's steps can reach gives that stretch a block
-/// of its own: `KINK_STEPS` steps at the highest speed the kink can be passed at
-/// (its direction change within the weakest axis's acceleration), plus the path the
-/// interpolator covers at that speed while it eases a full acceleration down to the
-/// stretch's (`A/J`), and the rest of the block keeps its full limits. The pieces lie exactly on the line (the point between
-/// them is worked out once and is the end of one and the start of the other).
+/// of its own: `KINK_STEPS` steps at the highest speed the kink can be passed at (its
+/// direction change within the weakest axis's acceleration), plus the path covered at
+/// that speed while the interpolator eases a full path acceleration down under the
+/// weakest jerk; the rest of the block keeps its full limits. The pieces lie exactly on
+/// the line (the point between them is worked out once and is the end of one and the
+/// start of the other).
 fn split_at_kinks<B: Plannable>(blocks: &mut Vec<B>, machine: &Machine, period_ns: u64) {
     const KINK_STEPS: f64 = 4.0;
     let period_s = period_ns as f64 * 1e-9;
     let fixed = PlanLimits::new(machine);
+    // The time the interpolator may take to ease a full acceleration down to what a kink
+    // leaves: at most the path's acceleration, at the lowest jerk a line can have.
+    let weakest_jerk = fixed.jerk.iter().fold(f64::INFINITY, |m, x| m.min(*x));
+    let ease = fixed.acc[PATH] / weakest_jerk;
     let n = blocks.len();
     // The stretch to split off at each block's start and end (0: none).
     let mut head = vec![0.0f64; n];
@@ -1530,9 +1537,6 @@ fn split_at_kinks<B: Plannable>(blocks: &mut Vec<B>, machine: &Machine, period_n
         let v = (fixed.weakest_acc * period_s / (2.0 * half_sin))
             .min(a.feed_mm_per_min() / 60.0)
             .min(b.feed_mm_per_min() / 60.0);
-        // The kink's steps, and before them the time the interpolator takes to ease a
-        // full acceleration down to what the kink leaves (at the jerk of the line).
-        let ease = fixed.acc[PATH] / machine.path_jerk_mm_per_s3;
         let stretch = v * (KINK_STEPS * period_s + ease);
         if la > 4.0 * stretch {
             tail[i - 1] = stretch;
@@ -1567,7 +1571,7 @@ fn split_at_kinks<B: Plannable>(blocks: &mut Vec<B>, machine: &Machine, period_n
 }
 
 /// [`plan_and`] once the blocks are split at their kinks.
-fn plan_round<B: Plannable>(
+fn plan_split<B: Plannable>(
     blocks: &mut [B],
     machine: &Machine,
     period_ns: u64,
@@ -1607,7 +1611,7 @@ fn plan_round<B: Plannable>(
                 _ => false,
             };
             if !fast {
-                *shp = shape(g, machine, period_s, feed / 60.0, NORMAL_SHARE);
+                *shp = shape(g, machine, period_s, feed / 60.0);
             }
             let limits = Jerk {
                 acc: shp.acc,

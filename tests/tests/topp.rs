@@ -173,17 +173,23 @@ fn corners_stop_kinks_pass_at_the_one_period_bound_and_dwells_add() {
     );
 }
 
-/// The grid is converged: on LinuxCNC's butterfly at F6000 on the LinuxCNC machine
-/// (curves of every curvature, corners), halving the table's grid step changes the
-/// optimum by less than 0.1 %.
-#[test]
-fn halving_the_grid_changes_the_optimum_by_less_than_a_thousandth() {
+/// LinuxCNC's butterfly with every `F300` made `F6000`, and the LinuxCNC machine.
+fn butterfly_f6000() -> (String, Machine) {
     let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR"));
     let text = std::fs::read_to_string(dir.join("peers/linuxcnc/g5_butterfly-xy.ngc"))
         .unwrap()
         .replace("F300", "F6000");
     let m =
         shared::machine::load(Some(&dir.join("../examples/machine-linuxcnc-sim.toml"))).unwrap();
+    (text, m)
+}
+
+/// The grid is converged: on LinuxCNC's butterfly at F6000 on the LinuxCNC machine
+/// (curves of every curvature, corners), halving the table's grid step changes the
+/// optimum by less than 0.1 %.
+#[test]
+fn halving_the_grid_changes_the_optimum_by_less_than_a_thousandth() {
+    let (text, m) = butterfly_f6000();
     let a = optimum_at(&text, &m, PERIOD_NS, DEFAULT_STEP_MM);
     let b = optimum_at(&text, &m, PERIOD_NS, DEFAULT_STEP_MM / 2.0);
     let rel = (a.time_s - b.time_s).abs() / b.time_s;
@@ -207,12 +213,7 @@ fn halving_the_grid_changes_the_optimum_by_less_than_a_thousandth() {
 /// every limit of the machine it is 4.71 s.
 #[test]
 fn agrees_with_the_issues_topp_ra_on_the_butterfly_curves() {
-    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR"));
-    let text = std::fs::read_to_string(dir.join("peers/linuxcnc/g5_butterfly-xy.ngc"))
-        .unwrap()
-        .replace("F300", "F6000");
-    let m =
-        shared::machine::load(Some(&dir.join("../examples/machine-linuxcnc-sim.toml"))).unwrap();
+    let (text, m) = butterfly_f6000();
     let blocks = interpreter::process::compile(&text, &m, PERIOD_NS)
         .unwrap()
         .1;

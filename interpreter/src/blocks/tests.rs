@@ -93,6 +93,46 @@ fn plan_stops_at_corners_and_flows_through_tangent_joins() {
 }
 
 #[test]
+fn a_kink_lowers_the_acceleration_only_next_to_it() {
+    // Two 50 mm lines meeting at a 1.1° kink (below the 5° corner angle): the kink's
+    // share of the acceleration holds the stretch on either side of it, and the rest of
+    // each line keeps the acceleration of a line alone.
+    let alone = planned("G1 X50 F3000\nM2\n")[0].acc_mm_per_s2;
+    let b = planned("G1 X50 F3000\nX100 Y1\nM2\n");
+    let motion: Vec<&CommandBlock> = b.iter().filter(|x| x.is_motion()).collect();
+    assert_eq!(motion.len(), 4, "each line split once, beside the kink");
+    let [body_a, tail, head, body_b] = [motion[0], motion[1], motion[2], motion[3]];
+    assert!(
+        tail.end_feed_mm_per_min > 0.0,
+        "the kink is passed at speed"
+    );
+    assert_eq!(body_a.acc_mm_per_s2, alone);
+    assert_eq!(body_b.acc_mm_per_s2, alone);
+    assert!(tail.acc_mm_per_s2 < alone && head.acc_mm_per_s2 < alone);
+    // Each stretch is 4 steps at the kink's highest speed (here the feed, 50 mm/s) plus
+    // the path covered while 2000 mm/s² eases down at 50 000 mm/s³: 50·(0.004 + 0.04)
+    // = 2.2 mm. The pieces join exactly on the programmed lines.
+    for x in [tail, head] {
+        assert!((x.length_mm - 2.2).abs() < 1e-9, "{}", x.length_mm);
+    }
+    let end = |x: &CommandBlock| x.ctrl()[1];
+    let start = |x: &CommandBlock| x.ctrl()[0];
+    assert_eq!(end(body_a), start(tail));
+    assert_eq!(end(tail)[..3], [50.0, 0.0, 0.0]);
+    assert_eq!(end(head), start(body_b));
+    assert_eq!(end(body_b)[..3], [100.0, 1.0, 0.0]);
+    assert_eq!(end(body_a)[1], 0.0, "on the first line");
+    let p = end(head);
+    assert!(
+        (p[1] - (p[0] - 50.0) / 50.0).abs() < 1e-15,
+        "on the second line"
+    );
+    for x in &motion {
+        assert!(x.validate().is_ok());
+    }
+}
+
+#[test]
 fn curvature_limits_the_feed() {
     // r = 1 mm at 6000 mm/min (100 mm/s) needs 10 000 mm/s² centripetal. The planner
     // gives the curvature half the path acceleration (v²/r <= 1000 mm/s²: 31.6 mm/s)
@@ -211,7 +251,7 @@ proptest::proptest! {
             machine.axes.z.max_jerk_mm_per_s3 = 3.0e6;
         }
         let lim = StraightLimits::new(&machine).expect("usable limits");
-        let general = shape(Geometry::Straight(d), &machine, 1e-3, feed, NORMAL_SHARE);
+        let general = shape(Geometry::Straight(d), &machine, 1e-3, feed);
         if let Some(fast) = shape_straight(d, &lim, feed) {
             proptest::prop_assert_eq!(shape_bits(&fast), shape_bits(&general), "{:?} {}", d, feed);
         }
