@@ -448,6 +448,21 @@ struct Ahead {
     next: Jerk,
 }
 
+impl Ahead {
+    /// The limits to brake for this point under: the acceleration of the blocks before
+    /// it, and the lower jerk of those and the block beyond. A braking that eases a
+    /// rising speed off onto `v` may go on past the point, and there the later block's
+    /// jerk holds: eased under the higher jerk before it, the speed entered a block of
+    /// a lower one still rising, and rose over its feed (by 2 % along a weak axis in the
+    /// random search of the planner's `limits.rs`).
+    fn easing(&self) -> Jerk {
+        Jerk {
+            acc: self.lim.acc,
+            jerk: self.lim.jerk.min(self.next.jerk),
+        }
+    }
+}
+
 fn is_motion(b: &CommandBlock) -> bool {
     b.kind == BlockKind::Motion as u32
 }
@@ -893,7 +908,13 @@ impl Engine {
     /// machine at speed `v_top` or below: each block end's planned speed (zero where no
     /// motion follows in hand), keeping only those lower than every nearer one, up to the
     /// distance in which the machine can stop anyway. Returns how many were written.
-    fn limits_ahead(&self, m: &Motion, v_top: f64, out: &mut [Ahead; MAX_AHEAD]) -> usize {
+    fn limits_ahead(
+        &self,
+        m: &Motion,
+        v_top: f64,
+        top: Jerk,
+        out: &mut [Ahead; MAX_AHEAD],
+    ) -> usize {
         let mut lim = block_jerk(&m.block);
         let mut d = if m.u >= m.u_end {
             0.0
@@ -917,8 +938,27 @@ impl Engine {
             jerk: f64::NAN,
         };
         let mut reach_d = 0.0;
+        // The lowest jerk of the blocks beyond the limits kept so far.
+        let mut kept_next_jerk = f64::INFINITY;
         let mut i = 0usize;
         loop {
+            let next = self.window.motion(i).map_or(lim, |f| f.lim);
+            if v >= lowest && next.jerk < kept_next_jerk && v.is_finite() {
+                // Not lower than a nearer limit, but the block beyond it eases a rising
+                // speed off more slowly than any beyond those: a speed passed under a
+                // nearer one may still be rising here, and rise over this one after it
+                // (its `next`). Kept as it is; it does not take the place of the lowest.
+                kept_next_jerk = next.jerk;
+                let a = Ahead { d, v, lim, next };
+                if n < MAX_AHEAD {
+                    if let Some(slot) = out.get_mut(n) {
+                        *slot = a;
+                    }
+                    n += 1;
+                } else if let Some(last) = out.get_mut(MAX_AHEAD - 1) {
+                    last.next = min_lim(last.next, next);
+                }
+            }
             if v < lowest {
                 lowest = v;
                 let implied = match (last_low, since_low) {
@@ -926,7 +966,13 @@ impl Engine {
                     // a full cycle after the last low is passed, not inside the cycle
                     // that crosses it.
                     // (The spare first: on tiny blocks it alone exceeds the room.)
+                    // (Braked for under the jerk of the block beyond it too: see
+                    // [`Ahead::easing`].)
                     (Some((dl, vl)), Some(seg)) => {
+                        let seg = Jerk {
+                            acc: seg.acc,
+                            jerk: seg.jerk.min(next.jerk),
+                        };
                         let room = d - dl - self.spare(vl, lim, seg);
                         room >= 0.0 && seg.change_within(v, vl, room)
                     }
@@ -934,11 +980,11 @@ impl Engine {
                 };
                 last_low = Some((d, v));
                 since_low = None;
-                let next = self.window.motion(i).map_or(lim, |f| f.lim);
                 let a = Ahead { d, v, lim, next };
                 if implied {
                     // Kept by keeping the last low.
                 } else if n < MAX_AHEAD {
+                    kept_next_jerk = kept_next_jerk.min(next.jerk);
                     if let Some(slot) = out.get_mut(n) {
                         *slot = a;
                     }
@@ -949,11 +995,16 @@ impl Engine {
                     // (found conservatively, with time to spare: see `spare`). Lowering
                     // it to this one's speed would be safe too, but on a long chain of
                     // tiny blocks slowing down to a stop it makes the machine crawl.
-                    let room = d - last.d - self.spare(last.v, lim, lim);
-                    let r = reach_within(lim, v, room);
+                    let easing = Jerk {
+                        acc: lim.acc,
+                        jerk: lim.jerk.min(next.jerk),
+                    };
+                    let room = d - last.d - self.spare(last.v, lim, easing);
+                    let r = reach_within(easing, v, room);
                     last.v = last.v.min(r);
                     last.lim = min_lim(last.lim, lim);
                     last.next = min_lim(last.next, next);
+                    kept_next_jerk = kept_next_jerk.min(next.jerk);
                 }
             }
             // Beyond the stopping distance nothing can bind, and nothing is below zero.
@@ -962,11 +1013,23 @@ impl Engine {
             if v <= 0.0 {
                 break;
             }
-            if lim != reach_lim {
+            // The next limit, at the end of the next block, is braked for under the jerk
+            // of the block after it too (see [`Ahead::easing`]).
+            let beyond = self.window.motion(i + 1).map_or(next, |f| min_lim(next, f.lim));
+            let braking = Jerk {
+                acc: lim.acc,
+                jerk: lim.jerk.min(beyond.jerk),
+            };
+            if braking != reach_lim {
                 // The same for every block end until the limits fall again.
-                reach_lim = lim;
-                let easing = self.acc.max(0.0) / lim.jerk;
-                reach_d = lim.change_distance(v_top, 0.0) + v_top * (self.t_s + easing);
+                reach_lim = braking;
+                // (A rising speed eased off under a lower jerk than the motion's own
+                // rises further: by `a²/2j`.)
+                let a_top = self.acc.max(top.acc);
+                let v_peak = v_top + a_top * a_top / (2.0 * braking.jerk.min(top.jerk));
+                let easing = self.acc.max(0.0) / braking.jerk;
+                reach_d =
+                    braking.change_distance(v_peak, 0.0) + v_peak * (self.t_s + easing);
             }
             if d > reach_d {
                 break;
@@ -1020,14 +1083,16 @@ impl Engine {
             a: self.acc,
             s: 0.0,
         };
-        let v_top = x0.v + x0.a.abs() * t + own.acc * own.acc / (2.0 * own.jerk);
+        // The speed reached before a braking can begin: this cycle's rise, then an
+        // acceleration eased off (further under a lower jerk ahead: `limits_ahead`).
+        let v_top = x0.v + x0.a.abs() * t;
         let mut ahead = [Ahead {
             d: 0.0,
             v: 0.0,
             lim: own,
             next: own,
         }; MAX_AHEAD];
-        let mut n = self.limits_ahead(m, v_top, &mut ahead);
+        let mut n = self.limits_ahead(m, v_top, own, &mut ahead);
         if self.stopping {
             // The stop point, unless a limit of the path ends the stop sooner.
             if let Some(slot) = ahead.get_mut(n.min(MAX_AHEAD - 1)) {
@@ -1103,13 +1168,13 @@ impl Engine {
                 {
                     f64::INFINITY
                 }
-                Some(l) => l.d - x.s - l.lim.brake_distance(x, l.v),
+                Some(l) => l.d - x.s - l.easing().brake_distance(x, l.v),
                 None => f64::INFINITY,
             }
         };
         let brake_for =
             |c: usize, x: profile::Motion| match c.checked_sub(1).and_then(|i| ahead.get(i)) {
-                Some(l) => l.lim.brake(x, l.v),
+                Some(l) => l.easing().brake(x, l.v),
                 None => {
                     let (cap, lim) = cap_at(&x);
                     lim.brake(x, cap)

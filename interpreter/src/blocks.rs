@@ -14,9 +14,10 @@
 //! which the machine follows (`set_point_eval`), scaled to the contact point feed the
 //! block's speeds are in.
 //!
-//! A straight block next to a kink gives the few steps around the kink a block of their
-//! own (`split_at_kinks`), so what the kink takes of the acceleration holds only there,
-//! not along the whole line.
+//! The caps follow the curve, not its sharpest point: a program's NURBS spans are split
+//! exactly where their speed limit crosses a level ([`speed`]), and a straight block
+//! next to a kink gives the few steps around the kink a block of their own
+//! (`split_at_kinks`), so what a bend or a kink takes holds only where it is.
 //!
 //! A program's blocks are held as [`Block`]s until they are sent: a straight move in a
 //! few numbers, anything else whole (see [`block`]); the planner takes either form
@@ -24,6 +25,7 @@
 
 pub mod block;
 pub mod check;
+pub mod speed;
 
 pub use block::{commands, Block, Straight};
 
@@ -229,6 +231,15 @@ fn split_at_cusps(c: SplitCurve, machine: &Machine) -> Vec<SplitCurve> {
 /// Turns moves into unplanned blocks (feeds are the caps, speeds not yet set), numbered
 /// in order when they become [`CommandBlock`]s ([`commands`]).
 pub fn build(moves: &[Move], machine: &Machine) -> Vec<Block> {
+    // The lines that program a NURBS (a blend below is one too, on a feed line's number:
+    // one motion a line), whose blocks are split where their speed limit changes.
+    let programmed: std::collections::HashSet<u32> = moves
+        .iter()
+        .filter_map(|m| match m {
+            Move::Nurbs { line, .. } => Some(*line),
+            _ => None,
+        })
+        .collect();
     // `G64 P`: corners between feed lines blended first (see [`blend`]).
     let blended = blend::corners(moves);
     let moves: &[Move] = &blended;
@@ -296,7 +307,19 @@ pub fn build(moves: &[Move], machine: &Machine) -> Vec<Block> {
                 // worst of the whole curve.
                 for span in nurbs::split_to_capacity(curve, (*degree + 1).min(MAX_CTRL)) {
                     for piece in split_at_cusps(span, machine) {
-                        out.push(curve_block(*line, &piece, Helix::NONE, f).into());
+                        // And where its speed limit changes: each block's cap is then
+                        // that of its own stretch of the curve. (Not a `G64 P` blend:
+                        // split, its pieces broke the speed by 0.4 % on a random chain
+                        // in `limits.rs`; they are short, and held to their slowest
+                        // point as before.)
+                        let parts = if programmed.contains(line) {
+                            speed::split_by_speed(piece, machine, f)
+                        } else {
+                            vec![piece]
+                        };
+                        for part in parts {
+                            out.push(curve_block(*line, &part, Helix::NONE, f).into());
+                        }
                     }
                 }
             }
@@ -689,6 +712,14 @@ type Measure<'a> = (fn(&Sample) -> f64, &'a dyn Fn(f64) -> Option<f64>);
 /// interior knots.
 /// Local maxima of the curvature and of its rate searched between samples, of each.
 const PEAKS_REFINED: usize = 3;
+/// Most a unit tangent turns between two samples of a curve (where more samples can
+/// make it so).
+const MAX_TURN_RAD: f64 = 0.35;
+/// Most samples added to one block to keep its tangent's turns within `MAX_TURN_RAD`.
+const TURN_SAMPLES: usize = 512;
+/// Local maxima of an axis's tangent share searched between samples: every one within
+/// `1 − cos(MAX_TURN_RAD/2)` (plus a margin) of the largest sample, up to this many.
+const TANGENT_PEAKS_REFINED: usize = 8;
 
 /// Where on `[lo, hi]` the measure `f` is largest, by golden-section search (for one
 /// peak there); `None` where `f` has no value at a point it tries.
@@ -759,13 +790,40 @@ fn samples(b: &CommandBlock) -> Samples {
     let mut us: Vec<f64> = Vec::with_capacity(samples + 1);
     let mut pts: Vec<Frame> = Vec::with_capacity(samples + 1);
     let mut dk: Vec<[f64; 3]> = Vec::with_capacity(samples + 1);
-    for i in 0..=samples {
-        let u = u0 + (u1 - u0) * i as f64 / samples as f64;
+    // Evenly spaced, and at each interior knot (where a tangent's swing may change
+    // course: the searches between samples below then look inside one span).
+    let mut grid: Vec<f64> = (0..=samples)
+        .map(|i| u0 + (u1 - u0) * i as f64 / samples as f64)
+        .chain(spans.iter().copied().filter(|k| *k > u0 && *k < u1))
+        .collect();
+    grid.sort_by(f64::total_cmp);
+    grid.dedup();
+    for u in grid {
         if let Some((f, d)) = at(u) {
             us.push(u);
             pts.push(f);
             dk.push(d);
         }
+    }
+    // Where the tangent turns by more than `MAX_TURN_RAD` between two samples (a tight
+    // bend), samples are added halfway until it does not: each axis's share of the
+    // tangent then has at most one hump between samples, found by the search below,
+    // and none peaks higher than a sample by more than `1 − cos(MAX_TURN_RAD/2)`.
+    let mut budget = TURN_SAMPLES;
+    let mut i = 0;
+    while i + 1 < us.len() {
+        let turn = dot(pts[i].0, pts[i + 1].0);
+        let u = 0.5 * (us[i] + us[i + 1]);
+        if turn < MAX_TURN_RAD.cos() && budget > 0 && u > us[i] && u < us[i + 1] {
+            budget -= 1;
+            if let Some((f, d)) = at(u) {
+                us.insert(i + 1, u);
+                pts.insert(i + 1, f);
+                dk.insert(i + 1, d);
+                continue;
+            }
+        }
+        i += 1;
     }
     // A peak of the curvature or of its rate narrower than the sampling (a control
     // polygon folding back on itself turns in a few µm) is found between its samples:
@@ -797,23 +855,62 @@ fn samples(b: &CommandBlock) -> Samples {
         }
         Some(path::norm(rate(u)))
     };
+    // And each axis's share of the tangent, whose peak sets that axis's velocity bound:
+    // in a tight bend it swings through its peak between samples as fast as the
+    // curvature does (a bend of a split block's end, at its cap, missed by 2 % broke a
+    // weak axis's velocity in the random search of `limits.rs`).
+    // (Searched on each side of its sample, in case the swing has two humps there: the
+    // tangent may pass through an axis and turn back within one sample's reach.)
+    let tangent = |i: usize| move |u: f64| frame(b, u).map(|(t, _)| t[i].abs());
+    let (tx, ty, tz) = (tangent(0), tangent(1), tangent(2));
     let mut extra: Vec<Sample> = Vec::new();
-    let measures: [Measure; 2] = [
-        (|x| path::norm(x.0 .1), &curvature),
-        (|x| path::norm(x.1), &curvature_rate),
+    let measures: [(Measure, bool); 5] = [
+        ((|x| path::norm(x.0 .1), &curvature), false),
+        ((|x| path::norm(x.1), &curvature_rate), false),
+        ((|x| x.0 .0[0].abs(), &tx), true),
+        ((|x| x.0 .0[1].abs(), &ty), true),
+        ((|x| x.0 .0[2].abs(), &tz), true),
     ];
     let mut values: Vec<f64> = Vec::with_capacity(pts.len());
-    for (m, search) in measures {
+    for ((m, search), halves) in measures {
         values.clear();
         values.extend(pts.iter().zip(&dk).map(|(f, d)| m(&(*f, *d))));
         let value = |i: usize| values[i];
-        let mut peaks: Vec<usize> = (1..pts.len().saturating_sub(1))
-            .filter(|&i| value(i) >= value(i - 1) && value(i) >= value(i + 1) && value(i) > 0.0)
+        // (The tangent's peaks at an end too, searched towards the domain's end: a curve
+        // leaving a stop swings fastest there, and its first sample may come after.)
+        let last = pts.len().saturating_sub(1);
+        let mut peaks: Vec<usize> = (usize::from(!halves)..pts.len().saturating_sub(1) + usize::from(halves))
+            .filter(|&i| {
+                // (Inside a plateau, as along a straight stretch, no peak: its end is.)
+                let flat = |j: usize| (value(j) - value(i)).abs() <= 1e-12;
+                (i == 0 || value(i) >= value(i - 1))
+                    && (i == last || value(i) >= value(i + 1))
+                    && value(i) > 0.0
+                    && !(halves && (i == 0 || flat(i - 1)) && (i == last || flat(i + 1)))
+            })
             .collect();
         peaks.sort_by(|a, b| value(*b).total_cmp(&value(*a)));
-        for &i in peaks.iter().take(PEAKS_REFINED) {
-            if let Some(found) = golden_max(us[i - 1], us[i + 1], search).and_then(at) {
-                extra.push(found);
+        let refined = if halves {
+            // Only a hump that can rise above the largest sample.
+            let top = peaks.first().map_or(0.0, |&i| value(i));
+            let reach = 1.5 * (1.0 - (0.5 * MAX_TURN_RAD).cos());
+            peaks.retain(|&i| value(i) >= top - reach);
+            TANGENT_PEAKS_REFINED
+        } else {
+            PEAKS_REFINED
+        };
+        for &i in peaks.iter().take(refined) {
+            let ranges = if halves {
+                let before = if i == 0 { u0 } else { us[i - 1] };
+                let after = if i == last { u1 } else { us[i + 1] };
+                [(before, us[i]), (us[i], after)]
+            } else {
+                [(us[i - 1], us[i + 1]), (f64::NAN, f64::NAN)]
+            };
+            for (lo, hi) in ranges.into_iter().filter(|r| r.0 < r.1) {
+                if let Some(found) = golden_max(lo, hi, search).and_then(at) {
+                    extra.push(found);
+                }
             }
         }
     }
@@ -1568,6 +1665,12 @@ fn split_at_kinks<B: Plannable>(blocks: &mut Vec<B>, machine: &Machine, period_n
         }
         blocks.push(rest);
     }
+}
+
+/// A motion block along a curve (not a line, not a surface pass): where the share of
+/// the limits its curvature takes is chosen.
+fn is_curve<B: Plannable>(b: &B) -> bool {
+    b.is_motion() && matches!(b.geometry(), Geometry::Curve(c) if !c.is_surface())
 }
 
 /// [`plan_and`] once the blocks are split at their kinks.

@@ -782,6 +782,38 @@ proptest! {
     }
 }
 
+/// Two quadratic curves the random search (`search_random_programs_for_broken_limits`,
+/// seed 7) found breaking a weak X axis once curves were split where their speed limit
+/// changes: blocks of one curve then differ in jerk, and the engine eased a rising
+/// speed off under the jerk of the block it was in, not the lower one of the block
+/// beyond. The first went 1.07 % over X's velocity into a block of half the jerk (the
+/// engine refused the step: `StepTooLarge`); in the second the end speed of such a block
+/// was dropped from the look-ahead as if the blocks before could brake for it, and X's
+/// jerk reached 1.75 times its limit.
+#[test]
+fn a_weak_axis_keeps_its_limits_where_a_curve_s_blocks_differ_in_jerk() {
+    let programs = [
+        "G21 G17\nG0 X0.0000 Y0.0000\nG1 F3000\nG5.2 P1.0000 L3\n\
+         X-0.4904 Y3.3542 P1.6571\nX-17.2985 Y-2.8076 P1.4153\nX-18.6564 Y-21.6922 P0.9397\n\
+         X-10.5138 Y-25.2817 P1.8559\nX6.3025 Y-35.6703 P0.7369\nX10.0737 Y-31.4768 P1.9130\n\
+         X7.5989 Y-22.0503 P1.9049\nX-4.2770 Y-0.1283 P1.2695\nX11.6310 Y3.6515 P1.8747\n\
+         X15.2712 Y-15.6448 P0.9763\nG5.3\nM2\n",
+        "G21 G17\nG0 X0.0000 Y0.0000\nG1 F6000\nG5.2 P1.0000 L3\n\
+         X1.6270 Y-2.4564 P1.7858\nX-18.4501 Y-7.5122 P1.6443\nX-29.0023 Y-26.5901 P1.4132\n\
+         X-9.6571 Y-28.5149 P1.0944\nX-20.1033 Y-47.3921 P1.1471\nX-21.2807 Y-47.3459 P1.0028\n\
+         X-20.4465 Y-62.8096 P1.2763\nX-25.8438 Y-79.4138 P1.6587\nX-31.9479 Y-94.8407 P0.6019\n\
+         G5.3\nM2\n",
+    ];
+    let machine = weak_x_machine();
+    for text in programs {
+        let (blocks, cycles) = step(text, &machine);
+        let w = check(&blocks, &cycles, &machine);
+        // As the search judges a case.
+        assert!(w.axis <= 1.0 + 1e-2, "{w:?}\n{text}");
+        assert!(w.acc <= 1.0 + 1e-3 && w.speed <= 1.0 + 1e-6, "{w:?}\n{text}");
+    }
+}
+
 /// A degree-5 curve whose control polygon nearly turns back (a near-cusp holds its last
 /// span to 0.57 mm/s): its stop at the end once reached 1.19 times the jerk limit. The
 /// span's length was measured 4.7e-5 mm long (the speed `|C'|` dips nearly to zero in

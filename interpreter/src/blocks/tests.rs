@@ -424,150 +424,44 @@ fn a_cusp_of_a_cubic_is_found_as_before() {
     assert_eq!(Some(u), find_cusp_everywhere(&c, &machine));
 }
 
-/// [`samples`] as it was before its searches looked at one measure (and with five
-/// evaluations a sample): the reference its bits are held to.
-fn golden_max_as_before<T>(
-    lo: f64,
-    hi: f64,
-    f: impl Fn(f64) -> Option<T>,
-    m: impl Fn(&T) -> f64,
-) -> Option<T> {
-    const R: f64 = 0.618_033_988_749_895;
-    let (mut a, mut b) = (lo, hi);
-    let mut c = b - R * (b - a);
-    let mut d = a + R * (b - a);
-    let (mut fc, mut fd) = (f(c)?, f(d)?);
-    for _ in 0..40 {
-        if b - a <= 1e-9 * (hi - lo) {
-            break;
-        }
-        if m(&fc) >= m(&fd) {
-            b = d;
-            d = c;
-            fd = fc;
-            c = b - R * (b - a);
-            fc = f(c)?;
-        } else {
-            a = c;
-            c = d;
-            fc = fd;
-            d = a + R * (b - a);
-            fd = f(d)?;
-        }
-    }
-    Some(if m(&fc) >= m(&fd) { fc } else { fd })
-}
-
-fn samples_as_before(b: &CommandBlock) -> Samples {
+/// The largest of a measure over a block, looked for everywhere: 40 001 points evenly
+/// spaced in the parameter, then golden section around the best (the reference for
+/// [`samples`], which takes a few dozen points and searches between them).
+fn largest_everywhere(b: &CommandBlock, m: impl Fn(f64) -> Option<f64>) -> f64 {
     let (u0, u1) = path::domain(b);
-    let samples = (16 * b.n_ctrl.max(2) as usize).max(32);
-    // Distinct knots: dk/ds is taken by differences inside one span (where the curve is
-    // smooth), and the curvature jump at a knot of continuity below C² is a junction of
-    // its own.
-    let mut spans: Vec<f64> = b.knots().to_vec();
-    spans.dedup();
-    let span_of = |u: f64| {
-        let i = spans
-            .partition_point(|k| *k <= u)
-            .clamp(1, spans.len().max(2) - 1);
-        (spans[i - 1], spans[i.min(spans.len() - 1)])
-    };
-    // The frame and dk/ds at `u` (dk/ds by a central difference inside u's span).
-    let at = |u: f64| -> Option<Sample> {
-        let (t, k) = frame(b, u)?;
-        let (lo, hi) = span_of(u);
-        let h = 1e-4 * (hi - lo);
-        let (ua, ub) = ((u - h).max(lo), (u + h).min(hi));
-        let d = match (frame(b, ua), frame(b, ub)) {
-            (Some((_, ka)), Some((_, kb))) if ub > ua => {
-                let ds = path::norm(sub(path::eval(b, ub).p, path::eval(b, ua).p));
-                if ds > 1e-15 {
-                    sub(kb, ka).map(|x| x / ds)
-                } else {
-                    [0.0; 3]
-                }
-            }
-            _ => [0.0; 3],
-        };
-        Some(((t, k), d))
-    };
-    let mut us: Vec<f64> = Vec::with_capacity(samples + 1);
-    let mut pts: Vec<Frame> = Vec::with_capacity(samples + 1);
-    let mut dk: Vec<[f64; 3]> = Vec::with_capacity(samples + 1);
-    for i in 0..=samples {
-        let u = u0 + (u1 - u0) * i as f64 / samples as f64;
-        if let Some((f, d)) = at(u) {
-            us.push(u);
-            pts.push(f);
-            dk.push(d);
-        }
-    }
-    // A peak of the curvature or of its rate narrower than the sampling (a control
-    // polygon folding back on itself turns in a few µm) is found between its samples:
-    // the largest local maxima of each are searched (golden section) between their
-    // neighbours, and what is found joins the samples (before the last, which gives
-    // the end's tangent).
-    let mut extra: Vec<Sample> = Vec::new();
-    let measures: [fn(&Sample) -> f64; 2] = [|x| path::norm(x.0 .1), |x| path::norm(x.1)];
-    for m in measures {
-        let value = |i: usize| m(&(pts[i], dk[i]));
-        let mut peaks: Vec<usize> = (1..pts.len().saturating_sub(1))
-            .filter(|&i| value(i) >= value(i - 1) && value(i) >= value(i + 1) && value(i) > 0.0)
-            .collect();
-        peaks.sort_by(|a, b| value(*b).total_cmp(&value(*a)));
-        for &i in peaks.iter().take(PEAKS_REFINED) {
-            if let Some(found) = golden_max_as_before(us[i - 1], us[i + 1], at, m) {
-                extra.push(found);
+    const N: usize = 40_000;
+    let u = |i: usize| u0 + (u1 - u0) * i as f64 / N as f64;
+    let (mut best, mut at) = (f64::NEG_INFINITY, 0);
+    for i in 0..=N {
+        if let Some(x) = m(u(i)) {
+            if x > best {
+                (best, at) = (x, i);
             }
         }
     }
-    if !extra.is_empty() {
-        let n = pts.len() - 1;
-        pts.splice(n..n, extra.iter().map(|x| x.0));
-        dk.splice(n..n, extra.iter().map(|x| x.1));
-    }
-    // Curvature jumps at interior knots where the curve is only C¹ (or less).
-    let mut jumps: Vec<f64> = Vec::new();
-    let degree = b.degree as usize;
-    for w in spans.windows(2).skip(1) {
-        let knot = w[0];
-        let mult = b.knots().iter().filter(|k| **k == knot).count();
-        if degree < mult + 2 {
-            let eps = 1e-9 * (u1 - u0);
-            if let (Some((_, ka)), Some((_, kb))) = (frame(b, knot - eps), frame(b, knot + eps)) {
-                jumps.push(path::norm(sub(kb, ka)));
-            }
-        }
-    }
-    (pts, dk, jumps)
-}
-
-/// Every number of a block's samples as bits.
-fn samples_bits(s: &Samples) -> Vec<u64> {
-    let (pts, dk, jumps) = s;
-    pts.iter()
-        .flat_map(|(t, k)| t.iter().chain(k))
-        .chain(dk.iter().flatten())
-        .chain(jumps)
-        .map(|x| x.to_bits())
-        .collect()
+    let (lo, hi) = (u(at.saturating_sub(1)), u((at + 1).min(N)));
+    golden_max(lo, hi, &m)
+        .and_then(&m)
+        .map_or(best, |x| x.max(best))
 }
 
 proptest::proptest! {
-    #![proptest_config(proptest::prelude::ProptestConfig::with_cases(300))]
-    /// The planner's samples are the very ones it took before: on random curves of one
-    /// span and of several, rational or not, zig-zag or made to have a cusp, and on
-    /// arcs and helices.
+    #![proptest_config(proptest::prelude::ProptestConfig::with_cases(100))]
+    /// Each axis's share of the tangent reaches its largest value among the planner's
+    /// samples (it sets that axis's velocity bound), as a search everywhere finds it, to
+    /// 1e-6: on random curves of one span and of several, rational or not, and on curves
+    /// with a bend of a few µm (a control point pulled close to its neighbour), where
+    /// the tangent swings through X between two samples. Before the tangent's peaks
+    /// were searched, such a bend at a split block's end broke a weak X axis's velocity
+    /// by 1 % in the random search of `limits.rs`.
     #[test]
-    fn samples_are_as_before(
-        degree in 1usize..=5,
+    fn samples_hold_each_axis_tangent_peak(
+        degree in 2usize..=5,
         extra in 0usize..3,
         pts in proptest::collection::vec((-20.0f64..20.0, -20.0f64..20.0, -2.0f64..2.0), 9),
         weights in proptest::collection::vec(0.3f64..3.0, 9),
         rational in proptest::bool::ANY,
-        fold in proptest::bool::ANY,
-        sweep in proptest::prop_oneof![-7.0f64..-0.1, 0.1f64..7.0],
-        dz in proptest::prop_oneof![proptest::strategy::Just(0.0), -3.0f64..3.0],
+        bend in proptest::prop_oneof![proptest::strategy::Just(None), proptest::strategy::Strategy::prop_map(1e-4f64..1e-2, Some)],
     ) {
         let n = degree + 1 + extra;
         let mut ctrl: Vec<[f64; 4]> = pts[..n]
@@ -575,17 +469,25 @@ proptest::proptest! {
             .zip(&weights)
             .map(|(&(x, y, z), &w)| [x, y, z, if rational { w } else { 1.0 }])
             .collect();
-        if fold && n >= 3 {
-            // Back along itself: the curve (nearly) stops where it turns.
-            ctrl[2] = ctrl[0];
+        if let Some(e) = bend {
+            // A tight bend: the middle control point next to the one before it.
+            let k = n / 2;
+            let p = ctrl[k - 1];
+            ctrl[k] = [p[0] + e, p[1] - e, p[2], ctrl[k][3]];
         }
         let mut knots = vec![0.0; degree + 1];
         knots.extend((1..=extra).map(|i| i as f64 * 0.7));
         knots.extend(std::iter::repeat_n(extra as f64 * 0.7 + 1.3, degree + 1));
-        let curve = SplitCurve { degree, knots, ctrl };
-        let arcs = arc_blocks(3, [5.0, 0.0, 1.0], [0.0, 0.0, 1.0], Plane::XY, sweep, dz, 900.0);
-        for b in std::iter::once(curve_block(3, &curve, Helix::NONE, 900.0)).chain(arcs) {
-            proptest::prop_assert_eq!(samples_bits(&samples(&b)), samples_bits(&samples_as_before(&b)));
+        let b = curve_block(3, &SplitCurve { degree, knots, ctrl }, Helix::NONE, 900.0);
+        let (pts, _, _) = samples(&b);
+        for i in 0..3 {
+            let sampled = pts.iter().map(|(t, _)| t[i].abs()).fold(0.0f64, f64::max);
+            let everywhere = largest_everywhere(&b, |u| frame(&b, u).map(|(t, _)| t[i].abs()));
+            proptest::prop_assert!(
+                sampled >= everywhere - 1e-6,
+                "axis {}: the samples' largest |T| {} below {} found everywhere",
+                i, sampled, everywhere
+            );
         }
     }
 }
@@ -604,3 +506,4 @@ proptest::proptest! {
         proptest::prop_assert_eq!(min_cbrt(v, x).to_bits(), v.min(x.cbrt()).to_bits(), "{} {}", v, x);
     }
 }
+
