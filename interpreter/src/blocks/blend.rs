@@ -344,6 +344,9 @@ fn screen(
     let motion = || blend.iter().filter(|b| b.length_mm > 0.0);
     let v_b = motion().map(|b| b.feed_mm_per_min).fold(f, f64::min) / 60.0;
     let len_b: f64 = motion().map(|b| b.length_mm).sum();
+    if v_b.is_nan() || v_b <= 0.0 || !len_b.is_finite() {
+        return None;
+    }
     // The exact corner between two lines long enough to reach the feed and stop from it.
     let leg = 2.0 * stop_distance(v, machine) + c.trim_mm;
     let (a, b) = (c.u1.map(|x| -x * leg), c.u2.map(|x| x * leg));
@@ -373,9 +376,6 @@ fn screen(
         .iter()
         .fold(f, |m, x| m.min(*x))
         / 60.0;
-    if !(v_b > 0.0) || len_b.is_nan() {
-        return None;
-    }
     let axes = machine.axes.as_array();
     let lim = shared::profile::Limits {
         acc: axes
