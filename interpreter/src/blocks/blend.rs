@@ -66,6 +66,39 @@
 //! reversal. Between rows they are interpolated linearly; the deviation formula holds for
 //! any `c1, c2`.
 //!
+//! # Blends that pay
+//!
+//! A blend is passed at the speed its curvature and its rate of change allow, and the
+//! planner holds the whole blend block to that speed. At a small tolerance and a large
+//! turn that is a crawl: the ratios above make `dκ/ds` nearly constant along the blend
+//! (about `0.21/h²` at 90°, a clothoid-like ramp up and down of the curvature), so no
+//! part of the blend is much faster than the rest, and at `P0.01` and 90° the built-in
+//! machine passes it at about 2 mm/s over its 0.055 mm, slower than stopping exactly at
+//! the corner. [`corners_on`] therefore weighs each corner, in program order, between its
+//! blend and its exact path (what `G61` does there: an exact stop above
+//! `corner_angle_deg`, the kink's junction speed below) and keeps the blend only when it
+//! is not slower:
+//!
+//! * first a screen ([`screen`]): each way is taken as one slow stretch in the feed `F`
+//!   of the two lines, the blend at the cap the planner gives it alone over its length,
+//!   the exact corner at the speed the planner passes it at between two long lines. Each
+//!   costs `2·(T(F→v) − D(F→v)/F) + ℓ·(1/v − 1/F)` against running on at `F` (`T`, `D`:
+//!   the jerk-limited speed change's time and distance under the machine's weakest
+//!   acceleration and jerk). Where one way loses at least twice as little (and 2 ms
+//!   less), that way is taken;
+//! * otherwise both ways are planned and stepped through the interpolator's engine
+//!   ([`crate::estimate`], what `cnc check --estimate` runs) over the corner's
+//!   neighbourhood: the lines joined to it by blendable corners, as far as the machine
+//!   needs to stop from their feed twice over on each side, from rest to rest, the
+//!   corners before it as already decided and those after it exact. The blend is kept if
+//!   its cycles are no more.
+//!
+//! The corners left exact are put under `G61` (a path-mode change before the line that
+//! ends at the corner and the mode in force back after it), so the result is final:
+//! [`corners`] and [`corners_on`] return it unchanged. Nothing emitted changes shape: a
+//! kept blend is the blend above, within `tol`; a corner left exact is the programmed
+//! corner.
+//!
 //! # Where it applies
 //!
 //! A corner is blended when the move that ends at it is a feed line (`G1`, not `G0`)
@@ -83,6 +116,7 @@
 use super::{dot, sub};
 use crate::program::{Move, PathControl};
 use shared::path::norm;
+use shared::Machine;
 use std::borrow::Cow;
 
 /// Turns below this (radians) are left as they are: a kink of 1e-4 rad costs the
@@ -123,6 +157,11 @@ const RATIOS: [(f64, f64, f64); 18] = [
     (170.0, 0.916, 0.825),
 ];
 
+/// The interpolation period (ns) a blend is weighed against the exact path at
+/// ([`corners_on`]), clamped to the machine's range: the moves do not know the period they
+/// will run at, and the choice barely depends on it.
+pub const DECISION_PERIOD_NS: u64 = 1_000_000;
+
 /// `(c1, c2)` for a turn of `theta_deg`, interpolated in [`RATIOS`].
 pub fn ratios(theta_deg: f64) -> (f64, f64) {
     let last = RATIOS[RATIOS.len() - 1];
@@ -142,8 +181,9 @@ pub fn mid_weight(c1: f64, c2: f64) -> f64 {
     (1.0 + 5.0 * c1 + 10.0 * c2) / 32.0
 }
 
-/// The moves with every eligible corner blended (see the module page); the moves
-/// themselves, not a copy, when the program never selects `G64 P` with a tolerance.
+/// The moves with every eligible corner blended (see the module page), whether the blend
+/// pays or not (see [`corners_on`]); the moves themselves, not a copy, when the program
+/// never selects `G64 P` with a tolerance.
 pub fn corners(moves: &[Move]) -> Cow<'_, [Move]> {
     let blends_anywhere = moves.iter().any(|m| {
         matches!(m, Move::PathMode { control: PathControl::Blend { tolerance_mm: Some(t), .. }, .. } if *t > 0.0)
@@ -156,6 +196,384 @@ pub fn corners(moves: &[Move]) -> Cow<'_, [Move]> {
         return Cow::Borrowed(moves);
     }
     Cow::Owned(emit(moves, &plans))
+}
+
+/// [`corners`], keeping only the blends that pay on `machine`: each eligible corner, in
+/// program order, is planned and stepped both ways in its neighbourhood (see the module
+/// page, "Blends that pay"), and is blended only when that is not slower than following
+/// the exact path there (`G61`: an exact stop above `corner_angle_deg`, the kink's speed
+/// below). A corner left exact is put under `G61` (a path-mode change before the line
+/// that ends at it, and the mode in force back after it), so the moves this returns are
+/// returned unchanged by [`corners`] and by this function.
+pub fn corners_on<'a>(moves: &'a [Move], machine: &Machine) -> Cow<'a, [Move]> {
+    let blends_anywhere = moves.iter().any(|m| {
+        matches!(m, Move::PathMode { control: PathControl::Blend { tolerance_mm: Some(t), .. }, .. } if *t > 0.0)
+    });
+    if !blends_anywhere {
+        return Cow::Borrowed(moves);
+    }
+    let plans = plan_corners(moves);
+    if plans.iter().all(Option::is_none) {
+        return Cow::Borrowed(moves);
+    }
+    let decided = decide(moves, &plans, machine);
+    Cow::Owned(emit_marked(moves, &decided.plans, &decided.exact))
+}
+
+/// The corners [`corners_on`] keeps, and the mode in force on each line whose end corner
+/// it leaves exact.
+struct Decided {
+    plans: Vec<Option<Corner>>,
+    exact: Vec<Option<PathControl>>,
+}
+
+/// The speed (mm/s) and the distance to stop from it (mm) that bound a corner's
+/// neighbourhood: what the machine's weakest acceleration and jerk (path or axis) need to
+/// stop from the faster of the two lines' feeds, jerk-limited.
+fn stop_distance(v: f64, machine: &Machine) -> f64 {
+    let axes = machine.axes.as_array();
+    let a = axes
+        .iter()
+        .map(|x| x.max_acc_mm_per_s2)
+        .fold(machine.path_acc_mm_per_s2, f64::min);
+    let j = axes
+        .iter()
+        .map(|x| x.max_jerk_mm_per_s3)
+        .fold(machine.path_jerk_mm_per_s3, f64::min);
+    if v * j <= a * a {
+        v * (v / j).sqrt()
+    } else {
+        0.5 * v * (v / a + a / j)
+    }
+}
+
+/// Each corner of `plans`, in program order, kept or left exact by which of the two is
+/// quicker through its neighbourhood ([`time_around`]).
+fn decide(moves: &[Move], plans: &[Option<Corner>], machine: &Machine) -> Decided {
+    let period_ns = DECISION_PERIOD_NS.clamp(
+        machine.min_period_us * 1000,
+        machine.max_period_us.max(machine.min_period_us) * 1000,
+    );
+    // The line each blended corner comes from, by the line it goes into.
+    let mut prev = vec![None; moves.len()];
+    for (i, c) in plans.iter().enumerate() {
+        if let Some(c) = c {
+            prev[c.next] = Some(i);
+        }
+    }
+    let mut kept: Vec<Option<Corner>> = plans.to_vec();
+    let mut exact = vec![None; moves.len()];
+    let mut control = None;
+    for i in 0..moves.len() {
+        if let Move::PathMode { control: c, .. } = &moves[i] {
+            control = Some(*c);
+        }
+        if plans[i].is_none() {
+            continue;
+        }
+        let pays = screen(moves, plans, i, machine, period_ns).unwrap_or_else(|| {
+            let blend = time_around(moves, plans, &kept, &prev, i, true, machine, period_ns);
+            let exact_path = time_around(moves, plans, &kept, &prev, i, false, machine, period_ns);
+            match (blend, exact_path) {
+                (Some(b), Some(e)) => b <= e,
+                // A neighbourhood the planner or the engine refuses: as before, blended.
+                _ => true,
+            }
+        });
+        if !pays {
+            kept[i] = None;
+            exact[i] = control;
+        }
+    }
+    Decided { plans: kept, exact }
+}
+
+/// How much one way's time lost at a corner must be below the other's for [`screen`] to
+/// decide without stepping the neighbourhood: a factor, and an absolute margin (s).
+const SCREEN_FACTOR: f64 = 2.0;
+const SCREEN_MARGIN_S: f64 = 2e-3;
+
+/// The quick answer for the corner at the end of line `i`, where it is clear: `Some(true)`
+/// to blend, `Some(false)` to leave it exact, `None` to step the neighbourhood
+/// ([`time_around`]). Each way is one slow stretch in the lines' feed `F`: the blend at its
+/// planned cap `v_b` over its length `ℓ`, the exact corner at the speed the planner passes
+/// it at, `v_e` (0 at an exact stop), over no length; each costs, against running on at
+/// `F`, `2·(T(F→v) − D(F→v)/F) + ℓ·(1/v − 1/F)` with the jerk-limited speed change's
+/// time `T` and distance `D` under the machine's weakest acceleration and jerk. Both are
+/// planned alone (the blend block, and the two lines meeting at the corner, each long
+/// enough to reach `F` and stop from it), which is cheap next to stepping the
+/// neighbourhood, and clear when one way loses [`SCREEN_FACTOR`] times less than the
+/// other (and [`SCREEN_MARGIN_S`] less).
+fn screen(
+    moves: &[Move],
+    plans: &[Option<Corner>],
+    i: usize,
+    machine: &Machine,
+    period_ns: u64,
+) -> Option<bool> {
+    let c = plans[i]?;
+    let feed = |k: usize| match &moves[k] {
+        Move::Line { feed, .. } => Some(*feed),
+        _ => None,
+    };
+    let f = feed(i)?.min(feed(c.next)?).min(machine.max_feed_mm_per_min);
+    let v = f / 60.0;
+    let planned = |ms: &[Move]| {
+        let mut blocks = super::build(ms, machine);
+        super::plan(&mut blocks, machine, period_ns);
+        super::commands(&blocks)
+    };
+    // The blend alone, about the origin.
+    let o = c.corner;
+    let local = Corner {
+        corner: [0.0; 3],
+        ..c
+    };
+    let start = sub(sub(c.corner, c.u1.map(|x| x * c.trim_mm)), o);
+    let end = sub(add(c.corner, c.u2.map(|x| x * c.trim_mm)), o);
+    let blend = planned(&[
+        Move::Nurbs {
+            line: 0,
+            degree: 5,
+            knots: vec![0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0],
+            ctrl: control_points(&local, start, end),
+            feed: f,
+        },
+        Move::End { line: 0 },
+    ]);
+    let motion = || blend.iter().filter(|b| b.length_mm > 0.0);
+    let v_b = motion().map(|b| b.feed_mm_per_min).fold(f, f64::min) / 60.0;
+    let len_b: f64 = motion().map(|b| b.length_mm).sum();
+    if v_b.is_nan() || v_b <= 0.0 || !len_b.is_finite() {
+        return None;
+    }
+    // The exact corner between two lines long enough to reach the feed and stop from it.
+    let leg = 2.0 * stop_distance(v, machine) + c.trim_mm;
+    let (a, b) = (c.u1.map(|x| -x * leg), c.u2.map(|x| x * leg));
+    let exact = planned(&[
+        Move::Line {
+            line: 0,
+            from: a,
+            to: [0.0; 3],
+            rapid: false,
+            feed: f,
+        },
+        Move::Line {
+            line: 0,
+            from: [0.0; 3],
+            to: b,
+            rapid: false,
+            feed: f,
+        },
+        Move::End { line: 0 },
+    ]);
+    let ends: Vec<f64> = exact
+        .iter()
+        .filter(|b| b.length_mm > 0.0)
+        .map(|b| b.end_feed_mm_per_min)
+        .collect();
+    let v_e = ends[..ends.len().saturating_sub(1)]
+        .iter()
+        .fold(f, |m, x| m.min(*x))
+        / 60.0;
+    let axes = machine.axes.as_array();
+    let lim = shared::profile::Limits {
+        acc: axes
+            .iter()
+            .map(|x| x.max_acc_mm_per_s2)
+            .fold(machine.path_acc_mm_per_s2, f64::min),
+        jerk: axes
+            .iter()
+            .map(|x| x.max_jerk_mm_per_s3)
+            .fold(machine.path_jerk_mm_per_s3, f64::min),
+    };
+    let lost = |u: f64, len: f64| {
+        let u = u.min(v);
+        let t = lim.change_time(v - u);
+        let slow = if len > 0.0 {
+            len * (1.0 / u - 1.0 / v)
+        } else {
+            0.0
+        };
+        2.0 * (t - lim.change_distance(v, u) / v) + slow
+    };
+    let (lb, le) = (lost(v_b, len_b), lost(v_e, 0.0));
+    if lb * SCREEN_FACTOR + SCREEN_MARGIN_S <= le {
+        Some(true)
+    } else if le * SCREEN_FACTOR + SCREEN_MARGIN_S <= lb {
+        Some(false)
+    } else {
+        None
+    }
+}
+
+/// The cycles the neighbourhood of the corner at the end of line `i` takes, from rest to
+/// rest, with that corner blended (`blend`) or exact: the lines that join it by blendable
+/// corners, as far back and ahead as the machine needs to stop from their feed twice
+/// over (the far lines cut to that), the corners before it as already decided (`kept`),
+/// the corners after it exact. Planned by [`super::plan`] and stepped by the
+/// interpolator's engine ([`crate::estimate`]), as `cnc check --estimate` does. `None`
+/// when either refuses.
+#[allow(clippy::too_many_arguments)]
+fn time_around(
+    moves: &[Move],
+    plans: &[Option<Corner>],
+    kept: &[Option<Corner>],
+    prev: &[Option<usize>],
+    i: usize,
+    blend: bool,
+    machine: &Machine,
+    period_ns: u64,
+) -> Option<u64> {
+    let here = plans[i]?;
+    let line = |k: usize| match &moves[k] {
+        Move::Line { from, to, feed, .. } => Some((*from, *to, *feed)),
+        _ => None,
+    };
+    let (_, _, f1) = line(i)?;
+    let (_, _, f2) = line(here.next)?;
+    let v = f1.max(f2).min(machine.max_feed_mm_per_min) / 60.0;
+    let reach = 2.0 * stop_distance(v, machine) + 2.0 * here.trim_mm;
+    // The lines of the neighbourhood, by index, and the length kept of each far one.
+    let mut back = vec![i];
+    let mut along = 0.0;
+    let mut k = i;
+    loop {
+        let (a, b, _) = line(k)?;
+        along += norm(sub(b, a));
+        match prev[k] {
+            Some(p) if along < reach => {
+                back.push(p);
+                k = p;
+            }
+            _ => break,
+        }
+    }
+    back.reverse();
+    let mut ahead = vec![here.next];
+    let mut along = 0.0;
+    let mut k = here.next;
+    loop {
+        let (a, b, _) = line(k)?;
+        along += norm(sub(b, a));
+        match plans[k] {
+            Some(c) if along < reach => {
+                ahead.push(c.next);
+                k = c.next;
+            }
+            _ => break,
+        }
+    }
+    let idx: Vec<usize> = back.into_iter().chain(ahead).collect();
+    let n = idx.len();
+    // The corner at the end of each line of the neighbourhood, as it is planned here.
+    let corner_of = |w: usize| -> Option<Corner> {
+        let k = idx[w];
+        let c = if k < i {
+            kept[k]
+        } else if k == i && blend {
+            plans[k]
+        } else {
+            None
+        };
+        c.filter(|_| w + 1 < n)
+    };
+    // The far lines cut to what the reach needs, but never below what the blend at their
+    // inner end takes of them (so each blend keeps its trim).
+    let mut segs: Vec<([f64; 3], [f64; 3], f64)> = Vec::with_capacity(n);
+    let total_back: f64 = idx[..idx.iter().position(|&k| k == here.next).unwrap_or(n)]
+        .iter()
+        .filter_map(|&k| line(k).map(|(a, b, _)| norm(sub(b, a))))
+        .sum();
+    let total_ahead: f64 = idx[idx.iter().position(|&k| k == here.next).unwrap_or(n)..]
+        .iter()
+        .filter_map(|&k| line(k).map(|(a, b, _)| norm(sub(b, a))))
+        .sum();
+    for (w, &k) in idx.iter().enumerate() {
+        let (mut a, mut b, f) = line(k)?;
+        let len = norm(sub(b, a));
+        let u = sub(b, a).map(|x| x / len);
+        if w == 0 && total_back > reach {
+            let keep_len = (len - (total_back - reach))
+                .max(2.0 * plans[k].map_or(0.0, |c| c.trim_mm))
+                .min(len);
+            a = sub(b, u.map(|x| x * keep_len));
+        }
+        if w + 1 == n && total_ahead > reach {
+            let start_trim = plans[idx[w - 1]].map_or(0.0, |c| c.trim_mm);
+            let keep_len = (len - (total_ahead - reach)).max(2.0 * start_trim).min(len);
+            b = add(a, u.map(|x| x * keep_len));
+        }
+        segs.push((a, b, f));
+    }
+    // Moved to the origin, where the engine starts.
+    let o = segs[0].0;
+    let mut window: Vec<Move> = segs
+        .iter()
+        .map(|&(a, b, feed)| Move::Line {
+            line: 0,
+            from: sub(a, o),
+            to: sub(b, o),
+            rapid: false,
+            feed,
+        })
+        .collect();
+    window.push(Move::End { line: 0 });
+    let wplans: Vec<Option<Corner>> = (0..=n)
+        .map(|w| {
+            (w < n).then(|| corner_of(w)).flatten().map(|c| Corner {
+                next: w + 1,
+                corner: sub(c.corner, o),
+                ..c
+            })
+        })
+        .collect();
+    let window = emit(&window, &wplans);
+    let mut blocks = super::build(&window, machine);
+    super::plan(&mut blocks, machine, period_ns);
+    let est = crate::estimate::estimate(&super::commands(&blocks), machine, period_ns).ok()?;
+    Some(est.cycles)
+}
+
+/// [`emit`], with the lines whose end corner is left exact (`exact`: the mode in force
+/// there) put under `G61` for that line alone.
+fn emit_marked(
+    moves: &[Move],
+    plans: &[Option<Corner>],
+    exact: &[Option<PathControl>],
+) -> Vec<Move> {
+    if exact.iter().all(Option::is_none) {
+        return emit(moves, plans);
+    }
+    let mut marked = Vec::with_capacity(moves.len() + 2 * exact.len());
+    let mut at = Vec::with_capacity(moves.len());
+    for (i, m) in moves.iter().enumerate() {
+        let line = match m {
+            Move::Line { line, .. } => *line,
+            _ => 0,
+        };
+        if exact[i].is_some() {
+            marked.push(Move::PathMode {
+                line,
+                control: PathControl::ExactPath,
+            });
+        }
+        at.push(marked.len());
+        marked.push(m.clone());
+        if let Some(c) = &exact[i] {
+            marked.push(Move::PathMode { line, control: *c });
+        }
+    }
+    let mut p = vec![None; marked.len()];
+    for (i, c) in plans.iter().enumerate() {
+        if let Some(c) = c {
+            p[at[i]] = Some(Corner {
+                next: at[c.next],
+                ..*c
+            });
+        }
+    }
+    emit(&marked, &p)
 }
 
 /// A corner to blend: at the end of the line at the index it is stored under, into the

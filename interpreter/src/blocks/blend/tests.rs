@@ -386,8 +386,10 @@ fn non_planar_corners_in_3d() {
 #[test]
 fn the_planner_passes_a_blended_corner_without_stopping() {
     let machine = Machine::default();
+    // Every corner blended (`corners`), whether or not the blend pays here (at 90° and
+    // `P0.01` it does not: `corners_on` leaves it exact).
     let planned = |text: &str| {
-        let mut b = commands(&build(&moves(text), &machine));
+        let mut b = commands(&build(&corners(&moves(text)), &machine));
         plan(&mut b, &machine, 1_000_000);
         b
     };
@@ -427,5 +429,98 @@ fn ratios_follow_the_table() {
     for d in 0..=170 {
         let (c1, c2) = ratios(d as f64);
         assert!(0.0 <= c2 && c2 < c1 && c1 < 1.0);
+    }
+}
+
+/// The polygon of the README (`examples/cam-polygon.ngc`, 6° turns), its raster
+/// (`examples/cam-zigzag.ngc`, 90° corners) and both in one program.
+fn example(name: &str) -> String {
+    std::fs::read_to_string(format!("{}/../examples/{name}", env!("CARGO_MANIFEST_DIR"))).unwrap()
+}
+
+/// Exact path (`G61`) path-mode changes in a move list.
+fn exact_marks(ms: &[Move]) -> usize {
+    ms.iter()
+        .filter(|m| {
+            matches!(
+                m,
+                Move::PathMode {
+                    control: PathControl::ExactPath,
+                    ..
+                }
+            )
+        })
+        .count()
+}
+
+#[test]
+fn blends_that_do_not_pay_are_left_exact_under_g61() {
+    let machine = Machine::default();
+    // 90° at P0.01 on the built-in machine: the blend would be passed at about 2 mm/s
+    // over its whole length, slower than stopping exactly (README, path control).
+    let zig = moves(&example("cam-zigzag.ngc"));
+    let corners_in = plan_corners(&zig).iter().flatten().count();
+    assert_eq!(corners_in, 39);
+    let kept = corners_on(&zig, &machine);
+    assert!(blends(&kept).is_empty());
+    assert_eq!(exact_marks(&kept), corners_in);
+    // Each line that ends at such a corner runs under G61, and the mode comes back.
+    for w in kept.windows(3) {
+        if let [Move::PathMode {
+            control: PathControl::ExactPath,
+            ..
+        }, Move::Line { .. }, after] = w
+        {
+            assert!(matches!(
+                after,
+                Move::PathMode {
+                    control: PathControl::Blend {
+                        tolerance_mm: Some(_),
+                        ..
+                    },
+                    ..
+                }
+            ));
+        }
+    }
+    // The same lines, in the same order.
+    let lines = |ms: &[Move]| -> Vec<Move> {
+        ms.iter()
+            .filter(|m| matches!(m, Move::Line { .. }))
+            .cloned()
+            .collect()
+    };
+    assert_eq!(lines(&kept), lines(&zig));
+}
+
+#[test]
+fn blends_that_pay_are_kept() {
+    // 6° turns at P0.01: passed far faster than the exact path's stops.
+    for machine in [Machine::default(), linuxcnc()] {
+        let poly = moves(&example("cam-polygon.ngc"));
+        assert_eq!(corners_on(&poly, &machine), corners(&poly));
+    }
+}
+
+fn linuxcnc() -> Machine {
+    Machine::from_toml(&example("machine-linuxcnc-sim.toml")).unwrap()
+}
+
+#[test]
+fn the_choice_is_final() {
+    // What `corners_on` returns, `corners` and `corners_on` return unchanged: the blends
+    // it kept join lines to curves, and the corners it left exact run under G61.
+    for machine in [Machine::default(), linuxcnc()] {
+        for text in [
+            example("cam-zigzag.ngc"),
+            example("cam-polygon.ngc"),
+            example("cam-circle.ngc"),
+            "G64 P0.05\nG1 X10 F3000\nX20 Y1\nY10\nX19 Y12\nX0 F600\nG61\nY0\nG64 P0.2\nX-5\nY5\nM2\n".into(),
+        ] {
+            let ms = moves(&text);
+            let once = corners_on(&ms, &machine).into_owned();
+            assert_eq!(corners_on(&once, &machine), once);
+            assert_eq!(corners(&once), once);
+        }
     }
 }
