@@ -1015,7 +1015,10 @@ impl Engine {
             }
             // The next limit, at the end of the next block, is braked for under the jerk
             // of the block after it too (see [`Ahead::easing`]).
-            let beyond = self.window.motion(i + 1).map_or(next, |f| min_lim(next, f.lim));
+            let beyond = self
+                .window
+                .motion(i + 1)
+                .map_or(next, |f| min_lim(next, f.lim));
             let braking = Jerk {
                 acc: lim.acc,
                 jerk: lim.jerk.min(beyond.jerk),
@@ -1028,8 +1031,7 @@ impl Engine {
                 let a_top = self.acc.max(top.acc);
                 let v_peak = v_top + a_top * a_top / (2.0 * braking.jerk.min(top.jerk));
                 let easing = self.acc.max(0.0) / braking.jerk;
-                reach_d =
-                    braking.change_distance(v_peak, 0.0) + v_peak * (self.t_s + easing);
+                reach_d = braking.change_distance(v_peak, 0.0) + v_peak * (self.t_s + easing);
             }
             if d > reach_d {
                 break;

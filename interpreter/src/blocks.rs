@@ -241,7 +241,7 @@ pub fn build(moves: &[Move], machine: &Machine) -> Vec<Block> {
         })
         .collect();
     // `G64 P`: corners between feed lines blended first (see [`blend`]).
-    let blended = blend::corners(moves);
+    let blended = blend::corners_on(moves, machine);
     let moves: &[Move] = &blended;
     // Most moves make one block.
     let mut out: Vec<Block> = Vec::with_capacity(moves.len());
@@ -879,7 +879,8 @@ fn samples(b: &CommandBlock) -> Samples {
         // (The tangent's peaks at an end too, searched towards the domain's end: a curve
         // leaving a stop swings fastest there, and its first sample may come after.)
         let last = pts.len().saturating_sub(1);
-        let mut peaks: Vec<usize> = (usize::from(!halves)..pts.len().saturating_sub(1) + usize::from(halves))
+        let mut peaks: Vec<usize> = (usize::from(!halves)
+            ..pts.len().saturating_sub(1) + usize::from(halves))
             .filter(|&i| {
                 // (Inside a plateau, as along a straight stretch, no peak: its end is.)
                 let flat = |j: usize| (value(j) - value(i)).abs() <= 1e-12;
@@ -1665,12 +1666,6 @@ fn split_at_kinks<B: Plannable>(blocks: &mut Vec<B>, machine: &Machine, period_n
         }
         blocks.push(rest);
     }
-}
-
-/// A motion block along a curve (not a line, not a surface pass): where the share of
-/// the limits its curvature takes is chosen.
-fn is_curve<B: Plannable>(b: &B) -> bool {
-    b.is_motion() && matches!(b.geometry(), Geometry::Curve(c) if !c.is_surface())
 }
 
 /// [`plan_and`] once the blocks are split at their kinks.

@@ -420,7 +420,16 @@ pub fn grid(
         breaks.dedup();
         let first = pts.len();
         let mut cells: Vec<(f64, f64, bool)> = Vec::new();
-        let tan = |u: f64, toward: f64| frame(&local(b, u), || path::eval(b, toward).p).0;
+        // The forward tangent at `u` (of a vanishing derivative: the chord towards
+        // `toward`, turned forward when `toward` lies behind).
+        let tan = |u: f64, toward: f64| {
+            let (t, _, sp) = frame(&local(b, u), || path::eval(b, toward).p);
+            if sp < 1e-12 && toward < u {
+                t.map(|x| -x)
+            } else {
+                t
+            }
+        };
         for w in breaks.windows(2) {
             let (a, c) = (w[0], w[1]);
             if c <= a {
@@ -435,7 +444,7 @@ pub fn grid(
                     a + (c - a) * (q + 1) as f64 / 4.0
                 };
                 let ta = tan(ua + 1e-12 * (c - a), ub);
-                let tb = tan(ub - 1e-12 * (c - a), ua).map(|x| -x);
+                let tb = tan(ub - 1e-12 * (c - a), ua);
                 refine(b, (ua, ta), (ub, tb), step_mm, 0, &mut cells);
             }
         }

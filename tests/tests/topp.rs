@@ -250,3 +250,24 @@ fn agrees_with_the_issues_topp_ra_on_the_butterfly_curves() {
     assert_eq!(runs, 5);
     assert_rel("butterfly curves at F6000 against TOPP-RA", t, 4.52, 1e-2);
 }
+
+/// The grid refines only where the tangent turns: on a straight line every cell is
+/// longer than half the step (10 mm at 0.02 mm: 512 cells of 0.0195 mm). Before the
+/// fix the end tangent of each starting cell was taken reversed, so the grid halved the
+/// cells at every quarter of a span down to 1e-7 mm (585 points instead of 513).
+#[test]
+fn a_straight_line_is_not_refined_below_the_step() {
+    let m = machine(1000.0);
+    let text = "G1 X10 F6000\nM2\n";
+    let blocks = interpreter::process::compile(text, &m, PERIOD_NS)
+        .unwrap()
+        .1;
+    let feeds = topp::programmed_feeds("t.ngc", text, &m, PERIOD_NS, &blocks).unwrap();
+    let (grid, _) = topp::grid(&blocks, &feeds, &RefLimits::of(&m, PERIOD_NS), 0.02);
+    let shortest = grid
+        .windows(2)
+        .map(|w| w[1].s - w[0].s)
+        .fold(f64::INFINITY, f64::min);
+    println!("{} points, shortest cell {shortest:e} mm", grid.len());
+    assert!(shortest > 0.01, "{shortest}");
+}

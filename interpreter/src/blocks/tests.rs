@@ -506,4 +506,3 @@ proptest::proptest! {
         proptest::prop_assert_eq!(min_cbrt(v, x).to_bits(), v.min(x.cbrt()).to_bits(), "{} {}", v, x);
     }
 }
-
