@@ -14,7 +14,12 @@
 //! source every cycle), and a stop at the end of the last block held: the machine can
 //! always stop on the known path, so a starved interpolator stops on the path instead of
 //! running off its end. The test of each limit is the closed form of
-//! [`shared::profile::Limits::can_reach`]. Up to `MAX_AHEAD` limits are tested one by
+//! [`shared::profile::Limits::can_reach`]. A speed eased off onto a block end's limit
+//! may still be rising when it passes it, so each block end is braked for under the
+//! lower jerk of its two blocks ([`Ahead::easing`]), and a block end no lower than a
+//! nearer one is still kept where the block beyond it has a lower jerk than any kept
+//! (a curve split where its speed limit changes has blocks of different jerks; eased
+//! under the higher one, a weak axis went 1.07 % over its velocity). Up to `MAX_AHEAD` limits are tested one by
 //! one; the further ones are folded into the last of them. The walk that finds them reads
 //! each block's few figures from a packed array beside the ring (not from its 1.5 KB
 //! block), and its searches use square-root-free comparisons

@@ -233,10 +233,18 @@ fn split_at_cusps(c: SplitCurve, machine: &Machine) -> Vec<SplitCurve> {
 pub fn build(moves: &[Move], machine: &Machine) -> Vec<Block> {
     // The lines that program a NURBS (a blend below is one too, on a feed line's number:
     // one motion a line), whose blocks are split where their speed limit changes.
+    // (Not a blend handed in already made, as `blend::corners` gives them: its shape
+    // tells it.)
     let programmed: std::collections::HashSet<u32> = moves
         .iter()
         .filter_map(|m| match m {
-            Move::Nurbs { line, .. } => Some(*line),
+            Move::Nurbs {
+                line,
+                degree,
+                knots,
+                ctrl,
+                ..
+            } if !blend::is_blend_shape(*degree, knots, ctrl) => Some(*line),
             _ => None,
         })
         .collect();

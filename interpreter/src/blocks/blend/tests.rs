@@ -524,3 +524,39 @@ fn the_choice_is_final() {
         }
     }
 }
+
+#[test]
+fn a_blend_is_known_by_its_shape() {
+    // Every blend `corners` makes, and not a programmed curve.
+    let blended = corners(&moves("G64 P0.05\nG1 X10 F3000\nY10\nX0 Z3\nM2\n")).into_owned();
+    let mut n = 0;
+    for m in &blended {
+        if let Move::Nurbs {
+            degree,
+            knots,
+            ctrl,
+            ..
+        } = m
+        {
+            assert!(is_blend_shape(*degree, knots, ctrl));
+            n += 1;
+        }
+    }
+    assert_eq!(n, 2);
+    let program = moves(
+        "G1 F3000\nG5.2 P1 L6\nX1 Y2 P1\nX3 Y-1 P1\nX4 Y4 P1\nX6 Y0 P1\nX8 Y1 P1\nX9 Y3 P1\nG5.3\nM2\n",
+    );
+    let curve = program
+        .iter()
+        .find_map(|m| match m {
+            Move::Nurbs {
+                degree,
+                knots,
+                ctrl,
+                ..
+            } => Some((*degree, knots.clone(), ctrl.clone())),
+            _ => None,
+        })
+        .unwrap();
+    assert!(!is_blend_shape(curve.0, &curve.1, &curve.2));
+}
