@@ -887,8 +887,8 @@ fn samples(b: &CommandBlock) -> Samples {
         // (The tangent's peaks at an end too, searched towards the domain's end: a curve
         // leaving a stop swings fastest there, and its first sample may come after.)
         let last = pts.len().saturating_sub(1);
-        let mut peaks: Vec<usize> = (usize::from(!halves)
-            ..pts.len().saturating_sub(1) + usize::from(halves))
+        let ends = usize::from(halves && !pts.is_empty());
+        let mut peaks: Vec<usize> = (usize::from(!halves)..pts.len().saturating_sub(1) + ends)
             .filter(|&i| {
                 // (Inside a plateau, as along a straight stretch, no peak: its end is.)
                 let flat = |j: usize| (value(j) - value(i)).abs() <= 1e-12;
