@@ -19,8 +19,8 @@
 //! lower jerk of its two blocks ([`Ahead::easing`]), and a block end no lower than a
 //! nearer one is still kept where the block beyond it has a lower jerk than any kept
 //! (a curve split where its speed limit changes has blocks of different jerks; eased
-//! under the higher one, a weak axis went 1.07 % over its velocity). Up to `MAX_AHEAD` limits are tested one by
-//! one; the further ones are folded into the last of them. The walk that finds them reads
+//! under the higher one, a weak axis went 1.07 % over its velocity). Up to `MAX_AHEAD`
+//! limits are tested one by one; the further ones are folded into the last of them. The walk that finds them reads
 //! each block's few figures from a packed array beside the ring (not from its 1.5 KB
 //! block), and its searches use square-root-free comparisons
 //! ([`shared::profile::Limits::change_within`]): on a window of hundreds of tiny
@@ -458,13 +458,31 @@ impl Ahead {
     /// it, and the lower jerk of those and the block beyond. A braking that eases a
     /// rising speed off onto `v` may go on past the point, and there the later block's
     /// jerk holds: eased under the higher jerk before it, the speed entered a block of
-    /// a lower one still rising, and rose over its feed (by 2 % along a weak axis in the
-    /// random search of the planner's `limits.rs`).
+    /// a lower one still rising, and rose over its feed (a weak axis 1.07 % over its
+    /// velocity in the random search of the planner's `limits.rs`).
     fn easing(&self) -> Jerk {
-        Jerk {
-            acc: self.lim.acc,
-            jerk: self.lim.jerk.min(self.next.jerk),
+        eased(self.lim, self.next)
+    }
+}
+
+/// Limits `lim` with the jerk lowered to `beyond`'s where that is lower (see
+/// [`Ahead::easing`]).
+fn eased(lim: Jerk, beyond: Jerk) -> Jerk {
+    Jerk {
+        acc: lim.acc,
+        jerk: lim.jerk.min(beyond.jerk),
+    }
+}
+
+/// Writes `a` into the next free slot of `out`; false when every slot is taken.
+fn keep(out: &mut [Ahead; MAX_AHEAD], n: &mut usize, a: Ahead) -> bool {
+    match out.get_mut(*n) {
+        Some(slot) => {
+            *slot = a;
+            *n += 1;
+            true
         }
+        None => false,
     }
 }
 
@@ -912,7 +930,9 @@ impl Engine {
     /// The speed limits ahead of the current motion `m`, nearest first, that can bind a
     /// machine at speed `v_top` or below: each block end's planned speed (zero where no
     /// motion follows in hand), keeping only those lower than every nearer one, up to the
-    /// distance in which the machine can stop anyway. Returns how many were written.
+    /// distance in which the machine can stop anyway, found from `v_top` and the motion's
+    /// own limits `top` (an acceleration eased off further under a lower jerk ahead).
+    /// Returns how many were written.
     fn limits_ahead(
         &self,
         m: &Motion,
@@ -954,14 +974,10 @@ impl Engine {
                 // nearer one may still be rising here, and rise over this one after it
                 // (its `next`). Kept as it is; it does not take the place of the lowest.
                 kept_next_jerk = next.jerk;
-                let a = Ahead { d, v, lim, next };
-                if n < MAX_AHEAD {
-                    if let Some(slot) = out.get_mut(n) {
-                        *slot = a;
+                if !keep(out, &mut n, Ahead { d, v, lim, next }) {
+                    if let Some(last) = out.get_mut(MAX_AHEAD - 1) {
+                        last.next = min_lim(last.next, next);
                     }
-                    n += 1;
-                } else if let Some(last) = out.get_mut(MAX_AHEAD - 1) {
-                    last.next = min_lim(last.next, next);
                 }
             }
             if v < lowest {
@@ -974,10 +990,7 @@ impl Engine {
                     // (Braked for under the jerk of the block beyond it too: see
                     // [`Ahead::easing`].)
                     (Some((dl, vl)), Some(seg)) => {
-                        let seg = Jerk {
-                            acc: seg.acc,
-                            jerk: seg.jerk.min(next.jerk),
-                        };
+                        let seg = eased(seg, next);
                         let room = d - dl - self.spare(vl, lim, seg);
                         room >= 0.0 && seg.change_within(v, vl, room)
                     }
@@ -988,22 +1001,15 @@ impl Engine {
                 let a = Ahead { d, v, lim, next };
                 if implied {
                     // Kept by keeping the last low.
-                } else if n < MAX_AHEAD {
+                } else if keep(out, &mut n, a) {
                     kept_next_jerk = kept_next_jerk.min(next.jerk);
-                    if let Some(slot) = out.get_mut(n) {
-                        *slot = a;
-                    }
-                    n += 1;
                 } else if let Some(last) = out.get_mut(MAX_AHEAD - 1) {
                     // No room for it: the last kept limit takes it over, lowered to the
                     // highest speed from which this one can still be kept between the two
                     // (found conservatively, with time to spare: see `spare`). Lowering
                     // it to this one's speed would be safe too, but on a long chain of
                     // tiny blocks slowing down to a stop it makes the machine crawl.
-                    let easing = Jerk {
-                        acc: lim.acc,
-                        jerk: lim.jerk.min(next.jerk),
-                    };
+                    let easing = eased(lim, next);
                     let room = d - last.d - self.spare(last.v, lim, easing);
                     let r = reach_within(easing, v, room);
                     last.v = last.v.min(r);
@@ -1024,10 +1030,7 @@ impl Engine {
                 .window
                 .motion(i + 1)
                 .map_or(next, |f| min_lim(next, f.lim));
-            let braking = Jerk {
-                acc: lim.acc,
-                jerk: lim.jerk.min(beyond.jerk),
-            };
+            let braking = eased(lim, beyond);
             if braking != reach_lim {
                 // The same for every block end until the limits fall again.
                 reach_lim = braking;

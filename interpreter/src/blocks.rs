@@ -231,23 +231,6 @@ fn split_at_cusps(c: SplitCurve, machine: &Machine) -> Vec<SplitCurve> {
 /// Turns moves into unplanned blocks (feeds are the caps, speeds not yet set), numbered
 /// in order when they become [`CommandBlock`]s ([`commands`]).
 pub fn build(moves: &[Move], machine: &Machine) -> Vec<Block> {
-    // The lines that program a NURBS (a blend below is one too, on a feed line's number:
-    // one motion a line), whose blocks are split where their speed limit changes.
-    // (Not a blend handed in already made, as `blend::corners` gives them: its shape
-    // tells it.)
-    let programmed: std::collections::HashSet<u32> = moves
-        .iter()
-        .filter_map(|m| match m {
-            Move::Nurbs {
-                line,
-                degree,
-                knots,
-                ctrl,
-                ..
-            } if !blend::is_blend_shape(*degree, knots, ctrl) => Some(*line),
-            _ => None,
-        })
-        .collect();
     // `G64 P`: corners between feed lines blended first (see [`blend`]).
     let blended = blend::corners_on(moves, machine);
     let moves: &[Move] = &blended;
@@ -316,14 +299,14 @@ pub fn build(moves: &[Move], machine: &Machine) -> Vec<Block> {
                 for span in nurbs::split_to_capacity(curve, (*degree + 1).min(MAX_CTRL)) {
                     for piece in split_at_cusps(span, machine) {
                         // And where its speed limit changes: each block's cap is then
-                        // that of its own stretch of the curve. (Not a `G64 P` blend:
-                        // split, its pieces broke the speed by 0.4 % on a random chain
-                        // in `limits.rs`; they are short, and held to their slowest
-                        // point as before.)
-                        let parts = if programmed.contains(line) {
-                            speed::split_by_speed(piece, machine, f)
-                        } else {
+                        // that of its own stretch of the curve. (Not a `G64 P` blend,
+                        // known by its shape: split, its pieces broke the speed by
+                        // 0.4 % on a random chain in `limits.rs`; they are short, and
+                        // held to their slowest point as before.)
+                        let parts = if blend::is_blend_shape(*degree, knots, ctrl) {
                             vec![piece]
+                        } else {
+                            speed::split_by_speed(piece, machine, f)
                         };
                         for part in parts {
                             out.push(curve_block(*line, &part, Helix::NONE, f).into());
@@ -865,8 +848,8 @@ fn samples(b: &CommandBlock) -> Samples {
     };
     // And each axis's share of the tangent, whose peak sets that axis's velocity bound:
     // in a tight bend it swings through its peak between samples as fast as the
-    // curvature does (a bend of a split block's end, at its cap, missed by 2 % broke a
-    // weak axis's velocity in the random search of `limits.rs`).
+    // curvature does (missed in a bend at a split block's end, at its cap, it let a weak
+    // axis's velocity be broken in the random search of `limits.rs`).
     // (Searched on each side of its sample, in case the swing has two humps there: the
     // tangent may pass through an axis and turn back within one sample's reach.)
     let tangent = |i: usize| move |u: f64| frame(b, u).map(|(t, _)| t[i].abs());

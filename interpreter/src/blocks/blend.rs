@@ -185,17 +185,23 @@ pub fn mid_weight(c1: f64, c2: f64) -> f64 {
 /// pays or not (see [`corners_on`]); the moves themselves, not a copy, when the program
 /// never selects `G64 P` with a tolerance.
 pub fn corners(moves: &[Move]) -> Cow<'_, [Move]> {
+    match eligible(moves) {
+        Some(plans) => Cow::Owned(emit(moves, &plans)),
+        None => Cow::Borrowed(moves),
+    }
+}
+
+/// The blend planned at each eligible corner; `None` where there is none (the program
+/// never selects `G64 P` with a tolerance, or no corner qualifies).
+fn eligible(moves: &[Move]) -> Option<Vec<Option<Corner>>> {
     let blends_anywhere = moves.iter().any(|m| {
         matches!(m, Move::PathMode { control: PathControl::Blend { tolerance_mm: Some(t), .. }, .. } if *t > 0.0)
     });
     if !blends_anywhere {
-        return Cow::Borrowed(moves);
+        return None;
     }
     let plans = plan_corners(moves);
-    if plans.iter().all(Option::is_none) {
-        return Cow::Borrowed(moves);
-    }
-    Cow::Owned(emit(moves, &plans))
+    (!plans.iter().all(Option::is_none)).then_some(plans)
 }
 
 /// [`corners`], keeping only the blends that pay on `machine`: each eligible corner, in
@@ -206,16 +212,9 @@ pub fn corners(moves: &[Move]) -> Cow<'_, [Move]> {
 /// that ends at it, and the mode in force back after it), so the moves this returns are
 /// returned unchanged by [`corners`] and by this function.
 pub fn corners_on<'a>(moves: &'a [Move], machine: &Machine) -> Cow<'a, [Move]> {
-    let blends_anywhere = moves.iter().any(|m| {
-        matches!(m, Move::PathMode { control: PathControl::Blend { tolerance_mm: Some(t), .. }, .. } if *t > 0.0)
-    });
-    if !blends_anywhere {
+    let Some(plans) = eligible(moves) else {
         return Cow::Borrowed(moves);
-    }
-    let plans = plan_corners(moves);
-    if plans.iter().all(Option::is_none) {
-        return Cow::Borrowed(moves);
-    }
+    };
     let decided = decide(moves, &plans, machine);
     Cow::Owned(emit_marked(moves, &decided.plans, &decided.exact))
 }
