@@ -19,7 +19,14 @@
 //! lower jerk of its two blocks ([`Ahead::easing`]), and a block end no lower than a
 //! nearer one is still kept where the block beyond it has a lower jerk than any kept
 //! (a curve split where its speed limit changes has blocks of different jerks; eased
-//! under the higher one, a weak axis went 1.07 % over its velocity). Up to `MAX_AHEAD`
+//! under the higher one, a weak axis went 1.07 % over its velocity). A block is never
+//! entered with more acceleration than it allows: the acceleration the profile rises to
+//! is held under each block ahead's limit plus what the lower jerk can shed before it is
+//! reached ([`Engine::acc_ceiling`]). The walk reaches as far as the lowest limits of
+//! every block in hand could need to stop, and a limit beyond a low is left to that low
+//! only where the easing of what the low may be passed with still keeps it
+//! ([`Engine::spare`]); blocks of one curve whose limits differ sixfold once broke each
+//! of these. Up to `MAX_AHEAD`
 //! limits are tested one by one; the further ones are folded into the last of them. The walk that finds them reads
 //! each block's few figures from a packed array beside the ring (not from its 1.5 KB
 //! block), and its searches use square-root-free comparisons
@@ -347,6 +354,8 @@ struct Window {
     figs: Vec<BlockFigs>,
     head: usize,
     len: usize,
+    /// The lowest acceleration and jerk of the motions held (infinite when none).
+    lowest: Jerk,
 }
 
 /// What the profile step needs of a block in the window.
@@ -379,6 +388,7 @@ impl Window {
             figs: vec![BlockFigs::of(&empty); capacity.max(1)],
             head: 0,
             len: 0,
+            lowest: NO_LIMIT,
         }
     }
 
@@ -428,6 +438,9 @@ impl Window {
         let k = self.slot(self.len);
         if let (Some(slot), Some(fig)) = (self.buf.get_mut(k), self.figs.get_mut(k)) {
             *fig = BlockFigs::of(&b);
+            if fig.motion {
+                self.lowest = min_lim(self.lowest, fig.lim);
+            }
             *slot = b;
             self.len += 1;
         }
@@ -437,9 +450,22 @@ impl Window {
         let b = self.get(0).copied()?;
         self.head = self.slot(1);
         self.len -= 1;
+        // Once per block, not per cycle: a walk over the figures held.
+        self.lowest = NO_LIMIT;
+        for i in 0..self.len {
+            if let Some(f) = self.motion(i) {
+                self.lowest = min_lim(self.lowest, f.lim);
+            }
+        }
         Some(b)
     }
 }
+
+/// No limit: the lowest of no blocks.
+const NO_LIMIT: Jerk = Jerk {
+    acc: f64::INFINITY,
+    jerk: f64::INFINITY,
+};
 
 /// A speed limit ahead: at most `v` mm/s, `d` mm further on, reached under `lim`.
 #[derive(Debug, Clone, Copy)]
@@ -483,6 +509,53 @@ fn keep(out: &mut [Ahead; MAX_AHEAD], n: &mut usize, a: Ahead) -> bool {
             true
         }
         None => false,
+    }
+}
+
+/// A low passed on the way to a limit further on (see [`Engine::spare`]).
+#[derive(Debug, Clone, Copy)]
+struct Low {
+    /// Where it is (mm ahead) and its speed.
+    d: f64,
+    v: f64,
+    /// The highest acceleration the machine may carry there.
+    acc: f64,
+    /// The jerk of the block beyond it: the one that eases off what it carries.
+    jerk: f64,
+}
+
+impl Low {
+    /// The highest acceleration it may be passed with.
+    fn passing_acc(&self) -> f64 {
+        self.acc.min((2.0 * self.jerk * self.v.max(0.0)).sqrt())
+    }
+
+    /// The highest speed the easing of that acceleration reaches under the jerk `j`
+    /// (no higher than the jerk beyond the low): passed at `v` with `a`,
+    /// `v + a²/2·jerk ≤ low.v`, the speed rises to `v + a²/2j`, highest where `a` is.
+    fn peak(&self, j: f64) -> f64 {
+        let a = self.passing_acc();
+        let rise = a * a / (2.0 * self.jerk);
+        (self.v - rise).max(0.0) + a * a / (2.0 * j)
+    }
+
+    /// The highest speed to pass the low with so that the easing under `j` stays
+    /// within `r` (the inverse of [`Low::peak`]; `low.v` if that is already so).
+    fn passed_below(&self, r: f64, j: f64) -> f64 {
+        if self.peak(j) <= r {
+            return self.v;
+        }
+        let a2 = self.acc * self.acc;
+        // Passed at its full acceleration: `v - a²/2jerk + a²/2j = r`; where that is
+        // slower than the acceleration allows (`a² = 2·jerk·v`): `v·jerk/j = r`.
+        let full = r + a2 / (2.0 * self.jerk) - a2 / (2.0 * j);
+        let root = r * j / self.jerk;
+        let v = if 2.0 * self.jerk * root <= a2 {
+            root
+        } else {
+            full
+        };
+        v.clamp(0.0, self.v)
     }
 }
 
@@ -955,14 +1028,29 @@ impl Engine {
         // out (when there is room to spare: see `spare`). Without this, its braking would be judged under the lowest limits of the
         // whole way, including blocks before the last low where the machine may brake
         // harder, and could look lost long before it is.
-        let mut last_low: Option<(f64, f64)> = None;
+        let mut last_low: Option<Low> = None;
         let mut since_low: Option<Jerk> = None;
-        // The stopping distance under `reach_lim` (none yet).
-        let mut reach_lim = Jerk {
-            acc: f64::NAN,
-            jerk: f64::NAN,
+        // The highest acceleration the machine may carry up to the point reached: its
+        // own, and each block's limit on the way (a block of a lower limit is entered
+        // with the acceleration of the one before and comes down to its own inside it).
+        let mut acc_hi = self.acc.abs().max(lim.acc);
+        // The highest jerk of the blocks on the way.
+        let mut jerk_hi = lim.jerk;
+        // Beyond the stopping distance nothing can bind: from `v_top` to rest, after
+        // this cycle and after the time it takes to bring a positive acceleration back to
+        // zero, under the lowest limits of the motion and every block in hand. (Under
+        // the limits met so far, a block of far lower ones further on was looked at too
+        // late: its end speed first showed where it could no longer be braked for, and a
+        // curve's junction was passed at six times its speed.)
+        let reach_d = {
+            let braking = min_lim(min_lim(lim, top), self.window.lowest);
+            // (A rising speed eased off under a lower jerk than the motion's own rises
+            // further: by `a²/2j`.)
+            let a_top = self.acc.max(top.acc);
+            let v_peak = v_top + a_top * a_top / (2.0 * braking.jerk);
+            let easing = self.acc.max(0.0) / braking.jerk;
+            braking.change_distance(v_peak, 0.0) + v_peak * (self.t_s + easing)
         };
-        let mut reach_d = 0.0;
         // The lowest jerk of the blocks beyond the limits kept so far.
         let mut kept_next_jerk = f64::INFINITY;
         let mut i = 0usize;
@@ -989,14 +1077,20 @@ impl Engine {
                     // (The spare first: on tiny blocks it alone exceeds the room.)
                     // (Braked for under the jerk of the block beyond it too: see
                     // [`Ahead::easing`].)
-                    (Some((dl, vl)), Some(seg)) => {
+                    (Some(low), Some(seg)) => {
                         let seg = eased(seg, next);
-                        let room = d - dl - self.spare(vl, lim, seg);
-                        room >= 0.0 && seg.change_within(v, vl, room)
+                        let (peak, spare) = self.spare(low, seg, jerk_hi);
+                        let room = d - low.d - spare;
+                        room >= 0.0 && seg.change_within(v, peak, room)
                     }
                     _ => false,
                 };
-                last_low = Some((d, v));
+                last_low = Some(Low {
+                    d,
+                    v,
+                    acc: acc_hi,
+                    jerk: next.jerk,
+                });
                 since_low = None;
                 let a = Ahead { d, v, lim, next };
                 if implied {
@@ -1010,36 +1104,26 @@ impl Engine {
                     // it to this one's speed would be safe too, but on a long chain of
                     // tiny blocks slowing down to a stop it makes the machine crawl.
                     let easing = eased(lim, next);
-                    let room = d - last.d - self.spare(last.v, lim, easing);
+                    let low = Low {
+                        d: last.d,
+                        v: last.v,
+                        acc: acc_hi,
+                        jerk: last.next.jerk,
+                    };
+                    let (_, spare) = self.spare(low, easing, jerk_hi);
+                    let room = d - last.d - spare;
                     let r = reach_within(easing, v, room);
-                    last.v = last.v.min(r);
+                    let j_s = easing.jerk.min(low.jerk);
+                    let r = r - self.growth(low, j_s, jerk_hi);
+                    last.v = last.v.min(low.passed_below(r, j_s));
                     last.lim = min_lim(last.lim, lim);
                     last.next = min_lim(last.next, next);
                     kept_next_jerk = kept_next_jerk.min(next.jerk);
                 }
             }
             // Beyond the stopping distance nothing can bind, and nothing is below zero.
-            // (From `v_top` to rest, after this cycle and after the time it takes to
-            // bring a positive acceleration back to zero.)
             if v <= 0.0 {
                 break;
-            }
-            // The next limit, at the end of the next block, is braked for under the jerk
-            // of the block after it too (see [`Ahead::easing`]).
-            let beyond = self
-                .window
-                .motion(i + 1)
-                .map_or(next, |f| min_lim(next, f.lim));
-            let braking = eased(lim, beyond);
-            if braking != reach_lim {
-                // The same for every block end until the limits fall again.
-                reach_lim = braking;
-                // (A rising speed eased off under a lower jerk than the motion's own
-                // rises further: by `a²/2j`.)
-                let a_top = self.acc.max(top.acc);
-                let v_peak = v_top + a_top * a_top / (2.0 * braking.jerk.min(top.jerk));
-                let easing = self.acc.max(0.0) / braking.jerk;
-                reach_d = braking.change_distance(v_peak, 0.0) + v_peak * (self.t_s + easing);
             }
             if d > reach_d {
                 break;
@@ -1048,6 +1132,8 @@ impl Engine {
                 break;
             };
             lim = min_lim(lim, b.lim);
+            acc_hi = acc_hi.max(b.lim.acc);
+            jerk_hi = jerk_hi.max(b.lim.jerk);
             since_low = Some(since_low.map_or(b.lim, |l| min_lim(l, b.lim)));
             d += b.length_mm;
             v = match self.window.motion(i + 1) {
@@ -1059,16 +1145,69 @@ impl Engine {
         n
     }
 
-    /// Distance to allow for past a kept limit of speed `v` before braking for a limit
-    /// beyond it can begin. A limit is kept by being passed no faster than `v`, perhaps
-    /// still accelerating: easing off a positive acceleration `a` (at most the lower of
-    /// `acc` and `√(2·jerk·v)`, since `v`'s own limit was kept) takes `a/jerk` seconds at
-    /// speeds up to `v`; and the braking may only begin in the cycle after the one that
-    /// crosses it (two periods).
-    fn spare(&self, v: f64, a: Jerk, b: Jerk) -> f64 {
-        let jerk = a.jerk.min(b.jerk);
-        let acc = a.acc.max(b.acc).min((2.0 * jerk * v).sqrt());
-        v * (2.0 * self.t_s + acc / jerk)
+    /// The highest speed, and the distance to allow for, past a low `low` before the
+    /// braking for a limit beyond it can begin, the blocks between having the limits
+    /// `seg` (their lowest) and jerks up to `jerk_hi`.
+    ///
+    /// The low is passed no faster than `low.v`, with an acceleration `a` that the
+    /// block beyond it eases off within it (`v + a²/2j ≤ low.v`, `j` that block's jerk)
+    /// and no higher than the machine may carry there (`low.acc`). Under the lower jerk
+    /// of the blocks after it the same easing rises further, by `a²/2·seg.jerk` (a
+    /// lower limit beyond a short fast stretch, judged from `low.v` alone, was reached
+    /// with 1.1 times the speed its braking was planned from, and lost). The braking may
+    /// only begin in the cycle after the one that crosses the low (two periods, in which
+    /// the acceleration still grows by the jerk), and easing the acceleration off takes
+    /// `a/seg.jerk` seconds at up to that speed.
+    fn spare(&self, low: Low, seg: Jerk, jerk_hi: f64) -> (f64, f64) {
+        let j_s = seg.jerk.min(low.jerk);
+        let growth = self.growth(low, j_s, jerk_hi);
+        let peak = low.peak(j_s) + growth;
+        let a2 = low.passing_acc() + 2.0 * self.t_s * jerk_hi;
+        (peak, peak * (2.0 * self.t_s + a2 / j_s))
+    }
+
+    /// What the two periods before a braking can begin add to the speed that easing
+    /// reaches past `low` (see [`Engine::spare`]): their rise, and the easing of the
+    /// acceleration grown in them.
+    fn growth(&self, low: Low, j_s: f64, jerk_hi: f64) -> f64 {
+        let t2 = 2.0 * self.t_s;
+        let a = low.passing_acc();
+        let a2 = a + t2 * jerk_hi;
+        t2 * a2 + (a2 * a2 - a * a) / (2.0 * j_s)
+    }
+
+    /// The highest acceleration the motion `m` may rise to now: its block's own limit,
+    /// and each block ahead's, raised by what the lower jerk of the two can shed before
+    /// the machine (at up to `v_top` plus the rise of that acceleration) gets there. A
+    /// block is then entered with no more acceleration than it allows: entered with
+    /// more, it came down to its own only inside it, and along a curve whose limits
+    /// leave the tangent little of an axis's share that broke the axis's (X's jerk at
+    /// 4.3 times its limit in the planner's random search).
+    fn acc_ceiling(&self, m: &Motion, own: Jerk, v_top: f64) -> f64 {
+        let mut ceiling = own.acc;
+        let v_max = v_top + own.acc * own.acc / (2.0 * own.jerk) + 1e-9;
+        let mut d = if m.u >= m.u_end {
+            0.0
+        } else {
+            (m.block.length_mm - m.s_mm).max(0.0)
+        };
+        // Two periods' travel first: the step that crosses into a block, and the one
+        // before it that could not yet see it.
+        let lead = 2.0 * self.t_s * v_max;
+        // Where even the lowest jerk in hand sheds all of it, nothing further binds.
+        let j_lo = own.jerk.min(self.window.lowest.jerk);
+        let mut i = 0;
+        while let Some(b) = self.window.motion(i) {
+            let tau = (d - lead).max(0.0) / v_max;
+            if j_lo * tau >= ceiling {
+                break;
+            }
+            let shed = own.jerk.min(b.lim.jerk) * tau;
+            ceiling = ceiling.min(b.lim.acc + shed);
+            d += b.length_mm;
+            i += 1;
+        }
+        ceiling
     }
 
     /// The cycle's profile step in motion `m`: the new speed and acceleration and the
@@ -1140,18 +1279,20 @@ impl Engine {
             }
             (0.0, own)
         };
+        let ceiling = self.acc_ceiling(m, own, v_top);
         let preferred: profile::Phases = if self.stopping {
             own.brake(x0, 0.0)
-        } else if x0.a <= own.acc {
+        } else if x0.a <= ceiling {
             [
-                (own.jerk, (own.acc - x0.a) / own.jerk),
+                (own.jerk, (ceiling - x0.a) / own.jerk),
                 (0.0, f64::INFINITY),
                 (0.0, 0.0),
             ]
         } else {
-            // A block with a lower acceleration limit than the last: come down to it.
+            // A block with a lower acceleration limit than the last, or one ahead: come
+            // down to it.
             [
-                (-own.jerk, (x0.a - own.acc) / own.jerk),
+                (-own.jerk, (x0.a - ceiling) / own.jerk),
                 (0.0, f64::INFINITY),
                 (0.0, 0.0),
             ]

@@ -830,6 +830,59 @@ fn a_weak_axis_keeps_its_limits_where_a_curve_s_blocks_differ_in_jerk() {
     }
 }
 
+/// Three random curves (`search_random_programs_for_broken_limits`, seed 7) that broke
+/// limits once the curvature took up to 0.9 of each acceleration where a curve's speed
+/// reaches its cap: neighbouring blocks of one curve then differ up to sixfold in their
+/// tangential limits.
+/// * A stop after a stretch of short blocks of high limits: the engine judged from the
+///   last low before it that the stop needed no braking yet, as if that low were passed
+///   without acceleration; passed with what a short fast stretch allows, the easing under
+///   the last block's lower jerk overshot, and the stop was reached at 48 mm/s (23 times
+///   the acceleration, 887 times the jerk).
+/// * A junction 13 mm ahead, its end speed 8.7 mm/s, first looked at 13 mm too late
+///   (the look-ahead stopped where the limits met so far could stop the machine, short of
+///   a block of a quarter of them): passed at 55 mm/s, X's jerk 4.3 times its limit.
+/// * A block whose limits the planner floored at a twentieth of the path's, above what
+///   the curvature left a weak X (its jerk 1.1 times its limit).
+#[test]
+fn limits_hold_where_a_curve_s_blocks_differ_sixfold_in_their_limits() {
+    let cases = [
+        (
+            "G21 G17\nG0 X0.0000 Y0.0000\nG1 F6000\nG5.2 P1.0000 L3\n\
+             X1.2648 Y16.0080 P1.5808\nX19.1513 Y12.2203 P0.6420\nX24.3035 Y2.9973 P1.1184\n\
+             X25.1733 Y1.0748 P1.3833\nX25.5934 Y-0.0372 P1.4407\nX29.3306 Y-14.2966 P0.6662\n\
+             G5.3\nM2\n",
+            Machine::default(),
+        ),
+        (
+            "G21 G17\nG0 X0.0000 Y0.0000\nG1 F6000\nG5.2 P1.0000 L3\n\
+             X4.3221 Y7.7960 P1.9401\nX-2.3209 Y11.2951 P1.0995\nX-6.1638 Y32.3290 P0.9557\n\
+             X-8.7333 Y34.8158 P1.9468\nX-6.5943 Y42.3126 P1.0039\nX1.2254 Y46.3252 P0.5697\n\
+             X4.4461 Y36.3942 P0.9370\nX12.1109 Y39.6858 P1.3958\nX10.8628 Y44.0552 P1.4811\n\
+             X7.8248 Y53.9588 P1.3452\nG5.3\nM2\n",
+            weak_x_machine(),
+        ),
+        (
+            "G21 G17\nG0 X0.0000 Y0.0000\nG1 F6000\nG5.2 P1.0000 L4\n\
+             X-1.7455 Y6.1185 P0.6751\nX-13.9942 Y-0.2130 P1.1670\nX-14.8304 Y3.6365 P1.0990\n\
+             X-6.1296 Y13.4017 P1.3605\nX-3.7078 Y13.6912 P1.7303\nX3.9187 Y16.9843 P1.6360\n\
+             X-1.9377 Y29.3989 P1.5893\nX-8.4692 Y42.4787 P1.9585\nX-11.1373 Y50.3429 P0.6825\n\
+             X-30.2866 Y50.9966 P0.6358\nG5.3\nM2\n",
+            weak_x_machine(),
+        ),
+    ];
+    for (text, machine) in cases {
+        let (blocks, cycles) = step(text, &machine);
+        let w = check(&blocks, &cycles, &machine);
+        // As the search judges a case.
+        assert!(w.axis <= 1.0 + 1e-2, "{w:?}\n{text}");
+        assert!(
+            w.acc <= 1.0 + 1e-3 && w.jerk <= 1.0 + 1e-2 && w.speed <= 1.0 + 1e-6,
+            "{w:?}\n{text}"
+        );
+    }
+}
+
 /// A degree-5 curve whose control polygon nearly turns back (a near-cusp holds its last
 /// span to 0.57 mm/s): its stop at the end once reached 1.19 times the jerk limit. The
 /// span's length was measured 4.7e-5 mm long (the speed `|C'|` dips nearly to zero in

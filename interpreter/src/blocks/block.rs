@@ -224,6 +224,13 @@ macro_rules! planned_fields {
             self.start_feed_mm_per_min = start_mm_per_min;
             self.end_feed_mm_per_min = end_mm_per_min;
         }
+        fn planned_mm_s(&self) -> (f64, f64, f64) {
+            (
+                self.start_feed_mm_per_min / 60.0,
+                self.end_feed_mm_per_min / 60.0,
+                self.feed_mm_per_min / 60.0,
+            )
+        }
     };
 }
 
@@ -314,6 +321,9 @@ impl Plannable for Block {
     }
     fn set_feeds(&mut self, start_mm_per_min: f64, end_mm_per_min: f64) {
         either!(self, b => b.set_feeds(start_mm_per_min, end_mm_per_min))
+    }
+    fn planned_mm_s(&self) -> (f64, f64, f64) {
+        either!(self, b => b.planned_mm_s())
     }
     fn split_straight(&self, t: f64) -> Option<(Self, Self)> {
         match self {

@@ -251,7 +251,7 @@ proptest::proptest! {
             machine.axes.z.max_jerk_mm_per_s3 = 3.0e6;
         }
         let lim = StraightLimits::new(&machine).expect("usable limits");
-        let general = shape(Geometry::Straight(d), &machine, 1e-3, feed);
+        let general = shape(Geometry::Straight(d), &machine, 1e-3, feed, NORMAL_SHARE);
         if let Some(fast) = shape_straight(d, &lim, feed) {
             proptest::prop_assert_eq!(shape_bits(&fast), shape_bits(&general), "{:?} {}", d, feed);
         }
