@@ -1190,6 +1190,14 @@ impl Engine {
                     lim.brake(x, cap)
                 }
             };
+        // A cheap proof that limit `c` (one ahead, not the feed cap) is kept from `x`:
+        // true only where `room(c, x)` is not negative (see
+        // [`shared::profile::Limits::brake_within`]); false where it cannot tell.
+        let kept = |c: usize, x: profile::Motion| match c.checked_sub(1).and_then(|i| ahead.get(i))
+        {
+            Some(l) => l.easing().brake_within(x, l.v, l.d - x.s),
+            None => false,
+        };
         let eps = 1e-12;
         let tol = t * SWITCH_RESOLUTION;
         // The feed cap over a piece of the cycle's motion that ends at `end`: each block's
@@ -1245,7 +1253,9 @@ impl Engine {
                 crossed.set(memo);
                 tau
             };
-            let mut first: Option<(usize, f64, f64)> = None;
+            // The limit found first so far: its index, the moment its braking begins,
+            // where that braking is at the end of the cycle, and the braking itself.
+            let mut first: Option<(usize, f64, f64, profile::Motion, profile::Phases)> = None;
             for c in 0..=n {
                 if braking_for == Some(c) {
                     // Followed already, as hard as it goes: it is kept along this braking
@@ -1265,28 +1275,54 @@ impl Engine {
                         let peak = x.v + x.a.max(0.0).powi(2) / (2.0 * l.next.jerk);
                         (lo, l.v - peak)
                     });
-                let (t_end, room_end) = match passed {
-                    Some((tp, r)) => (tp, r),
-                    None if c == 0 => cap_left(&at, &cross, t0, end),
-                    None => (t, room(c, end)),
+                // The room at the end of the piece, where it is the room function itself
+                // (kept for the search below, which would evaluate it again).
+                let (t_end, room_end, f_end) = match passed {
+                    Some((tp, r)) => (tp, r, None),
+                    None if c == 0 => {
+                        let (tc, r) = cap_left(&at, &cross, t0, end);
+                        (tc, r, Some(r + eps))
+                    }
+                    // Most limits are far from binding: a cheap test proves it first.
+                    None if kept(c, end) => continue,
+                    None => {
+                        let r = room(c, end);
+                        (t, r, Some(r + eps))
+                    }
                 };
                 if room_end >= -eps {
                     continue;
                 }
-                let tau = if room(c, at(t0)) < -eps {
+                let x0 = at(t0);
+                let k0 = kept(c, x0);
+                let r0 = if k0 { 0.0 } else { room(c, x0) };
+                let tau = if r0 < -eps {
                     t0
                 } else {
                     // A limit still kept at the earliest moment found so far for another
                     // cannot be the first lost: no need to find its own moment.
-                    let hi = match first {
-                        Some((_, tb, _)) if tb < t_end => tb,
-                        _ => t_end,
+                    let (hi, f_hi) = match first {
+                        Some((_, tb, ..)) if tb < t_end => {
+                            let xb = at(tb);
+                            if kept(c, xb) {
+                                continue;
+                            }
+                            let r = room(c, xb);
+                            if r >= -eps {
+                                continue;
+                            }
+                            (tb, Some(r + eps))
+                        }
+                        _ => (t_end, f_end),
                     };
-                    if hi < t_end && room(c, at(hi)) >= -eps {
-                        continue;
-                    }
-                    latest_ok(t0, hi, tol, |tau| room(c, at(tau)) + eps)
+                    // (Where the room at `t0` was proven by the cheap test, the search
+                    // finds its value itself.)
+                    let f_lo = (!k0).then_some(r0 + eps);
+                    latest_ok_from(t0, hi, tol, f_lo, f_hi, |tau| room(c, at(tau)) + eps)
                 };
+                let x = at(tau);
+                let ph = brake_for(c, x);
+                let s_end = profile::follow(x, &ph, t - tau).s;
                 // Braking for another limit already, and this one lost where (or just
                 // after) that braking began: the two cannot both be kept from here, and
                 // braking for this one helps only if it brakes harder. Otherwise it is
@@ -1297,31 +1333,24 @@ impl Engine {
                 // lost at one moment took turns until the rounds ran out: the softer
                 // braking, for a junction speed, could be left in force and lose an
                 // exact stop 0.6 mm further on, reached at 2.5 mm/s.)
-                if braking_for.is_some() && tau <= t0 + tol {
-                    let x = at(tau);
-                    let s_c = profile::follow(x, &brake_for(c, x), t - tau).s;
-                    if s_c >= at(t).s {
-                        continue;
-                    }
+                if braking_for.is_some() && tau <= t0 + tol && s_end >= end.s {
+                    continue;
                 }
                 // Ties (limits already lost together) go to the harder braking.
-                let x = at(tau);
-                let s_end = profile::follow(x, &brake_for(c, x), t - tau).s;
                 let better = match first {
                     None => true,
-                    Some((_, tb, sb)) => tau < tb || (tau == tb && s_end < sb),
+                    Some((_, tb, sb, ..)) => tau < tb || (tau == tb && s_end < sb),
                 };
                 if better {
-                    first = Some((c, tau, s_end));
+                    first = Some((c, tau, s_end, x, ph));
                 }
             }
-            let Some((c, tau, _)) = first else {
+            let Some((c, tau, _, x, ph)) = first else {
                 break;
             };
-            let x = at(tau);
             t0 = tau;
             x_start = x;
-            phases = brake_for(c, x);
+            phases = ph;
             braking_for = Some(c);
         }
         let x1 = profile::follow(x_start, &phases, t - t0);
@@ -1603,12 +1632,25 @@ impl Engine {
 /// follow. Whatever the path, the moment returned is one where `f >= 0` was seen (or
 /// `lo`), as with plain bisection, so a limit found kept there is kept.
 fn latest_ok(lo: f64, hi: f64, tol: f64, f: impl Fn(f64) -> f64) -> f64 {
+    latest_ok_from(lo, hi, tol, None, None, f)
+}
+
+/// [`latest_ok`] given the margin at either end where the caller has it already
+/// (`f(lo)`, `f(hi)`; `None`: evaluated here).
+fn latest_ok_from(
+    lo: f64,
+    hi: f64,
+    tol: f64,
+    f_lo: Option<f64>,
+    f_hi: Option<f64>,
+    f: impl Fn(f64) -> f64,
+) -> f64 {
     let (mut a, mut b) = (lo, hi);
-    let mut fa = f(a);
+    let mut fa = f_lo.unwrap_or_else(|| f(a));
     if fa.is_nan() || fa < 0.0 {
         return lo;
     }
-    let mut fb = f(b);
+    let mut fb = f_hi.unwrap_or_else(|| f(b));
     // Which end moved last: +1 the ok end, -1 the other (Illinois halves the stale one).
     let mut moved = 0i8;
     for step in 0..SWITCH_STEPS + SWITCH_HALVINGS {
