@@ -1269,7 +1269,7 @@ impl Engine {
                 if let Some(&(_, tau)) = memo.iter().find(|m| m.0 == d) {
                     return tau;
                 }
-                let tau = crossing(t0, t, tol, d, &at);
+                let tau = crossing(t0, t, tol, d, at);
                 memo.rotate_right(1);
                 if let Some(first) = memo.first_mut() {
                     *first = (d, tau);
@@ -1727,7 +1727,8 @@ fn crossing(lo: f64, hi: f64, tol: f64, d: f64, at: impl Fn(f64) -> profile::Mot
         let newton = tau + f / v;
         // A step to just past an end (rounding, or the curvature of `s` on the last
         // step) says the moment is next to that end.
-        let c = if step >= SWITCH_STEPS || !(newton > 2.0 * a - b && newton < 2.0 * b - a) {
+        let near = newton > 2.0 * a - b && newton < 2.0 * b - a;
+        let c = if step >= SWITCH_STEPS || !near {
             0.5 * (a + b)
         } else if newton - a < 0.25 * tol {
             // Close the bracket from the far side too: a landing this near one end
@@ -1738,7 +1739,8 @@ fn crossing(lo: f64, hi: f64, tol: f64, d: f64, at: impl Fn(f64) -> profile::Mot
         } else {
             newton
         };
-        if !(c > a && c < b) {
+        let inside = c > a && c < b;
+        if !inside {
             break;
         }
         let x = at(c);

@@ -261,7 +261,7 @@ impl Limits {
     pub fn brake_within(&self, m: Motion, v_end: f64, d: f64) -> bool {
         let (j, acc) = (self.jerk, self.acc);
         let (v, a) = (m.v, m.a);
-        if !(a.abs() <= acc) {
+        if a.is_nan() || a.abs() > acc {
             return false;
         }
         let tau = a.abs() / j;
@@ -277,7 +277,8 @@ impl Limits {
             self.change_within(peak, v_end, d - up - margin)
         } else {
             // `a²/2 < J·(v − v_end)`: the braking goes on (it does not ease off at once).
-            if !(0.5 * a * a < j * (v - v_end)) {
+            let room = j * (v - v_end);
+            if room.is_nan() || 0.5 * a * a >= room {
                 return false;
             }
             let v0 = v - half;
