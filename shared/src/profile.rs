@@ -240,6 +240,54 @@ impl Limits {
     }
 }
 
+impl Limits {
+    /// A cheap, conservative `brake_distance(m, v_end) <= d`: true only where the
+    /// quickest braking from `m` to `v_end` provably fits in `d` mm with a margin of
+    /// `1e-9·(1 + |d|)` mm (far above the rounding of either computation); false where
+    /// it does not fit, and wherever this test cannot tell (then ask
+    /// [`brake_distance`](Self::brake_distance)). No square root, one division.
+    ///
+    /// Where the acceleration `a` lies between `-acc` and `+acc` and a braking is needed
+    /// at all, that braking (see [`brake`](Self::brake)) passes through zero
+    /// acceleration at the speed `v₀ = v + a·|a|/2J` (the peak for `a >= 0`, where a
+    /// braking from zero acceleration began for `a < 0`), and from there on it is the
+    /// quickest change from `v₀` to `v_end`, point-symmetric in time: its distance is
+    /// the one [`change_within`](Self::change_within) tests. Before that point it covers
+    /// `v·τ + a·τ²/2 − J·τ³/6` (`τ = a/J`, the ramp of `a` down to zero) for `a >= 0`;
+    /// for `a < 0` that part lies behind, and its distance `v₀·τ − J·τ³/6` (`τ = −a/J`)
+    /// is taken off. A state braking harder than this braking needs (it eases off at
+    /// once and passes below `v_end`) or than `acc` is left to `brake_distance`.
+    #[inline]
+    pub fn brake_within(&self, m: Motion, v_end: f64, d: f64) -> bool {
+        let (j, acc) = (self.jerk, self.acc);
+        let (v, a) = (m.v, m.a);
+        if a.is_nan() || a.abs() > acc {
+            return false;
+        }
+        let tau = a.abs() / j;
+        let half = 0.5 * a * tau;
+        let margin = 1e-9 * (1.0 + d.abs());
+        if a >= 0.0 {
+            let peak = v + half;
+            if peak <= v_end {
+                // Only the acceleration is eased off: `brake_distance` covers that ramp.
+                return false;
+            }
+            let up = tau * (v + half - j * tau * tau / 6.0);
+            self.change_within(peak, v_end, d - up - margin)
+        } else {
+            // `a²/2 < J·(v − v_end)`: the braking goes on (it does not ease off at once).
+            let room = j * (v - v_end);
+            if room.is_nan() || 0.5 * a * a >= room {
+                return false;
+            }
+            let v0 = v - half;
+            let behind = tau * (v0 - j * tau * tau / 6.0);
+            self.change_within(v0, v_end, d + behind - margin)
+        }
+    }
+}
+
 /// One cycle of the profile: the acceleration moves linearly from `a` to `a1` over the
 /// period `t`. Returns the speed at its end and the distance covered.
 #[inline]
@@ -438,6 +486,44 @@ mod tests {
                 followed.s
             );
         }
+    }
+
+    #[test]
+    fn brake_within_never_says_yes_where_the_braking_does_not_fit() {
+        // Against `brake_distance` (the phases of `brake` followed: a second computation):
+        // over states accelerating and braking, below and above the target, under two
+        // sets of limits, `brake_within` is never true for a distance shorter than the
+        // braking's, and it is true for every distance 1e-6 (relative) longer where the
+        // acceleration is within `±acc` and the braking does not ease off at once.
+        let mut yes = 0;
+        for lim in [
+            LIM,
+            Limits {
+                acc: 118.1,
+                jerk: 13_362.0,
+            },
+        ] {
+            for v in [0.0, 0.3, 5.0, 26.2, 80.0, 400.0] {
+                for af in [-1.5, -1.0, -0.6, -0.2, 0.0, 0.1, 0.5, 1.0, 1.3] {
+                    let a = af * lim.acc;
+                    for v_end in [0.0, 1.0, 4.9, 25.0, 79.0] {
+                        let m = Motion { v, a, s: 0.0 };
+                        let bd = lim.brake_distance(m, v_end);
+                        for f in [0.0, 0.5, 1.0 - 1e-12, 1.0, 1.0 + 1e-12] {
+                            let d = bd * f;
+                            assert!(!lim.brake_within(m, v_end, d), "{v} {a} {v_end} {d}");
+                        }
+                        let fits = lim.brake_within(m, v_end, bd * (1.0 + 1e-6) + 1e-6);
+                        let regular = a.abs() <= lim.acc
+                            && v + a * a.abs() / (2.0 * lim.jerk) > v_end
+                            && (a >= 0.0 || 0.5 * a * a < lim.jerk * (v - v_end));
+                        assert_eq!(fits, regular, "{v} {a} {v_end}: {bd}");
+                        yes += fits as usize;
+                    }
+                }
+            }
+        }
+        assert!(yes > 200, "{yes}");
     }
 
     #[test]

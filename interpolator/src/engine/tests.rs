@@ -916,3 +916,107 @@ fn sub_blocks_with_varying_caps_and_limits_keep_every_feed_and_stop() {
         t.pos_mm
     );
 }
+
+#[test]
+fn crossing_finds_the_moment_a_point_is_passed_in_a_few_evaluations() {
+    // Against a second algorithm: 200 halvings of the distance's own closed form. For
+    // motions accelerating, braking and at constant speed, through phase changes, the
+    // moment returned has the point not yet passed and lies within the tolerance below
+    // the true one, in at most 8 evaluations of the motion (regula falsi took about 12).
+    let t = 1e-4;
+    let tol = t * SWITCH_RESOLUTION;
+    let lim = Jerk {
+        acc: 2000.0,
+        jerk: 50_000.0,
+    };
+    let cases: [(profile::Motion, profile::Phases); 4] = [
+        (
+            profile::Motion {
+                v: 10.0,
+                a: 500.0,
+                s: 0.0,
+            },
+            [(50_000.0, 3e-5), (0.0, f64::INFINITY), (0.0, 0.0)],
+        ),
+        (
+            profile::Motion {
+                v: 26.2,
+                a: -300.0,
+                s: 0.4,
+            },
+            lim.brake(
+                profile::Motion {
+                    v: 26.2,
+                    a: -300.0,
+                    s: 0.4,
+                },
+                3.0,
+            ),
+        ),
+        (
+            profile::Motion {
+                v: 5.0,
+                a: 0.0,
+                s: 0.0,
+            },
+            [(0.0, 0.0); 3],
+        ),
+        (
+            profile::Motion {
+                v: 0.3,
+                a: 1999.0,
+                s: 1.0,
+            },
+            [(-50_000.0, 1999.0 / 50_000.0), (0.0, 0.0), (0.0, 0.0)],
+        ),
+    ];
+    for (k, (x0, ph)) in cases.iter().enumerate() {
+        let end = profile::follow(*x0, ph, t).s;
+        for f in [0.01, 0.3, 0.5, 0.77, 0.999] {
+            let d = x0.s + f * (end - x0.s);
+            let evals = core::cell::Cell::new(0);
+            let at = |tau: f64| {
+                evals.set(evals.get() + 1);
+                profile::follow(*x0, ph, tau)
+            };
+            let got = crossing(0.0, t, tol, d, at);
+            let (mut lo, mut hi) = (0.0, t);
+            for _ in 0..200 {
+                let mid = 0.5 * (lo + hi);
+                if profile::follow(*x0, ph, mid).s <= d {
+                    lo = mid;
+                } else {
+                    hi = mid;
+                }
+            }
+            assert!(profile::follow(*x0, ph, got).s <= d, "{k} {f}");
+            assert!(got <= hi && got >= lo - tol, "{k} {f}: {got} vs {lo}");
+            assert!(evals.get() <= 8, "{k} {f}: {} evaluations", evals.get());
+        }
+        // Passed already at the start: the start.
+        assert_eq!(
+            crossing(0.0, t, tol, x0.s - 1e-9, |tau| profile::follow(
+                *x0, ph, tau
+            )),
+            0.0
+        );
+    }
+    // Landing on a stop at the point itself: the distance flattens out onto it (a
+    // triple root), then stays. Still ends, on a moment where it is not passed.
+    let x0 = profile::Motion {
+        v: 2.0,
+        a: 0.0,
+        s: 0.0,
+    };
+    let ph = lim.brake(x0, 0.0);
+    let d = lim.brake_distance(x0, 0.0);
+    let stop: f64 = ph.iter().map(|p| p.1).sum();
+    let evals = core::cell::Cell::new(0);
+    let got = crossing(0.0, 2.0 * stop, tol, d, |tau| {
+        evals.set(evals.get() + 1);
+        profile::follow(x0, &ph, tau)
+    });
+    assert!(profile::follow(x0, &ph, got).s <= d);
+    assert!(got >= 0.99 * stop, "{got} of {stop}");
+    assert!(evals.get() <= 1 + SWITCH_STEPS + SWITCH_HALVINGS);
+}
