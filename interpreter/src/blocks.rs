@@ -864,7 +864,8 @@ fn samples(b: &CommandBlock) -> Samples {
         move |u: f64| {
             let e = ev.eval(u);
             let sp = path::norm(e.d1);
-            (!(sp < 1e-12)).then(|| (e.d1[i] / sp).abs())
+            // (NaN goes on, as in `frame_at`.)
+            (sp.partial_cmp(&1e-12) != Some(std::cmp::Ordering::Less)).then(|| (e.d1[i] / sp).abs())
         }
     };
     let (tx, ty, tz) = (tangent(0), tangent(1), tangent(2));

@@ -88,8 +88,8 @@ mod tests {
             .map(|c| [c[0] - o[0], c[1] - o[1], c[2] - o[2], c[3]])
             .collect();
         let mut e = shared::nurbs::eval(b.degree as usize, b.knots(), &moved, u);
-        for i in 0..3 {
-            e.p[i] += o[i];
+        for (p, o) in e.p.iter_mut().zip(o) {
+            *p += o;
         }
         e
     }
@@ -145,7 +145,7 @@ mod tests {
                 knots.push(u);
             }
             u += 0.05 + rng.next();
-            knots.extend(std::iter::repeat(u).take(degree + 1));
+            knots.extend(std::iter::repeat_n(u, degree + 1));
             let b = block(degree, &knots, &ctrl);
             let ev = BlockEval::new(&b);
             assert!(
@@ -157,7 +157,7 @@ mod tests {
             let refs: Vec<CurvePoint> = us.iter().map(|&x| moved_eval(&b, x)).collect();
             let scale = |f: fn(&CurvePoint) -> [f64; 3]| {
                 refs.iter()
-                    .flat_map(|e| f(e))
+                    .flat_map(f)
                     .fold(0.0f64, |m, x| m.max(x.abs()))
                     .max(1e-300)
             };
@@ -207,7 +207,7 @@ mod tests {
             for i in 1..n - degree {
                 knots.push(i as f64 + 0.5 * rng.next());
             }
-            knots.extend(std::iter::repeat((n - degree) as f64).take(degree + 1));
+            knots.extend(std::iter::repeat_n((n - degree) as f64, degree + 1));
             let b = block(degree, &knots, &ctrl);
             let got = path::length(&b);
             let want =
