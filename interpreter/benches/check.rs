@@ -3,8 +3,9 @@
 //! function `cnc check` calls), and read and checked only ([`program::interpret`]), in
 //! lines per second.
 //!
-//! Two programs: plain `G1` lines, as CAM output for a 3-D surface is, and a mix of
-//! `G1`, `G2`, `G5.2 … G5.3` and `G6.2` blocks. `CHECK_BENCH_WRITE=DIR` also writes them
+//! Three programs: plain `G1` lines, as CAM output for a 3-D surface is, a mix of
+//! `G1`, `G2`, `G5.2 … G5.3` and `G6.2` blocks, and 50 000 lines of `G1`, `G2`, `G3`
+//! and `G5.2` that LinuxCNC's `rs274` reads too. `CHECK_BENCH_WRITE=DIR` also writes them
 //! to DIR (for timing LinuxCNC's `rs274` on the same text; see BENCHMARKS.md).
 //!
 //! Run: `cargo bench -p interpreter --bench check`.
@@ -24,6 +25,9 @@ fn bench(c: &mut Criterion) {
     let mut programs = vec![
         ("plain_g1".to_string(), programs::plain_g1(LINES)),
         ("mixed".to_string(), programs::mixed(LINES)),
+        // What `rs274` reads too (issue #23's planning throughput), half as long: its
+        // curves are planned block by block, a few seconds of it.
+        ("curves".to_string(), programs::curves(LINES / 2)),
     ];
     // Programs of one's own beside the generated ones (as for `rs274`), named by their
     // file stems: `CHECK_BENCH_FILES=a.ngc:b.ngc`.

@@ -38,6 +38,7 @@ use shared::Machine;
 use std::f64::consts::{FRAC_PI_2, PI};
 
 pub mod blend;
+mod eval;
 mod hodograph;
 
 /// Most quadratic segments (of at most 90°) in one arc block: 2n+1 control points.
@@ -349,6 +350,7 @@ fn dot(a: [f64; 3], b: [f64; 3]) -> f64 {
 
 /// The path's unit tangent and curvature vector `dT/ds` (length the curvature, pointing
 /// to the centre) at `u`.
+#[cfg(test)]
 fn frame(b: &CommandBlock, u: f64) -> Option<([f64; 3], [f64; 3])> {
     frame_at(&path::eval(b, u))
 }
@@ -773,6 +775,10 @@ fn golden_max(lo: f64, hi: f64, f: impl Fn(f64) -> Option<f64>) -> Option<f64> {
 
 fn samples(b: &CommandBlock) -> Samples {
     let (u0, u1) = path::domain(b);
+    // A thousand points or more a block, nearly all inside the span of the one before:
+    // the moving-data evaluator (see [`eval`]).
+    let ev = eval::BlockEval::new(b);
+    let frame = |u: f64| frame_at(&ev.eval(u));
     let samples = (16 * b.n_ctrl.max(2) as usize).max(32);
     // Distinct knots: dk/ds is taken by differences inside one span (where the curve is
     // smooth), and the curvature jump at a knot of continuity below C² is a junction of
@@ -793,7 +799,7 @@ fn samples(b: &CommandBlock) -> Samples {
         if ub.partial_cmp(&ua) != Some(std::cmp::Ordering::Greater) {
             return [0.0; 3];
         }
-        let (ea, eb) = (path::eval(b, ua), path::eval(b, ub));
+        let (ea, eb) = (ev.eval(ua), ev.eval(ub));
         match (frame_at(&ea), frame_at(&eb)) {
             (Some((_, ka)), Some((_, kb))) => {
                 let ds = path::norm(sub(eb.p, ea.p));
@@ -807,7 +813,7 @@ fn samples(b: &CommandBlock) -> Samples {
         }
     };
     // The frame and dk/ds at `u`; none where the curve (nearly) stops.
-    let at = |u: f64| -> Option<Sample> { Some((frame(b, u)?, rate(u))) };
+    let at = |u: f64| -> Option<Sample> { Some((frame(u)?, rate(u))) };
     let mut us: Vec<f64> = Vec::with_capacity(samples + 1);
     let mut pts: Vec<Frame> = Vec::with_capacity(samples + 1);
     let mut dk: Vec<[f64; 3]> = Vec::with_capacity(samples + 1);
@@ -869,10 +875,10 @@ fn samples(b: &CommandBlock) -> Samples {
             (lo..=hi).all(|j| moving >> j & 1 == 1)
         }
     };
-    let curvature = |u: f64| frame(b, u).map(|(_, k)| path::norm(k));
+    let curvature = |u: f64| frame(u).map(|(_, k)| path::norm(k));
     let curvature_rate = |u: f64| {
         if !surely_moving(u) {
-            frame(b, u)?;
+            frame(u)?;
         }
         Some(path::norm(rate(u)))
     };
@@ -882,7 +888,16 @@ fn samples(b: &CommandBlock) -> Samples {
     // axis's velocity be broken in the random search of `limits.rs`).
     // (Searched on each side of its sample, in case the swing has two humps there: the
     // tangent may pass through an axis and turn back within one sample's reach.)
-    let tangent = |i: usize| move |u: f64| frame(b, u).map(|(t, _)| t[i].abs());
+    // (Only the tangent: `frame_at`'s, bit for bit, without the curvature it would work out.)
+    let tangent = |i: usize| {
+        let ev = &ev;
+        move |u: f64| {
+            let e = ev.eval(u);
+            let sp = path::norm(e.d1);
+            // (NaN goes on, as in `frame_at`.)
+            (sp.partial_cmp(&1e-12) != Some(std::cmp::Ordering::Less)).then(|| (e.d1[i] / sp).abs())
+        }
+    };
     let (tx, ty, tz) = (tangent(0), tangent(1), tangent(2));
     let mut extra: Vec<Sample> = Vec::new();
     let measures: [(Measure, bool); 5] = [
@@ -949,7 +964,7 @@ fn samples(b: &CommandBlock) -> Samples {
         let mult = b.knots().iter().filter(|k| **k == knot).count();
         if degree < mult + 2 {
             let eps = 1e-9 * (u1 - u0);
-            if let (Some((_, ka)), Some((_, kb))) = (frame(b, knot - eps), frame(b, knot + eps)) {
+            if let (Some((_, ka)), Some((_, kb))) = (frame(knot - eps), frame(knot + eps)) {
                 jumps.push(path::norm(sub(kb, ka)));
             }
         }

@@ -58,3 +58,38 @@ pub fn mixed(lines: usize) -> String {
     s.push_str("M2\n");
     s
 }
+
+/// Groups of twelve lines that LinuxCNC's `rs274` reads too (no `G6.2`): a line, a
+/// `G2` and a `G3` half circle, a cubic `G5.2` NURBS of six points with weights 1 to 3,
+/// two lines; 13 mm along X each, in rows from X-900 Y-500, 5 mm apart in Y (a `G0`
+/// between rows), inside the built-in travel. At most `lines` lines.
+pub fn curves(lines: usize) -> String {
+    let mut s = String::from("G21 G90 G17\nG0 X-900 Y-500 Z0\nF1500\n");
+    let mut n = 3;
+    let (mut x0, mut y0) = (-900.0f64, -500.0f64);
+    let xy = |x0: f64, y0: f64, dx: f64, dy: f64| format!("X{:.3} Y{:.3}", x0 + dx, y0 + dy);
+    while n + 16 < lines {
+        let p = |dx, dy| xy(x0, y0, dx, dy);
+        let _ = writeln!(s, "G1 {}", p(1.0, 0.0));
+        let _ = writeln!(s, "G2 {} I1 J0", p(3.0, 0.0));
+        let _ = writeln!(s, "G3 {} I1 J0", p(5.0, 0.0));
+        let _ = writeln!(s, "G5.2 {} P1 L4", p(6.0, 1.0));
+        let _ = writeln!(s, "{} P2", p(7.0, -1.0));
+        let _ = writeln!(s, "{} P1", p(8.0, 1.5));
+        let _ = writeln!(s, "{} P1", p(9.0, -0.5));
+        let _ = writeln!(s, "{} P3", p(10.0, 0.8));
+        let _ = writeln!(s, "{} P1", p(11.0, 0.0));
+        s.push_str("G5.3\n");
+        let _ = writeln!(s, "G1 {}", p(12.0, 0.5));
+        let _ = writeln!(s, "G1 {}", p(13.0, 0.0));
+        n += 12;
+        x0 += 13.0;
+        if x0 > 880.0 {
+            (x0, y0) = (-900.0, y0 + 5.0);
+            let _ = writeln!(s, "G0 {}", xy(x0, y0, 0.0, 0.0));
+            n += 1;
+        }
+    }
+    s.push_str("M2\n");
+    s
+}

@@ -18,8 +18,8 @@ const GL5: [(f64, f64); 5] = [
 /// span (a control polygon folding back on itself) is no polynomial there: 32 pieces
 /// of a 24 mm span left 4.7e-5 mm out, and the interpolator, which lands exact stops
 /// on this length, came to the curve's end with speed still to lose.
-pub fn arc_length(knots: &[f64], subdiv: usize, speed: impl Fn(f64) -> f64) -> f64 {
-    let rule = |x0: f64, x1: f64| {
+pub fn arc_length(knots: &[f64], subdiv: usize, mut speed: impl FnMut(f64) -> f64) -> f64 {
+    let mut rule = |x0: f64, x1: f64| {
         let (mid, half) = (0.5 * (x0 + x1), 0.5 * (x1 - x0));
         GL5.iter()
             .map(|&(x, wt)| wt * speed(mid + half * x))
@@ -47,8 +47,8 @@ pub fn arc_length(knots: &[f64], subdiv: usize, speed: impl Fn(f64) -> f64) -> f
                 total += left;
                 total += right;
             } else {
-                total += refined(&rule, x0, x1, left, gap, MAX_DEPTH);
-                total += refined(&rule, x1, x2, right, gap, MAX_DEPTH);
+                total += refined(&mut rule, x0, x1, left, gap, MAX_DEPTH);
+                total += refined(&mut rule, x1, x2, right, gap, MAX_DEPTH);
             }
             s += 2;
         }
@@ -76,7 +76,7 @@ fn agree(gap: f64, halves: f64) -> bool {
 /// coordinate's rounding is above the tolerance), not the rule's error, which shrinks at
 /// every halving (by 2^10 on a smooth piece, by 4 even where the speed has a corner).
 fn refined(
-    rule: &impl Fn(f64, f64) -> f64,
+    rule: &mut impl FnMut(f64, f64) -> f64,
     x0: f64,
     x1: f64,
     whole: f64,

@@ -10,6 +10,7 @@ mod eval;
 pub mod fast;
 mod knots;
 mod length;
+pub mod local;
 pub mod reference;
 pub mod surface;
 
