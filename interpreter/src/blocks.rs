@@ -549,7 +549,7 @@ fn shape(g: Geometry, machine: &Machine, period_s: f64, feed_mm_s: f64, share: f
     for _ in 0..LOWER_STEPS {
         // (Never below the slowest feed a block may have: see `check`.)
         let slowest = shared::machine::MIN_FEED_MM_PER_MIN / 60.0 * ratio;
-        if (acc >= acc_min && jerk >= jerk_min) || !(v * 0.8 >= 4.0 * slowest) {
+        if (acc >= acc_min && jerk >= jerk_min) || v * 0.8 < 4.0 * slowest || v.is_nan() {
             break;
         }
         v *= 0.8;
@@ -1693,7 +1693,7 @@ fn times<B: Plannable>(blocks: &[B]) -> Vec<f64> {
 /// Time (s) to cover `len` mm from `start` to `end` mm/s within the speed `cap`, the
 /// quickest under `lim`: up to the highest speed the length allows, held there, down.
 fn block_time(lim: Jerk, start: f64, end: f64, cap: f64, len: f64) -> f64 {
-    if !(len > 0.0) {
+    if len.is_nan() || len <= 0.0 {
         return 0.0;
     }
     let fits = |v: f64| lim.change_distance(start, v) + lim.change_distance(v, end) <= len;
@@ -1762,7 +1762,7 @@ fn shares<B: Plannable>(blocks: &[B]) -> Vec<f64> {
         if b.flags() & FLAG_STOP_AT_END != 0 {
             reached = 0.0;
         }
-        if !is_curve(b) || !(c > 0.0) {
+        if !is_curve(b) || c.is_nan() || c <= 0.0 {
             continue;
         }
         if peak >= c * (1.0 - 1e-3) {

@@ -224,34 +224,41 @@ M2
 /// feed or an acceleration (4.6e-6 of one jerk, a 9e-6 mm block of g5_curva_delfino)
 /// and not at all in length. Block counts and every machining time of the peers and
 /// the generated programs are as before. Added: `curves` (the bench's `rs274` program).
+/// Renewed for issue #23, on purpose: where a curve's planned speed reaches its cap the
+/// curvature may take 0.9 of each limit instead of half, kept per curve where its
+/// planned time is shorter (`blocks::shares`, `blocks::block_time`), and a block's
+/// tangential limits are no longer floored at a twentieth of the path's (the cap is
+/// lowered instead). Changed, with the same block counts: mixed, curves, g5_splines and
+/// the g5 and g6 chitarras and delfinos (built-in machine: chitarra 186.502 -> 185.907 s,
+/// delfino 133.695 -> 133.725 s); every other fingerprint is as before.
 const GOLDEN_BLOCKS: &[(&str, usize, u64)] = &[
     ("plain_g1", 99999, 0x2314c695b1663686),
-    ("mixed", 2080, 0x36bd6a567983bcab),
-    ("curves", 3426, 0xfe844a2bfb51d862),
+    ("mixed", 2080, 0x21edab6b805dd8b6),
+    ("curves", 3426, 0xe5c2bffea93ce7d8),
     ("demo", 23, 0x2bb134988afe25d4),
     ("every_kind", 24, 0x910325940f2c5ae7),
     ("fanuc_ellipse.ngc", 7, 0x7e7fe26e96ab8b5f),
-    ("g5_splines.ngc", 36, 0xbc613edb458d62a9),
+    ("g5_splines.ngc", 36, 0x63263a2c7dfe7325),
     ("o_words.ngc", 14, 0x341004163056a35e),
     ("seed004_fixed.ngc", 10, 0xf4a69d1642553741),
     ("seed004_table1.ngc", 1, 0x547761ab9c6006f2),
     ("g5_butterfly-xy.ngc", 69, 0x820bbee6a28da3a4),
     ("g5_butterfly-yz.ngc", 69, 0xac50692ea1e9da82),
     ("g5_butterfly-zx.ngc", 69, 0x349ad7dae74aa01f),
-    ("g5_curva_chitarra.ngc", 57, 0x952200e2c61f5c17),
-    ("g5_curva_delfino.ngc", 91, 0xccf16a21b29b6888),
+    ("g5_curva_chitarra.ngc", 57, 0x7bb2b2213bbf60fe),
+    ("g5_curva_delfino.ngc", 91, 0x02def94c4bfdf269),
     ("g5_curva_mazatrol.ngc", 26, 0xf974b9fcdf1bf074),
     ("g5_curva_stella.ngc", 17, 0xe4673450da4ffb27),
     ("g5_leto-xy.ngc", 16, 0x8f5d6aa356024417),
     ("g5_nurbs-xy.ngc", 8, 0xbca3d3ec96c4491c),
     ("g5_nurbs-yz.ngc", 8, 0x5facf61993254d3c),
     ("g5_nurbs-zx.ngc", 8, 0xc0d25396dd53bcec),
-    ("g6_curva_chitarra_q1.ngc", 34, 0x8abe8ed643630047),
-    ("g6_curva_chitarra_q2.ngc", 34, 0x371911c8819adf57),
-    ("g6_curva_chitarra_q3.ngc", 34, 0x2c43e38e9e5c71ec),
-    ("g6_curva_delfino_q1.ngc", 67, 0x551bb5d70d5bd64b),
-    ("g6_curva_delfino_q2.ngc", 67, 0x551bb5d70d5bd64b),
-    ("g6_curva_delfino_q3.ngc", 67, 0x76a3c4614a4842dd),
+    ("g6_curva_chitarra_q1.ngc", 34, 0x3697a0dc42e9591b),
+    ("g6_curva_chitarra_q2.ngc", 34, 0xe6b2cec4aa29aa7b),
+    ("g6_curva_chitarra_q3.ngc", 34, 0x4639c566bdcc87ec),
+    ("g6_curva_delfino_q1.ngc", 67, 0xfd073c46346509c4),
+    ("g6_curva_delfino_q2.ngc", 67, 0xfd073c46346509c4),
+    ("g6_curva_delfino_q3.ngc", 67, 0x077db5bbb9422946),
     ("g6_curva_mazatrol_q1_xy.ngc", 15, 0x9c5837882522e2ae),
     ("g6_curva_mazatrol_q1_yz.ngc", 14, 0xb6eda9c2fa28aa37),
     ("g6_curva_mazatrol_q1_zx.ngc", 14, 0x73b8859969558602),
