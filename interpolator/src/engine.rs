@@ -1034,8 +1034,6 @@ impl Engine {
         // own, and each block's limit on the way (a block of a lower limit is entered
         // with the acceleration of the one before and comes down to its own inside it).
         let mut acc_hi = self.acc.abs().max(lim.acc);
-        // The highest jerk of the blocks on the way.
-        let mut jerk_hi = lim.jerk;
         // Beyond the stopping distance nothing can bind: from `v_top` to rest, after
         // this cycle and after the time it takes to bring a positive acceleration back to
         // zero, under the lowest limits of the motion and every block in hand. (Under
@@ -1079,7 +1077,7 @@ impl Engine {
                     // [`Ahead::easing`].)
                     (Some(low), Some(seg)) => {
                         let seg = eased(seg, next);
-                        let (peak, spare) = self.spare(low, seg, jerk_hi);
+                        let (peak, spare) = self.spare(low, seg);
                         let room = d - low.d - spare;
                         room >= 0.0 && seg.change_within(v, peak, room)
                     }
@@ -1110,12 +1108,10 @@ impl Engine {
                         acc: acc_hi,
                         jerk: last.next.jerk,
                     };
-                    let (_, spare) = self.spare(low, easing, jerk_hi);
+                    let (_, spare) = self.spare(low, easing);
                     let room = d - last.d - spare;
                     let r = reach_within(easing, v, room);
-                    let j_s = easing.jerk.min(low.jerk);
-                    let r = r - self.growth(low, j_s, jerk_hi);
-                    last.v = last.v.min(low.passed_below(r, j_s));
+                    last.v = last.v.min(low.passed_below(r, easing.jerk.min(low.jerk)));
                     last.lim = min_lim(last.lim, lim);
                     last.next = min_lim(last.next, next);
                     kept_next_jerk = kept_next_jerk.min(next.jerk);
@@ -1133,7 +1129,6 @@ impl Engine {
             };
             lim = min_lim(lim, b.lim);
             acc_hi = acc_hi.max(b.lim.acc);
-            jerk_hi = jerk_hi.max(b.lim.jerk);
             since_low = Some(since_low.map_or(b.lim, |l| min_lim(l, b.lim)));
             d += b.length_mm;
             v = match self.window.motion(i + 1) {
@@ -1147,7 +1142,7 @@ impl Engine {
 
     /// The highest speed, and the distance to allow for, past a low `low` before the
     /// braking for a limit beyond it can begin, the blocks between having the limits
-    /// `seg` (their lowest) and jerks up to `jerk_hi`.
+    /// `seg` (their lowest).
     ///
     /// The low is passed no faster than `low.v`, with an acceleration `a` that the
     /// block beyond it eases off within it (`v + a²/2j ≤ low.v`, `j` that block's jerk)
@@ -1155,25 +1150,15 @@ impl Engine {
     /// of the blocks after it the same easing rises further, by `a²/2·seg.jerk` (a
     /// lower limit beyond a short fast stretch, judged from `low.v` alone, was reached
     /// with 1.1 times the speed its braking was planned from, and lost). The braking may
-    /// only begin in the cycle after the one that crosses the low (two periods, in which
-    /// the acceleration still grows by the jerk), and easing the acceleration off takes
-    /// `a/seg.jerk` seconds at up to that speed.
-    fn spare(&self, low: Low, seg: Jerk, jerk_hi: f64) -> (f64, f64) {
+    /// only begin in the cycle after the one that crosses the low (two periods), and
+    /// easing the acceleration off takes `a/seg.jerk` seconds at up to that speed. (The
+    /// rise inside those two periods is left out, as before this was written: counted
+    /// too, a chain of 0.01 mm lines slowing to a stop topped at 51 % of its planned
+    /// speed instead of 61 %, and the random search finds no limit broken without it.)
+    fn spare(&self, low: Low, seg: Jerk) -> (f64, f64) {
         let j_s = seg.jerk.min(low.jerk);
-        let growth = self.growth(low, j_s, jerk_hi);
-        let peak = low.peak(j_s) + growth;
-        let a2 = low.passing_acc() + 2.0 * self.t_s * jerk_hi;
-        (peak, peak * (2.0 * self.t_s + a2 / j_s))
-    }
-
-    /// What the two periods before a braking can begin add to the speed that easing
-    /// reaches past `low` (see [`Engine::spare`]): their rise, and the easing of the
-    /// acceleration grown in them.
-    fn growth(&self, low: Low, j_s: f64, jerk_hi: f64) -> f64 {
-        let t2 = 2.0 * self.t_s;
-        let a = low.passing_acc();
-        let a2 = a + t2 * jerk_hi;
-        t2 * a2 + (a2 * a2 - a * a) / (2.0 * j_s)
+        let peak = low.peak(j_s);
+        (peak, peak * (2.0 * self.t_s + low.passing_acc() / j_s))
     }
 
     /// The highest acceleration the motion `m` may rise to now: its block's own limit,
