@@ -413,6 +413,18 @@ impl Shape {
 /// speed, and of the jerk; the rest is left to the speed profile along the path.
 const NORMAL_SHARE: f64 = 0.5;
 
+/// The least tangential acceleration and jerk [`shape`] leaves a block's profile: a
+/// twentieth of the weakest of the path's and the axes' (a floor of a twentieth of the
+/// path's alone stood above what a weak axis has).
+fn profile_floors(machine: &Machine) -> (f64, f64) {
+    let axes = machine.axes.as_array();
+    let (acc, jerk) = axes.iter().fold(
+        (machine.path_acc_mm_per_s2, machine.path_jerk_mm_per_s3),
+        |(a, j), ax| (a.min(ax.max_acc_mm_per_s2), j.min(ax.max_jerk_mm_per_s3)),
+    );
+    (0.05 * acc, 0.05 * jerk)
+}
+
 /// Most times [`shape`] lowers a cap by a fifth to leave the profile its floor: to
 /// 0.26 of the cap at most.
 const LOWER_STEPS: usize = 6;
@@ -533,18 +545,13 @@ fn shape(g: Geometry, machine: &Machine, period_s: f64, feed_mm_s: f64, share: f
         }
         (acc, jerk)
     };
-    // The profile is left at least a quarter of what the curvature's share leaves of
-    // the weakest acceleration, and an eighth of the jerk: where the cap leaves less
-    // (the `6·v·k·a` term of a tight bend at a low speed binds the acceleration through
-    // the jerk, not through the share), the cap is lowered until it does (within
-    // `LOWER_STEPS`). A floor put
+    // The profile is left at least a twentieth of the weakest acceleration and jerk
+    // (`profile_floors`): where the cap leaves less (the `6·v·k·a` term of a tight bend
+    // at a low speed binds the acceleration through the jerk, not through the share),
+    // the cap is lowered until it does (within `LOWER_STEPS`). A floor put
     // under the acceleration instead (a twentieth of the path's) once let X's jerk
     // reach 1.14 times its limit in such a bend.
-    let (acc_floor, jerk_floor) = axes.iter().fold((a_path, j_path), |(a, j), ax| {
-        (a.min(ax.max_acc_mm_per_s2), j.min(ax.max_jerk_mm_per_s3))
-    });
-    let spare = 0.5 * (1.0 - share);
-    let (acc_min, jerk_min) = (0.5 * spare * acc_floor, 0.25 * spare * jerk_floor);
+    let (acc_min, jerk_min) = profile_floors(machine);
     let (mut acc, mut jerk) = leftover(v);
     for _ in 0..LOWER_STEPS {
         // (Never below the slowest feed a block may have: see `check`.)
@@ -649,8 +656,8 @@ impl StraightLimits {
             jerk: axes.map(|a| a.max_jerk_mm_per_s3),
             a_tangential: a_path.min((a_path * a_path - an * an).max(0.0).sqrt()),
             j_path,
-            acc_floor: 0.05 * a_path,
-            jerk_floor: 0.05 * j_path,
+            acc_floor: 1e-3 * profile_floors(machine).0,
+            jerk_floor: 1e-3 * profile_floors(machine).1,
         })
     }
 }
