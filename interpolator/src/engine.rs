@@ -7,9 +7,11 @@
 //! The speed profile is jerk-limited (an S-curve along the arc length): the engine keeps
 //! the path speed `v` and the path acceleration `a`, and each cycle changes `a` by at most
 //! `J·T` within `±A`, where `A` and `J` are the block's tangential limits (the planner's
-//! share of the machine's limits that the block's curvature leaves). Of the jerks that
-//! keep every speed limit ahead reachable, it takes the largest (a bisection between
-//! `-J` and `+J`). The limits ahead are the current block's feed, the planned end speed
+//! share of the machine's limits that the block's curvature leaves). It follows its
+//! preferred motion (accelerate at `+J` up to `A`) for as long as the quickest braking
+//! can still keep every speed limit ahead, and from the last such moment inside the
+//! cycle (found by Newton's method or bisection, to `SWITCH_RESOLUTION`) that braking
+//! ([`Engine::profile_step`]). The limits ahead are the current block's feed, the planned end speed
 //! of every block in the look-ahead window (a ring of `lookahead_blocks`, filled from the
 //! source every cycle), and a stop at the end of the last block held: the machine can
 //! always stop on the known path, so a starved interpolator stops on the path instead of
