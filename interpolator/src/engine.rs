@@ -1172,6 +1172,10 @@ impl Engine {
     /// 4.3 times its limit in the planner's random search).
     fn acc_ceiling(&self, m: &Motion, own: Jerk, v_top: f64) -> f64 {
         let mut ceiling = own.acc;
+        // No block in hand allows less: nothing to walk for (a chain of equal blocks).
+        if self.window.lowest.acc >= ceiling {
+            return ceiling;
+        }
         let v_max = v_top + own.acc * own.acc / (2.0 * own.jerk) + 1e-9;
         let mut d = if m.u >= m.u_end {
             0.0
