@@ -837,8 +837,8 @@ fn a_weak_axis_keeps_its_limits_where_a_curve_s_blocks_differ_in_jerk() {
 /// `Window::lowest` and `Engine::spare` (seed 7: 12 times the acceleration and 413 times
 /// the jerk, a stop reached still fast; seed 11: 1.3 % over a block's feed); the third
 /// (seed 5, weak X) on the planner's old floor under a block's tangential limits, a
-/// twentieth of the path's, above what the curvature left X in a tight bend at low speed
-/// (X's jerk 1.14 times its limit).
+/// twentieth of the path's, above what the curvature left the weak X (an X limit 1.08
+/// times over).
 #[test]
 fn limits_hold_where_a_curve_s_blocks_differ_sixfold_in_their_limits() {
     let cases = [
@@ -858,10 +858,9 @@ fn limits_hold_where_a_curve_s_blocks_differ_sixfold_in_their_limits() {
             Machine::default(),
         ),
         (
-            "G21 G17\nG0 X0.0000 Y0.0000\nG1 F3000\nG5.2 P1.0000 L3\n\
-             X-6.7262 Y-14.9700 P1.7857\nX-20.7481 Y-2.3949 P1.2046\nX-42.4315 Y-11.0811 P1.4627\n\
-             X-34.7636 Y-20.1088 P1.3717\nX-35.4488 Y-21.3971 P0.6172\nX-44.3708 Y-19.7021 P1.8583\n\
-             X-45.0103 Y-20.5095 P0.9479\nX-33.4955 Y-24.0539 P1.9653\nX-30.5203 Y-27.3916 P1.9217\n\
+            "G21 G17\nG0 X0.0000 Y0.0000\nG1 F6000\nG5.2 P1.0000 L5\n\
+             X5.7594 Y13.1912 P1.4697\nX3.4910 Y14.3158 P0.9777\nX-0.3102 Y12.5494 P1.1548\n\
+             X-15.0334 Y22.6046 P0.9782\nX-15.2593 Y27.0411 P1.4148\nX2.3907 Y22.9922 P1.6480\n\
              G5.3\nM2\n",
             weak_x_machine(),
         ),
