@@ -484,7 +484,7 @@ fn shape(g: Geometry, machine: &Machine, period_s: f64, feed_mm_s: f64, share: f
     let mut v = feed_mm_s;
     for jump in jumps {
         if *jump > 1e-9 {
-            v = v.min((share * j_path * period_s / jump).sqrt());
+            v = v.min((share * j_path * period_s / (SAMPLED_STEP * jump)).sqrt());
         }
     }
     for ((t, k), dk) in pts.iter().zip(dk) {
@@ -586,6 +586,72 @@ fn shape(g: Geometry, machine: &Machine, period_s: f64, feed_mm_s: f64, share: f
             _ => None,
         },
     }
+}
+
+/// The tangential acceleration a curve block's profile may use at the speeds it can have,
+/// not only at its cap: it enters at `start` at most and leaves at `end` at most (mm/s,
+/// the planned junction speeds, which the interpolator never exceeds), and changes its
+/// speed by `acc` at most, so at a share `x` of its length `len` its speed is within
+/// `min(cap, √(start² + 2·acc·x·len), √(end² + 2·acc·(1 − x)·len))`. Where the curvature
+/// is sharpest near the slower end (a valley's flank), that leaves the profile more of
+/// the acceleration than [`shape`]'s worst case at the cap. The jerk stays `lim.jerk`:
+/// the acceleration found keeps it within every limit too. Never less than `lim.acc`.
+fn relaxed_acc(
+    b: &CommandBlock,
+    machine: &Machine,
+    cap: f64,
+    lim: Jerk,
+    (start, end): (f64, f64),
+    len: f64,
+) -> f64 {
+    let (pts, dk, _, at) = samples(b);
+    let axes = machine.axes.as_array();
+    let a_path = machine.path_acc_mm_per_s2;
+    let j_path = machine.path_jerk_mm_per_s3;
+    // A margin on each place for the chords' shortfall against the arc.
+    const MARGIN: f64 = 0.01;
+    let fits = |a: f64| {
+        pts.iter().zip(&dk).zip(&at).all(|(((t, k), dk), x)| {
+            let (lo, hi) = ((x[0] - MARGIN).max(0.0), (x[1] + MARGIN).min(1.0));
+            let v = cap
+                .min((start * start + 2.0 * a * hi * len).sqrt())
+                .min((end * end + 2.0 * a * (1.0 - lo) * len).sqrt());
+            let kappa = path::norm(*k);
+            let an = v * v * kappa;
+            let jn = v * v * v * path::norm(*dk);
+            if a * a + an * an > a_path * a_path
+                || 6.0 * v * kappa * a + jn > j_path
+                || lim.jerk + 3.0 * v * a * kappa + jn > j_path
+            {
+                return false;
+            }
+            axes.iter().enumerate().all(|(i, ax)| {
+                let (ti, ki, dki) = (t[i].abs(), k[i].abs(), dk[i].abs());
+                let jn_i = v * v * v * dki;
+                a * ti + v * v * ki <= ax.max_acc_mm_per_s2
+                    && 6.0 * v * ki * a + jn_i <= ax.max_jerk_mm_per_s3
+                    && lim.jerk * ti + 3.0 * v * a * ki + jn_i <= ax.max_jerk_mm_per_s3
+            })
+        })
+    };
+    let top = axes
+        .iter()
+        .fold(a_path, |m, ax| m.max(ax.max_acc_mm_per_s2));
+    // (`lim.acc` itself fits: [`shape`] found it at the cap, the envelope's highest;
+    // not asked again, as a limit it binds exactly may round either way.)
+    if pts.is_empty() || lim.acc.partial_cmp(&top) != Some(std::cmp::Ordering::Less) {
+        return lim.acc;
+    }
+    let (mut lo, mut hi) = (lim.acc, top);
+    for _ in 0..20 {
+        let mid = 0.5 * (lo + hi);
+        if fits(mid) {
+            lo = mid;
+        } else {
+            hi = mid;
+        }
+    }
+    lo
 }
 
 /// `v.min(x.cbrt())`, without the cube root where it cannot be the lower: where `v³`
@@ -733,7 +799,9 @@ type Frame = ([f64; 3], [f64; 3]);
 /// Unit tangents with curvature vectors, curvature derivatives, curvature jumps.
 /// One sample: the frame and dk/ds.
 type Sample = (Frame, [f64; 3]);
-type Samples = (Vec<Frame>, Vec<[f64; 3]>, Vec<f64>);
+/// Where each sample lies along its block: the least and the most share of the block's
+/// length before it (see [`samples`]).
+type Samples = (Vec<Frame>, Vec<[f64; 3]>, Vec<f64>, Vec<[f64; 2]>);
 /// A measure of a sample, and the search of it between samples (at a parameter).
 type Measure<'a> = (fn(&Sample) -> f64, &'a dyn Fn(f64) -> Option<f64>);
 
@@ -907,6 +975,7 @@ fn samples(b: &CommandBlock) -> Samples {
     };
     let (tx, ty, tz) = (tangent(0), tangent(1), tangent(2));
     let mut extra: Vec<Sample> = Vec::new();
+    let mut extra_at: Vec<(f64, f64)> = Vec::new();
     let measures: [(Measure, bool); 5] = [
         ((|x| path::norm(x.0 .1), &curvature), false),
         ((|x| path::norm(x.1), &curvature_rate), false),
@@ -954,14 +1023,37 @@ fn samples(b: &CommandBlock) -> Samples {
             for (lo, hi) in ranges.into_iter().filter(|r| r.0 < r.1) {
                 if let Some(found) = golden_max(lo, hi, search).and_then(at) {
                     extra.push(found);
+                    extra_at.push((lo, hi));
                 }
             }
         }
     }
+    // Each sample's place along the block, by the chords between the samples in order
+    // (within a few thousandths of the arc: a tangent turns at most `MAX_TURN_RAD`
+    // between two); a sample found by a search lies anywhere in its search's range.
+    let mut chords: Vec<f64> = Vec::with_capacity(us.len());
+    let mut total = 0.0;
+    let mut prev: Option<[f64; 3]> = None;
+    for &u in &us {
+        let p = ev.eval(u).p;
+        if let Some(q) = prev {
+            total += path::norm(sub(p, q));
+        }
+        chords.push(total);
+        prev = Some(p);
+    }
+    let share = |x: f64| if total > 0.0 { x / total } else { 0.0 };
+    let mut at: Vec<[f64; 2]> = chords.iter().map(|&c| [share(c), share(c)]).collect();
     if !extra.is_empty() {
         let n = pts.len() - 1;
         pts.splice(n..n, extra.iter().map(|x| x.0));
         dk.splice(n..n, extra.iter().map(|x| x.1));
+        let place = |(lo, hi): (f64, f64)| {
+            let a = us.partition_point(|&u| u <= lo).saturating_sub(1);
+            let b = us.partition_point(|&u| u < hi).min(us.len() - 1);
+            [share(chords[a]), share(chords[b])]
+        };
+        at.splice(n..n, extra_at.iter().map(|&r| place(r)));
     }
     // Curvature jumps at interior knots where the curve is only C¹ (or less).
     let mut jumps: Vec<f64> = Vec::new();
@@ -976,7 +1068,7 @@ fn samples(b: &CommandBlock) -> Samples {
             }
         }
     }
-    (pts, dk, jumps)
+    (pts, dk, jumps, at)
 }
 
 /// Samples along a surface block's pass (`t` in `[0, 1]`).
@@ -1061,7 +1153,8 @@ fn surface_samples(b: &CommandBlock) -> Samples {
             }
         })
         .collect();
-    (pts, dk, Vec::new())
+    let n = pts.len();
+    (pts, dk, Vec::new(), vec![[0.0, 1.0]; n])
 }
 
 /// Speed (mm/s) at which the junction between two motions with these shapes can be
@@ -1132,7 +1225,7 @@ fn junction_speed(
     }
     let dk = at.dk;
     if is_jump(dk) {
-        v = v.min((jerk * period_s / dk).sqrt() / r);
+        v = v.min((jerk * period_s / (SAMPLED_STEP * dk)).sqrt() / r);
         if let Some(load) = at.load {
             // The acceleration's step with the normal jerk there takes at most
             // `JUMP_SHARE` of the path's jerk and of each axis's.
@@ -1219,6 +1312,14 @@ fn is_kink(half_sin: f64) -> bool {
 fn curvature_jump(a: &Shape, b: &Shape) -> f64 {
     path::norm(sub(a.k_end, b.k_start))
 }
+
+/// The most a step `Δa` of the acceleration moves the set-points' jerk, in units of
+/// `Δa/T`. A set-point's second difference over the period `T` is the acceleration
+/// averaged under a triangle of width `2·T` about it, so a step at `τ` enters two
+/// neighbouring averages by the triangle's masses after `τ`: their difference, the
+/// third difference, is largest for a step halfway between set-points, `7/8 − 1/8`.
+/// (A curvature jump `Δk` passed at `v` is a step `v²·Δk` of the normal acceleration.)
+const SAMPLED_STEP: f64 = 0.75;
 
 /// Does a curvature jump this large count as one?
 fn is_jump(dk: f64) -> bool {
@@ -1345,7 +1446,10 @@ impl Load {
         Load {
             turn,
             kappa: larger(ka, kb),
-            jump: each(&|i| jump[i].abs() / period_s, path::norm(jump) / period_s),
+            jump: each(
+                &|i| SAMPLED_STEP * jump[i].abs() / period_s,
+                SAMPLED_STEP * path::norm(jump) / period_s,
+            ),
             acc_kappa3,
             dk: larger(a.dk_end, b.dk_start),
         }
@@ -1353,6 +1457,20 @@ impl Load {
 
     fn acc(&self, c: usize, v: f64) -> f64 {
         v * self.turn[c] + v * v * self.kappa[c]
+    }
+
+    /// The most tangential acceleration a block whose curvature vector at this
+    /// junction is `k` may have without raising the load's `3·a_t·|k|` (the larger of
+    /// the two blocks').
+    fn acc_ceiling(&self, k: [f64; 3]) -> f64 {
+        let each = [k[0].abs(), k[1].abs(), k[2].abs(), path::norm(k)];
+        (0..4).fold(f64::INFINITY, |m, c| {
+            if each[c] > 0.0 {
+                m.min(self.acc_kappa3[c] / (3.0 * each[c]))
+            } else {
+                m
+            }
+        })
     }
 
     fn jerk(&self, c: usize, v: f64) -> f64 {
@@ -1649,11 +1767,11 @@ pub fn plan_and<B: Plannable>(
             }
         }
     };
-    plan_split(blocks, machine, period_ns, &|_| NORMAL_SHARE, |_, _| {});
+    let _ = plan_split(blocks, machine, period_ns, &|_| NORMAL_SHARE, |_, _| {});
     let before = times(blocks);
     let mut shares = shares(blocks);
     reset(blocks);
-    plan_split(blocks, machine, period_ns, &|i| shares[i], |_, _| {});
+    let mut ceiling = plan_split(blocks, machine, period_ns, &|i| shares[i], |_, _| {});
     let after = times(blocks);
     // Each curve keeps the larger share only where its blocks take less time with it.
     let mut kept = true;
@@ -1670,15 +1788,54 @@ pub fn plan_and<B: Plannable>(
         }
         i = end;
     }
-    if kept {
-        // (Last to first, as the backward pass hands them over.)
-        for (i, b) in blocks.iter().enumerate().rev() {
-            done(i, b);
-        }
-        return;
+    if !kept {
+        reset(blocks);
+        ceiling = plan_split(blocks, machine, period_ns, &|i| shares[i], |_, _| {});
     }
-    reset(blocks);
-    plan_split(blocks, machine, period_ns, &|i| shares[i], done);
+    relax(blocks, machine, &ceiling);
+    // (Last to first, as the backward pass hands them over.)
+    for (i, b) in blocks.iter().enumerate().rev() {
+        done(i, b);
+    }
+}
+
+/// Each curve block's acceleration raised to what its planned speeds leave
+/// ([`relaxed_acc`]), after the last planning round: the planned speeds stay as they
+/// are (junction limits the interpolator never exceeds), the profile between them gets
+/// there sooner. Skipped: a block held at its cap at both ends (its speeds are the
+/// cap's). Never above `ceiling`, the most a junction's load leaves each block
+/// ([`plan_split`]): what a kink's direction change leaves, and at a curvature jump the
+/// acceleration whose `3·a_t·|k|` stays within the load the junction speed was worked
+/// out with ([`Load::acc_ceiling`]).
+fn relax<B: Plannable>(blocks: &mut [B], machine: &Machine, ceiling: &[f64]) {
+    for (b, &ceiling) in blocks.iter_mut().zip(ceiling) {
+        if !is_curve(b) {
+            continue;
+        }
+        let Geometry::Curve(c) = b.geometry() else {
+            continue;
+        };
+        let (start, end, cap) = b.planned_mm_s();
+        if start >= cap && end >= cap {
+            continue;
+        }
+        let (lim, len) = (b.limits(), b.length_mm());
+        if ceiling <= lim.acc {
+            continue;
+        }
+        let acc = relaxed_acc(c, machine, cap, lim, (start, end), len).min(ceiling);
+        if acc > lim.acc {
+            let feed = b.feed_mm_per_min();
+            b.set_caps(
+                len,
+                feed,
+                Jerk {
+                    acc,
+                    jerk: lim.jerk,
+                },
+            );
+        }
+    }
 }
 
 /// Each block's time along its planned profile (zero for anything else): from its start
@@ -1858,19 +2015,22 @@ fn split_at_kinks<B: Plannable>(blocks: &mut Vec<B>, machine: &Machine, period_n
     }
 }
 
-/// [`plan_and`] once the blocks are split at their kinks.
+/// [`plan_and`] once the blocks are split at their kinks; returns the most acceleration
+/// the junctions' loads leave each block (for [`relax`]).
 fn plan_split<B: Plannable>(
     blocks: &mut [B],
     machine: &Machine,
     period_ns: u64,
     share: &dyn Fn(usize) -> f64,
-    mut done: impl FnMut(usize, &B),
-) {
+    done: impl FnMut(usize, &B),
+) -> Vec<f64> {
     let period_s = period_ns as f64 * 1e-9;
     let n = blocks.len();
     // Junction speed limits (mm/s) at the end of each block, each found as soon as the
     // block after it has its shape (a junction needs only its two blocks').
     let mut end = crate::pages::filled(n, 0.0f64);
+    // The most acceleration a junction's load leaves each block (see [`relax`]).
+    let mut ceiling = crate::pages::filled(n, f64::INFINITY);
     // The shapes of the block before and of this one (where they are motions), taking
     // turns (`i % 2`), each worked out where it stays: a shape is 248 bytes, and making
     // one and handing it on were copies a block.
@@ -1925,6 +2085,17 @@ fn plan_split<B: Plannable>(
                     if let Some(left) = junction_leaves(sa, sb, end[j], &at, &fixed, period_s) {
                         keep_within(&mut blocks[j], left);
                         keep_within(&mut blocks[i], left);
+                        let (ka, kb) = (sa.k_end, sb.k_start);
+                        let (ca, cb) = match at.load {
+                            Some(load) if is_jump(at.dk) => {
+                                (load.acc_ceiling(ka), load.acc_ceiling(kb))
+                            }
+                            Some(_) => (f64::INFINITY, f64::INFINITY),
+                            // (Worked out in `junction_leaves`: kept as they are.)
+                            None => (blocks[j].limits().acc, blocks[i].limits().acc),
+                        };
+                        ceiling[j] = ceiling[j].min(left.acc).min(ca);
+                        ceiling[i] = ceiling[i].min(left.acc).min(cb);
                     }
                     if let Some(k) = kink.filter(|_| end[j] > 0.0) {
                         let at = s - blocks[i].length_mm();
@@ -1943,8 +2114,12 @@ fn plan_split<B: Plannable>(
                                     }),
                                 jerk: f64::INFINITY,
                             };
-                            for b in &mut blocks[first..=last.min(i)] {
+                            for (b, c) in blocks[first..=last.min(i)]
+                                .iter_mut()
+                                .zip(&mut ceiling[first..=last.min(i)])
+                            {
                                 keep_within(b, left);
+                                *c = c.min(left.acc);
                             }
                         }
                     }
@@ -1955,6 +2130,19 @@ fn plan_split<B: Plannable>(
             }
         }
     }
+    backward(blocks, &mut end, done);
+    ceiling
+    // No forward pass: the interpolator accelerates as fast as its limits allow by
+    // itself, along the whole path at once. A forward pass (each block's end speed
+    // reachable from its start with zero acceleration at both) would hold it to a
+    // staircase of stops in acceleration at every block end: on a chain of tiny segments
+    // from rest, a crawl.
+}
+
+/// The backward pass of [`plan_split`] over the junction speed limits `end` (mm/s, at
+/// each block's end; overwritten with the planned speeds).
+fn backward<B: Plannable>(blocks: &mut [B], end: &mut [f64], mut done: impl FnMut(usize, &B)) {
+    let n = blocks.len();
     // Backward pass: every block must be able to slow to its end speed. A block's end
     // speed is final once the block after it has been passed, so its feeds are set here.
     for i in (0..n).rev() {
@@ -1983,11 +2171,6 @@ fn plan_split<B: Plannable>(
             end[i - 1] = start;
         }
     }
-    // No forward pass: the interpolator accelerates as fast as its limits allow by
-    // itself, along the whole path at once. A forward pass (each block's end speed
-    // reachable from its start with zero acceleration at both) would hold it to a
-    // staircase of stops in acceleration at every block end: on a chain of tiny segments
-    // from rest, a crawl.
 }
 
 #[cfg(test)]
