@@ -25,15 +25,17 @@
 //! entered with more acceleration than it allows: the acceleration the profile rises to
 //! is held under each block ahead's limit plus what the lower jerk can shed before it is
 //! reached ([`Engine::acc_ceiling`]). The walk reaches as far as the lowest limits of
-//! every block in hand could need to stop, and a limit beyond a low is left to that low
-//! only where the easing of what the low may be passed with still keeps it
+//! every block in hand could need to stop from the highest speed and acceleration this
+//! cycle can reach (its acceleration raised by one period's jerk, not the block's whole
+//! limit: that reached three to four times too far), and a limit beyond a low is left
+//! to that low only where the easing of what the low may be passed with still keeps it
 //! ([`Engine::spare`]); blocks of one curve whose limits differ sixfold once broke each
-//! of these. Up to `MAX_AHEAD`
-//! limits are tested one by one; the further ones are folded into the last of them. The walk that finds them reads
-//! each block's few figures from a packed array beside the ring (not from its 1.5 KB
-//! block), and its searches use square-root-free comparisons
-//! ([`shared::profile::Limits::change_within`]): on a window of hundreds of tiny
-//! blocks this walk was two thirds of a cycle's cost (`cycle/profile_worst` in
+//! of these. Up to `MAX_AHEAD` limits are tested one by one; the further ones are
+//! folded into the last of them. The walk that finds them reads each block's few
+//! figures from a packed array beside the ring (not from its 1.5 KB block), and its
+//! tests use square-root-free comparisons ([`shared::profile::Limits::change_within`],
+//! [`Engine::spare_exceeds`]) and a branch-free bisection: on a window of hundreds of
+//! tiny blocks this walk was two thirds of a cycle's cost (`cycle/profile_worst` in
 //! `benches/cycle.rs`, `BENCHMARKS.md`).
 //!
 //! The engine trusts no block it was not built to: each block is validated, then checked
@@ -1070,11 +1072,21 @@ impl Engine {
         // curve's junction was passed at six times its speed.)
         let reach_d = {
             let braking = min_lim(min_lim(lim, top), self.window.lowest);
-            // (A rising speed eased off under a lower jerk than the motion's own rises
-            // further: by `a²/2j`.)
-            let a_top = self.acc.max(top.acc);
-            let v_peak = v_top + a_top * a_top / (2.0 * braking.jerk);
-            let easing = self.acc.max(0.0) / braking.jerk;
+            // The highest acceleration of this cycle: the motion's, raised by its jerk
+            // for at most one period, up to its limit (a braking only lowers it). The
+            // speed rises in the cycle by at most `v_top - v` plus `J·T²/2` under the
+            // jerk, and a rising speed eased off from there under the lowest jerk rises
+            // further by `a²/2j`, taking `a/j`. (Taken
+            // as the whole limit, the walk reached three to four times as far as any
+            // limit could bind: 2 mm, 200 blocks, at 26 mm/s on the chain of
+            // `cycle/profile_worst`, every limit past the 16th folded into it.)
+            let a_top = self
+                .acc
+                .max((self.acc + top.jerk * self.t_s).min(top.acc))
+                .max(0.0);
+            let v_peak =
+                v_top + 0.5 * top.jerk * self.t_s * self.t_s + a_top * a_top / (2.0 * braking.jerk);
+            let easing = a_top / braking.jerk;
             braking.change_distance(v_peak, 0.0) + v_peak * (self.t_s + easing)
         };
         // The lowest jerk of the blocks beyond the limits kept so far.
