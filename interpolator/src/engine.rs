@@ -25,15 +25,17 @@
 //! entered with more acceleration than it allows: the acceleration the profile rises to
 //! is held under each block ahead's limit plus what the lower jerk can shed before it is
 //! reached ([`Engine::acc_ceiling`]). The walk reaches as far as the lowest limits of
-//! every block in hand could need to stop, and a limit beyond a low is left to that low
-//! only where the easing of what the low may be passed with still keeps it
+//! every block in hand could need to stop from the highest speed and acceleration this
+//! cycle can reach (its acceleration raised by one period's jerk, not the block's whole
+//! limit: that reached three to four times too far), and a limit beyond a low is left
+//! to that low only where the easing of what the low may be passed with still keeps it
 //! ([`Engine::spare`]); blocks of one curve whose limits differ sixfold once broke each
-//! of these. Up to `MAX_AHEAD`
-//! limits are tested one by one; the further ones are folded into the last of them. The walk that finds them reads
-//! each block's few figures from a packed array beside the ring (not from its 1.5 KB
-//! block), and its searches use square-root-free comparisons
-//! ([`shared::profile::Limits::change_within`]): on a window of hundreds of tiny
-//! blocks this walk was two thirds of a cycle's cost (`cycle/profile_worst` in
+//! of these. Up to `MAX_AHEAD` limits are tested one by one; the further ones are
+//! folded into the last of them. The walk that finds them reads each block's few
+//! figures from a packed array beside the ring (not from its 1.5 KB block), and its
+//! tests use square-root-free comparisons ([`shared::profile::Limits::change_within`],
+//! [`Engine::spare_exceeds`]) and a branch-free bisection: on a window of hundreds of
+//! tiny blocks this walk was two thirds of a cycle's cost (`cycle/profile_worst` in
 //! `benches/cycle.rs`, `BENCHMARKS.md`).
 //!
 //! The engine trusts no block it was not built to: each block is validated, then checked
@@ -452,13 +454,20 @@ impl Window {
         let b = self.get(0).copied()?;
         self.head = self.slot(1);
         self.len -= 1;
-        // Once per block, not per cycle: a walk over the figures held.
-        self.lowest = NO_LIMIT;
-        for i in 0..self.len {
-            if let Some(f) = self.motion(i) {
-                self.lowest = min_lim(self.lowest, f.lim);
-            }
-        }
+        // Once per block, not per cycle: a walk over the figures held, the two runs of
+        // the ring as plain slices.
+        let (head, len) = (self.head, self.len);
+        let cap = self.figs.len();
+        let first = self.figs.get(head..cap.min(head + len)).unwrap_or(&[]);
+        let rest = self
+            .figs
+            .get(..(head + len).saturating_sub(cap))
+            .unwrap_or(&[]);
+        self.lowest = first
+            .iter()
+            .chain(rest)
+            .filter(|f| f.motion)
+            .fold(NO_LIMIT, |lo, f| min_lim(lo, f.lim));
         Some(b)
     }
 }
@@ -535,16 +544,18 @@ impl Low {
     /// The highest speed the easing of that acceleration reaches under the jerk `j`
     /// (no higher than the jerk beyond the low): passed at `v` with `a`,
     /// `v + a²/2·jerk ≤ low.v`, the speed rises to `v + a²/2j`, highest where `a` is.
-    fn peak(&self, j: f64) -> f64 {
-        let a = self.passing_acc();
+    /// (`a` is [`Low::passing_acc`], found once by the caller: it takes a square root.)
+    #[inline]
+    fn peak(&self, a: f64, j: f64) -> f64 {
         let rise = a * a / (2.0 * self.jerk);
         (self.v - rise).max(0.0) + a * a / (2.0 * j)
     }
 
     /// The highest speed to pass the low with so that the easing under `j` stays
-    /// within `r` (the inverse of [`Low::peak`]; `low.v` if that is already so).
-    fn passed_below(&self, r: f64, j: f64) -> f64 {
-        if self.peak(j) <= r {
+    /// within `r` (the inverse of [`Low::peak`]; `low.v` if that is already so), `peak`
+    /// being `self.peak(self.passing_acc(), j)`.
+    fn passed_below(&self, peak: f64, r: f64, j: f64) -> f64 {
+        if peak <= r {
             return self.v;
         }
         let a2 = self.acc * self.acc;
@@ -575,9 +586,11 @@ fn block_jerk(b: &CommandBlock) -> Jerk {
 
 /// A speed (zero acceleration) from which `v` is reached within `d` mm under `lim`: the
 /// highest such to within an eighth of a per cent, never above it (a few steps of
-/// bisection on the closed-form distance; cheap enough for the cycle).
-fn reach_within(lim: Jerk, v: f64, d: f64) -> f64 {
-    if d <= 0.0 {
+/// bisection on the closed-form distance; cheap enough for the cycle). The search stops
+/// as soon as it finds one no lower than `enough` (for a caller that only asks whether
+/// `enough` is within reach).
+fn reach_within(lim: Jerk, v: f64, d: f64, enough: f64) -> f64 {
+    if d <= 0.0 || v >= enough {
         return v;
     }
     // Upper bracket: the speed change whose distance alone at the higher speed is `d`
@@ -594,13 +607,28 @@ fn reach_within(lim: Jerk, v: f64, d: f64) -> f64 {
     );
     for _ in 0..10 {
         let mid = 0.5 * (lo + hi);
-        if lim.change_within(mid, v, d) {
-            lo = mid;
-        } else {
-            hi = mid;
+        // (Selected, not branched on: the outcome of each step is a coin toss.)
+        let ok = change_within(lim, mid, v, d);
+        lo = if ok { mid } else { lo };
+        hi = if ok { hi } else { mid };
+        if lo >= enough {
+            break;
         }
     }
     lo
+}
+
+/// [`shared::profile::Limits::change_within`], the same arithmetic with both branches
+/// evaluated and one selected (no branch to mispredict in a bisection).
+#[inline]
+fn change_within(lim: Jerk, v0: f64, v1: f64, d: f64) -> bool {
+    let (acc, jerk) = (lim.acc, lim.jerk);
+    let dv = (v0 - v1).abs();
+    let sum = v0 + v1;
+    let sat = dv * jerk >= acc * acc;
+    let within_sat = 0.5 * sum * (dv * jerk + acc * acc) <= d * (acc * jerk);
+    let within = (d >= 0.0) & (sum * sum * dv <= d * d * jerk);
+    (sat & within_sat) | (!sat & within)
 }
 
 fn min_lim(a: Jerk, b: Jerk) -> Jerk {
@@ -1044,18 +1072,30 @@ impl Engine {
         // curve's junction was passed at six times its speed.)
         let reach_d = {
             let braking = min_lim(min_lim(lim, top), self.window.lowest);
-            // (A rising speed eased off under a lower jerk than the motion's own rises
-            // further: by `a²/2j`.)
-            let a_top = self.acc.max(top.acc);
-            let v_peak = v_top + a_top * a_top / (2.0 * braking.jerk);
-            let easing = self.acc.max(0.0) / braking.jerk;
+            // The highest acceleration of this cycle: the motion's, raised by its jerk
+            // for at most one period, up to its limit (a braking only lowers it). The
+            // speed rises in the cycle by at most `v_top - v` plus `J·T²/2` under the
+            // jerk, and a rising speed eased off from there under the lowest jerk rises
+            // further by `a²/2j`, taking `a/j`. (Taken
+            // as the whole limit, the walk reached three to four times as far as any
+            // limit could bind: 2 mm, 200 blocks, at 26 mm/s on the chain of
+            // `cycle/profile_worst`, every limit past the 16th folded into it.)
+            let a_top = self
+                .acc
+                .max((self.acc + top.jerk * self.t_s).min(top.acc))
+                .max(0.0);
+            let v_peak =
+                v_top + 0.5 * top.jerk * self.t_s * self.t_s + a_top * a_top / (2.0 * braking.jerk);
+            let easing = a_top / braking.jerk;
             braking.change_distance(v_peak, 0.0) + v_peak * (self.t_s + easing)
         };
         // The lowest jerk of the blocks beyond the limits kept so far.
         let mut kept_next_jerk = f64::INFINITY;
         let mut i = 0usize;
+        // The figures of the block beyond the point reached (the `i`-th held), if a motion.
+        let mut beyond = self.window.motion(i);
         loop {
-            let next = self.window.motion(i).map_or(lim, |f| f.lim);
+            let next = beyond.map_or(lim, |f| f.lim);
             if v >= lowest && next.jerk < kept_next_jerk && v.is_finite() {
                 // Not lower than a nearer limit, but the block beyond it eases a rising
                 // speed off more slowly than any beyond those: a speed passed under a
@@ -1077,6 +1117,11 @@ impl Engine {
                     // (The spare first: on tiny blocks it alone exceeds the room.)
                     // (Braked for under the jerk of the block beyond it too: see
                     // [`Ahead::easing`].)
+                    (Some(low), Some(seg))
+                        if self.spare_exceeds(low, seg.jerk.min(next.jerk), d - low.d) =>
+                    {
+                        false
+                    }
                     (Some(low), Some(seg)) => {
                         let seg = eased(seg, next);
                         let (peak, spare) = self.spare(low, seg);
@@ -1110,10 +1155,14 @@ impl Engine {
                         acc: acc_hi,
                         jerk: last.next.jerk,
                     };
-                    let (_, spare) = self.spare(low, easing);
+                    let (peak, spare) = self.spare(low, easing);
                     let room = d - last.d - spare;
-                    let r = reach_within(easing, v, room);
-                    last.v = last.v.min(low.passed_below(r, easing.jerk.min(low.jerk)));
+                    // (The search ends once it shows the low's easing, `peak`, within
+                    // reach: the low is then kept as it is, whatever the rest finds.)
+                    let r = reach_within(easing, v, room, peak);
+                    last.v = last
+                        .v
+                        .min(low.passed_below(peak, r, easing.jerk.min(low.jerk)));
                     last.lim = min_lim(last.lim, lim);
                     last.next = min_lim(last.next, next);
                     kept_next_jerk = kept_next_jerk.min(next.jerk);
@@ -1126,18 +1175,19 @@ impl Engine {
             if d > reach_d {
                 break;
             }
-            let Some(b) = self.window.motion(i) else {
+            let Some(b) = beyond else {
                 break;
             };
             lim = min_lim(lim, b.lim);
             acc_hi = acc_hi.max(b.lim.acc);
             since_low = Some(since_low.map_or(b.lim, |l| min_lim(l, b.lim)));
             d += b.length_mm;
-            v = match self.window.motion(i + 1) {
+            i += 1;
+            beyond = self.window.motion(i);
+            v = match beyond {
                 Some(_) => b.end_mm_per_s,
                 None => 0.0,
             };
-            i += 1;
         }
         n
     }
@@ -1159,8 +1209,34 @@ impl Engine {
     /// speed instead of 61 %, and the random search finds no limit broken without it.)
     fn spare(&self, low: Low, seg: Jerk) -> (f64, f64) {
         let j_s = seg.jerk.min(low.jerk);
-        let peak = low.peak(j_s);
-        (peak, peak * (2.0 * self.t_s + low.passing_acc() / j_s))
+        let a = low.passing_acc();
+        let peak = low.peak(a, j_s);
+        (peak, peak * (2.0 * self.t_s + a / j_s))
+    }
+
+    /// True only where `gap` is shorter than the distance [`Engine::spare`] allows past
+    /// `low` under the jerk `seg_jerk` (so a limit `gap` beyond the low is not implied by
+    /// it): shown without its square root and divisions, from `peak >= low.v` (the easing
+    /// under a jerk no higher than the low's own rises at least as far as it falls), with
+    /// a relative margin of `1e-6` that rounding cannot cross. False where it cannot
+    /// tell; the full test then decides. (On a chain slowing down to a stop, every block
+    /// end is a new low 10 µm past the last, with a spare of about half a millimetre:
+    /// `cycle/profile_worst`'s dearest cycles made about 90 such tests.)
+    #[inline]
+    fn spare_exceeds(&self, low: Low, seg_jerk: f64, gap: f64) -> bool {
+        let w = low.v;
+        let j_s = seg_jerk.min(low.jerk);
+        if !(w >= 0.0 && j_s > 0.0) {
+            return false;
+        }
+        // gap·(1 + 1e-6) < w·(2T + passing_acc/j_s), with passing_acc² = min(acc², 2·jerk·w).
+        let x = gap * (1.0 + 1e-6) - 2.0 * self.t_s * w;
+        if x < 0.0 {
+            return true;
+        }
+        let pa2 = (low.acc * low.acc).min(2.0 * low.jerk * w);
+        let lhs = x * j_s;
+        lhs * lhs < w * w * pa2
     }
 
     /// The highest acceleration the motion `m` may rise to now: its block's own limit,
