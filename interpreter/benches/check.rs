@@ -8,6 +8,12 @@
 //! and `G5.2` that LinuxCNC's `rs274` reads too. `CHECK_BENCH_WRITE=DIR` also writes them
 //! to DIR (for timing LinuxCNC's `rs274` on the same text; see BENCHMARKS.md).
 //!
+//! `CHECK_BENCH_PLAIN_LINES=N` makes `plain_g1` N lines long instead of 100 000 (`mixed`
+//! walks off the longest travel beyond 136 000): `CHECK_BENCH_PLAIN_LINES=200000
+//! CHECK_BENCH_WRITE=DIR cargo bench -p interpreter --bench check -- none` writes the
+//! 200 000-line `plain_g1` that BENCHMARKS.md times against `rs274`, and benchmarks
+//! nothing.
+//!
 //! Run: `cargo bench -p interpreter --bench check`.
 
 use criterion::{criterion_group, criterion_main, Criterion, Throughput};
@@ -22,8 +28,14 @@ const PERIOD_NS: u64 = 1_000_000;
 
 fn bench(c: &mut Criterion) {
     let machine = programs::long_x_machine();
+    let plain_lines = std::env::var("CHECK_BENCH_PLAIN_LINES")
+        .map(|n| {
+            n.parse()
+                .unwrap_or_else(|e| panic!("CHECK_BENCH_PLAIN_LINES={n}: {e}"))
+        })
+        .unwrap_or(LINES);
     let mut programs = vec![
-        ("plain_g1".to_string(), programs::plain_g1(LINES)),
+        ("plain_g1".to_string(), programs::plain_g1(plain_lines)),
         ("mixed".to_string(), programs::mixed(LINES)),
         // What `rs274` reads too (issue #23's planning throughput), half as long: its
         // curves are planned block by block, a few seconds of it.

@@ -211,13 +211,14 @@ fn open_in_browser(page: &std::path::Path) {
 /// `cnc check part.stp`: the part's report; with `--estimate` its blocks stepped through
 /// the interpolator's engine too.
 fn check_step(
-    src: &Source,
+    name: &str,
+    text: &str,
     machine: &shared::Machine,
     period_us: u64,
     estimate: bool,
     json: bool,
 ) -> ExitCode {
-    let report = match crate::step::check::check_part(&src.name, &src.text, machine) {
+    let report = match crate::step::check::check_part(name, text, machine) {
         Ok(r) => r,
         Err(errors) => {
             eprint!("{errors}");
@@ -229,11 +230,10 @@ fn check_step(
         return ExitCode::SUCCESS;
     }
     let period_ns = period_us * 1000;
-    let (blocks, scallop) = match crate::surface_blocks::part_blocks(&src.text, machine, period_ns)
-    {
+    let (blocks, scallop) = match crate::surface_blocks::part_blocks(text, machine, period_ns) {
         Ok(b) => b,
         Err(e) => {
-            eprint!("{}", crate::step::format_errors(&src.name, &e));
+            eprint!("{}", crate::step::format_errors(name, &e));
             return ExitCode::FAILURE;
         }
     };
@@ -247,7 +247,7 @@ fn check_step(
             println!(
                 "{}: {} blocks; machining time {:.3} s ({} cycles of {} µs), path {:.3} mm, \
                  max scallop {:.2} µm",
-                src.name,
+                name,
                 blocks.len(),
                 est.time_s,
                 est.cycles,
@@ -257,7 +257,7 @@ fn check_step(
             );
             ExitCode::SUCCESS
         }
-        Err(e) => fail(format!("{}: estimate: {e}", src.name)),
+        Err(e) => fail(format!("{name}: estimate: {e}")),
     }
 }
 
@@ -282,13 +282,23 @@ pub fn main() -> ExitCode {
             if let Err(e) = machine.check_period(period_us) {
                 return fail(e);
             }
-            let src = match Source::load(Some(&program)) {
-                Ok(s) => s,
-                Err(e) => return fail(e),
+            // A regular UTF-8 file is mapped, not copied (see `mapped`); anything else
+            // is read the usual way, with the usual errors.
+            let mapped = crate::mapped::MappedText::open(&program);
+            let src = match &mapped {
+                Some(_) => Source {
+                    name: program.display().to_string(),
+                    text: String::new(),
+                },
+                None => match Source::load(Some(&program)) {
+                    Ok(s) => s,
+                    Err(e) => return fail(e),
+                },
             };
+            let text = mapped.as_ref().map_or(src.text.as_str(), |m| m.as_str());
             let period_ns = period_us * 1000;
-            if crate::step::check::is_step_file(&src.name, &src.text) {
-                return check_step(&src, &machine, period_us, estimate, json);
+            if crate::step::check::is_step_file(&src.name, text) {
+                return check_step(&src.name, text, &machine, period_us, estimate, json);
             }
             // Subroutine files are looked for beside the program first, as LinuxCNC
             // looks in the directory of the program it opened.
@@ -297,7 +307,7 @@ pub fn main() -> ExitCode {
                 dialect,
                 subroutine_dirs: beside.into_iter().chain(subroutine_path).collect(),
             };
-            match process::check_with(&src.text, &opts, &machine, period_ns) {
+            match process::check_with(text, &opts, &machine, period_ns) {
                 Ok((prog, blocks)) if estimate => {
                     let blocks = crate::blocks::commands(&blocks);
                     match crate::estimate::estimate(&blocks, &machine, period_ns) {
@@ -332,7 +342,7 @@ pub fn main() -> ExitCode {
                     // once: dropping the lists first would only walk every move (for
                     // the curves' own lists) and unmap them, a few percent of the
                     // check of a long program.
-                    std::mem::forget((prog, blocks, src));
+                    std::mem::forget((prog, blocks, src, mapped));
                     ExitCode::SUCCESS
                 }
                 Err(diags) => {

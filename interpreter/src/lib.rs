@@ -24,6 +24,7 @@ pub mod estimate;
 pub mod expr;
 pub mod html;
 pub mod launch;
+mod mapped;
 mod pages;
 pub mod parse;
 pub mod process;

@@ -27,6 +27,7 @@ mod fanuc;
 mod feed;
 mod flow;
 mod linuxcnc;
+mod plain;
 mod subfile;
 mod usage;
 
@@ -338,6 +339,21 @@ pub fn interpret(text: &str) -> Result<Program, Vec<Diagnostic>> {
 
 /// [`interpret`], with the dialect forced or other options.
 pub fn interpret_with(text: &str, opts: &Options) -> Result<Program, Vec<Diagnostic>> {
+    interpret_lines(text, opts, Way::Short)
+}
+
+/// How [`interpret_lines`] reads plain straight moves.
+#[derive(Clone, Copy, PartialEq)]
+enum Way {
+    /// The short way ([`plain`]), the general one for every other line.
+    Short,
+    /// Every line the general way: what the short way is held to (tests).
+    #[cfg_attr(not(test), allow(dead_code))]
+    General,
+}
+
+/// [`interpret_with`], reading plain straight moves as `way` says.
+fn interpret_lines(text: &str, opts: &Options, way: Way) -> Result<Program, Vec<Diagnostic>> {
     let mut st = State {
         pos: [0.0; 3],
         g62: None,
@@ -407,15 +423,30 @@ pub fn interpret_with(text: &str, opts: &Options) -> Result<Program, Vec<Diagnos
         }
         let here = pc;
         pc += 1;
+        if let Err(d) = run.count_line(here) {
+            errors.push(d);
+            break;
+        }
+        // A plain straight move (most lines of CAM output) the short way; a line of the
+        // program's own (not of a subroutine file) carries its own number.
+        let plain = match &mut in_order {
+            _ if way == Way::General => None,
+            Some(split) => {
+                plain::run(&mut st, split.rest(), line, &mut prog.moves).map(|len| split.pass(len))
+            }
+            None if here < own_lines => {
+                plain::run(&mut st, lines[here].as_bytes(), line, &mut prog.moves).map(drop)
+            }
+            None => None,
+        };
+        if plain.is_some() {
+            continue;
+        }
         // Without O-words nothing jumps: line `here` is the next one split off.
         let raw = match &mut in_order {
             Some(split) => split.next().unwrap_or_default(),
             None => lines[here],
         };
-        if let Err(d) = run.count_line(here) {
-            errors.push(d);
-            break;
-        }
         if raw.len() > MAX_LINE_BYTES {
             let col = raw
                 .char_indices()
@@ -569,6 +600,17 @@ struct LineSplitter<'a> {
 impl<'a> LineSplitter<'a> {
     fn new(text: &'a str) -> Self {
         LineSplitter { text, at: 0 }
+    }
+
+    /// The text from the next line's start to the end.
+    fn rest(&self) -> &'a [u8] {
+        &self.text.as_bytes()[self.at..]
+    }
+
+    /// Passes the next line, `len` bytes before its `\n` (or the text's end), as
+    /// [`Iterator::next`] would.
+    fn pass(&mut self, len: usize) {
+        self.at = (self.at + len + 1).min(self.text.len());
     }
 }
 

@@ -310,3 +310,140 @@ proptest::proptest! {
         proptest::prop_assert_eq!(quick, check_letters(&lw).is_ok());
     }
 }
+
+/// Lines for [`the_short_way_reads_as_the_general_way`]: mostly plain straight moves,
+/// with their near misses and the codes that change what they do.
+fn line_strategy() -> impl proptest::strategy::Strategy<Value = String> {
+    use proptest::prelude::*;
+    let value = prop_oneof![
+        8 => (-2000i32..2000).prop_map(|v| format!("{:.3}", f64::from(v) * 0.123)),
+        2 => proptest::sample::select(vec!["0", "-0", "+3", ".25", "-.5", "1.", "7", "0.01"])
+            .prop_map(String::from),
+        1 => proptest::sample::select(vec![
+            "200000", "-100000.001", "1..2", "", " 1", "[1]", "#1", "1e3", "-5",
+        ])
+        .prop_map(String::from),
+    ];
+    let axis = (
+        proptest::sample::select(vec!['X', 'Y', 'Z', 'x', 'z']),
+        value.clone(),
+    )
+        .prop_map(|(l, v)| format!("{l}{v}"));
+    let plain = (
+        proptest::sample::select(vec![
+            "", "", "G1", "G0", "G01", "G1.0", "g00", "G0.0", "G+1",
+        ]),
+        proptest::collection::vec(axis, 0..4),
+        proptest::option::weighted(0.3, value.prop_map(|v| format!("F{v}"))),
+        proptest::sample::select(vec![" ", ""]),
+    )
+        .prop_map(|(g, axes, f, sep)| {
+            let mut words = vec![g.to_string()];
+            words.extend(axes);
+            words.extend(f);
+            words.join(sep)
+        });
+    let other = proptest::sample::select(vec![
+        "G91",
+        "G90",
+        "G20",
+        "G21",
+        "G93 G1 X1 F2",
+        "G94 F300",
+        "G2 X1 Y1 I0.5 J0.5",
+        "G5.2 X1 Y1 P1 L3\nX2 Y0 P1\nG5.3",
+        "M3 S100",
+        "M5",
+        "F100",
+        "F0.01",
+        "G1",
+        "G0",
+        "N5 G1 X2",
+        "G1 X1 (c)",
+        "G1 X2 ;c",
+        "#1=2",
+        "G1 X#1",
+        "/G1 X3",
+        "%",
+        "G1 X1 é",
+        "G61.1",
+        "G64 P0.1",
+        "G18",
+        "G17",
+        "G1 X1 X2",
+        "G1 G0 X1",
+        "G1 X1 I1",
+        "G80 X1",
+        "G4 P0.1",
+        "M2",
+        "",
+        "G5 X2 Y2 I0.5 J0 P0.5 Q0",
+        "G5 X3 Y1 P0.5 Q0",
+    ])
+    .prop_map(String::from);
+    (
+        proptest::sample::select(vec!["", "", " ", "\t"]),
+        prop_oneof![3 => plain, 1 => other],
+        proptest::sample::select(vec!["\n", "\n", "\r\n", " \n"]),
+    )
+        .prop_map(|(lead, line, end)| format!("{lead}{line}{end}"))
+}
+
+proptest::proptest! {
+    #![proptest_config(proptest::prelude::ProptestConfig::with_cases(1000))]
+    /// The short way through plain straight moves ([`plain`]) gives the very moves,
+    /// messages, dialect and errors the general way gives, on programs of plain moves,
+    /// their near misses and the codes that change what they do; with O-words too (the
+    /// lines then listed), and without a last `\n`; mostly after a feed (a feed move
+    /// without one is an error, and a program with an error gives no moves). Every start of the program is read
+    /// (all but its first lines cut off), so that the moves before an error are compared
+    /// too.
+    #[test]
+    fn the_short_way_reads_as_the_general_way(
+        lines in proptest::collection::vec(line_strategy(), 1..24),
+        o_words in proptest::bool::ANY,
+        feed in proptest::bool::weighted(0.8),
+        cut_end in proptest::bool::ANY,
+    ) {
+        let head = if o_words { "o1 sub\nG1 X1\no1 endsub\n" } else { "" };
+        for n in 1..=lines.len() {
+            let mut text = String::from(head);
+            if feed {
+                text.push_str("F100\n");
+            }
+            text.extend(lines[..n].iter().map(String::as_str));
+            if cut_end {
+                text.pop();
+            }
+            let read = |way| match interpret_lines(&text, &Options::default(), way) {
+                Ok(p) => Ok((p.moves, p.messages, p.dialect)),
+                Err(e) => Err(e),
+            };
+            proptest::prop_assert_eq!(read(Way::Short), read(Way::General), "{:?}", text);
+        }
+    }
+}
+
+/// [`the_short_way_reads_as_the_general_way`] on cases chance seldom builds: a plain
+/// move between two `G5` forgets the first one's tangent, inch and incremental moves,
+/// inverse time, a curve open around plain lines, lines too long.
+#[test]
+fn the_short_way_on_chosen_cases() {
+    let long = format!("G1 X1{}\n", " ".repeat(260));
+    for text in [
+        "F100\nG5 X2 Y2 I0.5 J0 P0.5 Q0\nG1 X3 Y3\nG5 X4 Y4 P0.5 Q0\n",
+        "F100\nG5 X2 Y2 I0.5 J0 P0.5 Q0\nG5 X4 Y4 P0.5 Q0\nG1 X5\n",
+        "G20 G91 F4\nG1 X1 Y1\nX1\nG0 Z1\nG90 G21 X2 Y2 Z2 F0.09\nG1 X1\n",
+        "G93 G1 X1 F2\nG1 X2\nX3 F4\nG94 G1 X4\n",
+        "F100\nG5.2 X1 Y1 P1 L3\nX2 Y0 P1\nG1 X3 Y1\nG5.3\nG1 X4\n",
+        "F100\nG1 X1\n",
+        long.as_str(),
+        "F100\nG1 X1\nM2\nG1 X-1e6\n",
+    ] {
+        let read = |way| match interpret_lines(text, &Options::default(), way) {
+            Ok(p) => Ok((p.moves, p.messages, p.dialect)),
+            Err(e) => Err(e),
+        };
+        assert_eq!(read(Way::Short), read(Way::General), "{text:?}");
+    }
+}
