@@ -30,11 +30,13 @@
 //!   `x`: its norm within `path_jerk_mm_per_s3` (a cone), each axis's component within
 //!   that axis's jerk. The solves stop when the time changes by less than
 //!   [`CONVERGED`] (or after [`MAX_ROUNDS`]); at the fixed point `v̄ = v` and the jerk
-//!   is the grid profile's true one. [`JerkOptimum::jerk_ratio`] reports it with the
+//!   is the grid profile's true one. Of a stretch's solves the fastest whose own jerk
+//!   is within [`KEEP_JERK`] is kept (else the one of the lowest own jerk), so a solve
+//!   that swung off never replaces a good one. [`JerkOptimum::jerk_ratio`] reports it with the
 //!   profile's own speeds in units of its limit, which shows how far from the fixed
 //!   point a run ended. **Known limit**: where the grid is much finer than the jerk
 //!   phases of a start from rest (a 0.2 mm move on a 0.004 mm grid) the iteration does
-//!   not settle (its own jerk 2.5 × the limit there); the table's grid (0.25 mm and
+//!   not settle (its own jerk 2.2 × the limit there); the table's grid (0.25 mm and
 //!   coarser) settles (`tests/tests/topp3.rs`);
 //! * **`κ'`** is the difference of the curvature vectors over a window around the node at
 //!   least `v̄·T` long (`T` the period): on a smooth curve this is the derivative; where
@@ -55,9 +57,9 @@
 //! differences over cells), at the fixed point of the linearization (a KKT point of the
 //! jerk-limited problem; the TOPP3 literature finds these globally optimal in practice,
 //! not proven). Measured (`tests/tests/topp3.rs`): the 7-phase S-curve of a line to
-//! 6.8e-3 at worst (0.2 mm; 2.8e-4 on 100 mm), a circle's cruise at `(J r²)^(1/3)` to
-//! 3.4e-4, the acceleration-only optimum when the jerk does not bind to 1.1e-4, and a
-//! change of 6.2e-4 from halving the feed table's 0.25 mm grid on LinuxCNC's NURBS
+//! 7.1e-3 at worst (0.2 mm; 2.8e-4 on 100 mm), a circle's cruise at `(J r²)^(1/3)` to
+//! 4.5e-4, the acceleration-only optimum when the jerk does not bind to 1.1e-4, and a
+//! change of 6.0e-4 from halving the feed table's 0.25 mm grid on LinuxCNC's NURBS
 //! program. Its distance from the fixed point: [`JerkOptimum::last_change`].
 
 use crate::topp::{self, GridPoint, RefLimits, MAX_TURN_RAD};
@@ -69,9 +71,12 @@ use shared::protocol::CommandBlock;
 use shared::Machine;
 
 /// The solves stop when the time changes by less than this (relative).
-pub const CONVERGED: f64 = 1e-4;
+pub const CONVERGED: f64 = 1e-3;
 /// At most this many solves a stretch.
-pub const MAX_ROUNDS: usize = 16;
+pub const MAX_ROUNDS: usize = 10;
+/// A solve's profile counts as keeping the jerk when its own jerk (with its own speeds)
+/// is within this many times the limit; of those, the fastest is kept.
+pub const KEEP_JERK: f64 = 1.1;
 
 /// The limits of the jerk-limited reference: those of [`topp`] and the jerks, mm/s³.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -505,6 +510,7 @@ fn time_optimal(grid: &[GridPoint], v0: &[f64], lim: &JerkLimits) -> Result<Jerk
         }
         let mut vb = vbar[start..=end].to_vec();
         let mut prev = f64::INFINITY;
+        let mut best: Option<(f64, f64)> = None;
         let mut r = 0;
         let mut change = f64::INFINITY;
         while r < MAX_ROUNDS {
@@ -525,7 +531,25 @@ fn time_optimal(grid: &[GridPoint], v0: &[f64], lim: &JerkLimits) -> Result<Jerk
             for (b, x) in vb.iter_mut().zip(&xs) {
                 *b = (1.0 - w) * *b + w * x.sqrt();
             }
-            x[start..=end].copy_from_slice(&xs);
+            // Keep the fastest solve whose own jerk is within KEEP_JERK of the limit, else
+            // the one with the lowest own jerk: a solve that swung off (a node driven
+            // to rest by a too high `v̄`) never replaces a good one.
+            let own = worst_ratios(part, &xs, lim).1;
+            let ok = own <= KEEP_JERK;
+            let better = match best {
+                None => true,
+                Some((bt, bj)) => {
+                    if ok {
+                        bj > KEEP_JERK || t < bt
+                    } else {
+                        bj > KEEP_JERK && own < bj
+                    }
+                }
+            };
+            if better {
+                best = Some((t, own));
+                x[start..=end].copy_from_slice(&xs);
+            }
             if change < CONVERGED {
                 break;
             }
