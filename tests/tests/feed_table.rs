@@ -7,9 +7,10 @@
 //! and the worst acceleration, jerk and chord in units of their limits ([`tests::feed`]).
 //! On the built-in machine also the jerk-limited optimum of [`tests::topp3`] (on a grid
 //! of [`tests::feed::JERK_STEP_MM`], coarser on long paths), our ratio to it, its grid
-//! and its profile's own jerk (above 1.1: the linearization did not settle, the figure
-//! is no reference); it is printed again as a table of its own at the end. This adds
-//! about four minutes; `FEED_TABLE_NO_JERK=1` leaves it out.
+//! and its profile's own jerk in units of the limit (each kept profile's is within
+//! [`tests::topp3::KEEP_JERK`]; a figure above it would mean no solve kept the jerk);
+//! it is printed again as a table of its own at the end. This adds a few minutes;
+//! `FEED_TABLE_NO_JERK=1` leaves it out.
 //!
 //! ```text
 //! cargo test --release -p tests --test feed_table -- --ignored --nocapture
