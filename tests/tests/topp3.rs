@@ -247,7 +247,8 @@ fn a_curve_from_its_own_first_control_point_has_a_finite_curvature() {
 }
 
 /// Diagnosis: the reference on the program `TOPP3_FILE` (an absolute path; built-in
-/// machine, the feed table's grid), printed; with `TOPP3_TRACE=1` each solve too:
+/// machine, the feed table's grid, or `TOPP3_CELLS` cells by length), printed; with
+/// `TOPP3_TRACE=1` each solve too:
 ///
 /// ```text
 /// TOPP3_FILE=$PWD/tests/peers/linuxcnc/g5_curva_delfino.ngc \
@@ -272,7 +273,11 @@ fn diagnose_a_program() {
         .blocks;
     let feeds = topp::programmed_feeds(&name, &text, &m, PERIOD_NS, &blocks).unwrap();
     let length: f64 = blocks.iter().map(|b| b.length_mm).sum();
-    let step = tests::feed::JERK_STEP_MM.max(length / tests::feed::JERK_MAX_CELLS);
+    let cells = std::env::var("TOPP3_CELLS")
+        .ok()
+        .and_then(|c| c.parse().ok())
+        .unwrap_or(tests::feed::JERK_MAX_CELLS);
+    let step = tests::feed::JERK_STEP_MM.max(length / cells);
     let t0 = std::time::Instant::now();
     let o = topp3::optimum(&blocks, &feeds, &JerkLimits::of(&m, PERIOD_NS), step).unwrap();
     println!(
