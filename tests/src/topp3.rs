@@ -83,21 +83,20 @@ use clarabel::solver::{
 use shared::protocol::CommandBlock;
 use shared::Machine;
 
-/// The solves stop when the time changes by less than this (relative).
-pub const CONVERGED: f64 = 1e-3;
 /// At most this many solves a stretch.
 pub const MAX_ROUNDS: usize = 14;
 /// A solve's profile counts as keeping the jerk when its own jerk (with its own speeds)
 /// is within this many times the limit; of those, the fastest is kept.
 pub const KEEP_JERK: f64 = 1.0 + 2e-3;
 /// The first trust factor: a solve's jerk is taken with `u = (1 + δ)·v` of the best
-/// profile so far and its speeds kept below `u`; `δ` halves whenever a solve gains
-/// less than [`GAIN`], down to [`DELTA_MIN`].
+/// profile so far and its speeds kept below `u`; `δ` shrinks by [`SHRINK`] whenever a
+/// solve gains less than half of it, down to [`DELTA_MIN`].
 pub const DELTA0: f64 = 0.25;
 pub const DELTA_MIN: f64 = 0.002;
-/// The factor `δ` shrinks by from one solve to the next.
+/// The factor `δ` shrinks by.
 pub const SHRINK: f64 = 0.6;
-/// A solve that shortens the best time by less than this (relative) halves `δ`.
+/// At [`DELTA_MIN`], the solves stop once one shortens the best time by less than this
+/// (relative).
 pub const GAIN: f64 = 1e-4;
 /// Cells shorter than this are merged (see [`nodes`]), mm.
 pub const MIN_NODE_MM: f64 = 1e-4;
@@ -655,8 +654,7 @@ fn time_optimal(grid: &[GridPoint], v0: &[f64], lim: &JerkLimits) -> Result<Jerk
             start = end;
             continue;
         }
-        let (t, xs, r, change, delta) = stretch(part, &ubar[start..=end], lim)?;
-        let _ = t;
+        let (_, xs, r, change, delta) = stretch(part, &ubar[start..=end], lim)?;
         x[start..=end].copy_from_slice(&xs);
         last_change = last_change.max(change);
         rounds = rounds.max(r);
