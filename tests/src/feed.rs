@@ -1,7 +1,7 @@
 //! The feed table's measurements: a program planned and stepped through the
 //! interpolator's engine in this process, as `cnc check --estimate` does, and its
 //! set-points measured cycle by cycle against the machine's limits, next to the
-//! time-optimal reference of [`crate::topp`].
+//! time-optimal references of [`crate::topp`] and (jerk-limited) [`crate::topp3`].
 //!
 //! From the set-points alone (backward differences, `T` the period): each axis's velocity
 //! `Δp/T`, acceleration `Δ²p/T²` and jerk `Δ³p/T³` against that axis's limits, and the
@@ -15,6 +15,7 @@
 //! `chord_tolerance_mm`. A second algorithm to the sagitta of `limits.rs`.
 
 use crate::topp::{self, RefLimits};
+use crate::topp3::{self, JerkLimits};
 use interpolator::engine::{BlockSource, Engine, Limits, TickState};
 use shared::path;
 use shared::protocol::{BlockKind, CommandBlock};
@@ -283,6 +284,24 @@ fn chord_deviation(
 /// The most cells [`row`] puts on a path at its coarser grid (by length).
 pub const MAX_CELLS: f64 = 100_000.0;
 
+/// The grid step of the jerk-limited optimum in the table, mm, and the most cells it
+/// puts on a path (by length; the curvature refinement adds its own): the conic solves
+/// take seconds per thousand cells. `tests/tests/topp3.rs` measures its convergence on
+/// LinuxCNC's NURBS program (halving 0.25 mm and 0.1 mm).
+pub const JERK_STEP_MM: f64 = 0.25;
+pub const JERK_MAX_CELLS: f64 = 1_000.0;
+
+/// The jerk-limited optimum of a row ([`topp3`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct JerkColumn {
+    pub step_mm: f64,
+    pub optimum_s: f64,
+    /// The acceleration-only optimum on the same (coarser) grid.
+    pub acc_only_s: f64,
+    /// The profile's own worst jerk in units of its limit (see [`topp3::JerkOptimum`]).
+    pub jerk_ratio: f64,
+}
+
 /// One program on one machine: our time (the engine, as `cnc check --estimate`), the
 /// acceleration-only optimum at the grid step and at half of it, and the worst figures.
 #[derive(Debug, Clone, PartialEq)]
@@ -296,6 +315,8 @@ pub struct Row {
     pub grid_points: usize,
     pub length_mm: f64,
     pub worst: Worst,
+    /// The jerk-limited optimum, when asked for ([`row`]'s `jerk`).
+    pub jerk: Option<Result<JerkColumn, String>>,
 }
 
 impl Row {
@@ -313,13 +334,15 @@ impl Row {
 /// Compiles `text` (G-code or STEP-NC, told apart by its name and text) for `machine`,
 /// steps it, measures it and computes its optimum on a grid of `step_mm`, or of
 /// [`MAX_CELLS`] cells over the path if that is coarser (a long part's grid stays
-/// affordable; the table reports the step and the change at half of it).
+/// affordable; the table reports the step and the change at half of it). With `jerk`,
+/// also the jerk-limited optimum at [`JERK_STEP_MM`] (or [`JERK_MAX_CELLS`] by length).
 pub fn row(
     name: &str,
     text: &str,
     machine: &Machine,
     period_ns: u64,
     step_mm: f64,
+    jerk: bool,
 ) -> Result<Row, String> {
     let opts = interpreter::program::Options::default();
     let blocks =
@@ -338,6 +361,16 @@ pub fn row(
     let step_mm = step_mm.max(length / MAX_CELLS);
     let coarse = topp::optimum(&blocks, &feeds, &lim, step_mm);
     let fine = topp::optimum(&blocks, &feeds, &lim, step_mm / 2.0);
+    let jerk = jerk.then(|| {
+        let step = JERK_STEP_MM.max(length / JERK_MAX_CELLS);
+        let jl = JerkLimits::of(machine, period_ns);
+        topp3::optimum(&blocks, &feeds, &jl, step).map(|o| JerkColumn {
+            step_mm: step,
+            optimum_s: o.time_s,
+            acc_only_s: o.acc_only_s,
+            jerk_ratio: o.jerk_ratio,
+        })
+    });
     Ok(Row {
         step_mm,
         time_s: est.time_s,
@@ -346,5 +379,6 @@ pub fn row(
         grid_points: fine.grid.len(),
         length_mm: fine.length_mm,
         worst: m.worst,
+        jerk,
     })
 }

@@ -4,6 +4,7 @@
 
 pub mod feed;
 pub mod topp;
+pub mod topp3;
 
 use std::path::{Path, PathBuf};
 use std::process::Command;

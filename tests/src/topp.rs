@@ -448,7 +448,14 @@ pub fn grid(
                 refine(b, (ua, ta), (ub, tb), step_mm, 0, &mut cells);
             }
         }
-        let at = |u: f64, kink: bool, s: f64, pts: &mut Vec<GridPoint>| {
+        // A block end where the parametric speed (nearly) vanishes, as at a repeated
+        // control point: its tangent is right, but its curvature `d2⊥/|d1|²` is roundoff
+        // over a vanishing square (1e20 /mm on g5_curva_mazatrol's 110 mm); such a point
+        // takes its neighbour's curvature (the limit from inside) once the block's points
+        // are known.
+        let mean_speed = cells.iter().map(|c| c.1).sum::<f64>() / (u1 - u0);
+        let mut vanishing: Vec<usize> = Vec::new();
+        let mut at = |u: f64, kink: bool, s: f64, pts: &mut Vec<GridPoint>| {
             // The tangent's side: from just inside the block, towards its other end.
             let uu = u.clamp(u0 + 1e-12 * (u1 - u0), u1 - 1e-12 * (u1 - u0));
             let l = local(b, uu);
@@ -462,6 +469,9 @@ pub fn grid(
             } else {
                 1.0
             };
+            if sp < 1e-6 * mean_speed {
+                vanishing.push(pts.len());
+            }
             let mut cap = if sp < 1e-12 {
                 0.0
             } else {
@@ -483,6 +493,12 @@ pub fn grid(
         for (u, ds, kink) in cells {
             s += ds;
             at(u, kink, s, &mut pts);
+        }
+        for i in vanishing {
+            let near = if i == first { i + 1 } else { i - 1 };
+            if near < pts.len() {
+                pts[i].curvature = pts[near].curvature;
+            }
         }
         // The junction with the motion before.
         if rest_next {
