@@ -366,10 +366,10 @@ pub fn assemble(
         path_length_mm: i.map_or(traced.map_or(0.0, |t| t.path_length_mm), |s| {
             s.path_length_mm
         }),
-        time_s: i.map_or(
-            traced.map_or(0.0, |t| (t.cycles * period_ns) as f64 * 1e-9),
-            |s| s.time_s,
-        ),
+        // From the cycles, as the interpolator and `check --estimate` work it out: its
+        // summary's figure has been through JSON text, whose parser may round the last
+        // bit differently (12.453000000000001 came back 12.453).
+        time_s: (i.map_or(traced.map_or(0, |t| t.cycles), |s| s.cycles) * period_ns) as f64 * 1e-9,
         avg_feed_mm_per_min: i.map_or(
             traced.map_or(0.0, |t| {
                 let s = (t.cycles * period_ns) as f64 * 1e-9;
