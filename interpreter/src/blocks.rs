@@ -1216,11 +1216,14 @@ fn junction_speed(
         });
     }
     // The tool point's velocity step across the junction, in length and direction:
-    // `v·|m_b − m_a|` within one period's share of the acceleration.
+    // `v·|m_b − m_a|` within one period's share of the acceleration, and within half of
+    // what the two blocks' profiles may use along the tool point's path (the other half
+    // they keep: `surface_step_leaves`).
     if let (Some(ma), Some(mb)) = (a.m_end, b.m_start) {
         let dm = path::norm(sub(mb, ma));
         if dm > 1e-9 {
-            v = v.min(acc * period_s / dm);
+            let room = 0.5 * tool_acc(a).min(tool_acc(b));
+            v = v.min(acc * period_s / dm).min(room * period_s / dm);
         }
     }
     let dk = at.dk;
@@ -1512,11 +1515,37 @@ impl Load {
     }
 }
 
+/// The most tangential acceleration a block's profile puts on the tool point's path:
+/// its own (along the contact path) times the fastest the tool point moves for it.
+fn tool_acc(s: &Shape) -> f64 {
+    s.acc * s.surface_ratio.unwrap_or(1.0)
+}
+
+/// What the tool point's velocity step at a junction of surface blocks passed at `v`
+/// (`v·|m_b − m_a|` in one period, along the tool point's path where the surface's
+/// curvature jumps: the ratio of its speed to the contact speed steps) leaves the two
+/// blocks' profiles: their tangential acceleration on the tool point's path less the
+/// step's, so the two together stay within what [`shape`] left them. Without it a part's
+/// profile accelerating at 962 mm/s² passed such a step of 315 mm/s² (1.28 times the
+/// LinuxCNC machine's 1000: `seed-surface-planecc.stp`, the feed table).
+fn surface_step_leaves(a: &Shape, b: &Shape, v: f64, period_s: f64) -> Option<Jerk> {
+    let (ma, mb) = (a.m_end?, b.m_start?);
+    let step = v * path::norm(sub(mb, ma)) / period_s;
+    if step.is_nan() || step <= 0.0 {
+        return None;
+    }
+    let left = |s: &Shape| (s.acc - step / s.surface_ratio.unwrap_or(1.0)).max(0.0);
+    Some(Jerk {
+        acc: left(a).min(left(b)),
+        jerk: f64::INFINITY,
+    })
+}
+
 /// The tangential acceleration and jerk the profiles of the two blocks at a junction
 /// between curves may keep, passed at `v`: what [`Load`] leaves of the path's limits
 /// (`sqrt(A² − acc²)`, `sqrt(J² − jerk²)`) and of each axis's (`(A_i − acc_i)/|t_i|`,
 /// with `t` the larger of the two tangents' components there); `None` where nothing is
-/// taken (a smooth junction, or one between surface blocks, whose shares are their own).
+/// taken (a smooth junction). Between surface blocks, [`surface_step_leaves`].
 fn junction_leaves(
     a: &Shape,
     b: &Shape,
@@ -1526,7 +1555,7 @@ fn junction_leaves(
     period_s: f64,
 ) -> Option<Jerk> {
     if a.surface_ratio.is_some() || b.surface_ratio.is_some() {
-        return None;
+        return surface_step_leaves(a, b, v, period_s);
     }
     let kinked = is_kink(at.half_sin);
     let jumps = is_jump(at.dk);

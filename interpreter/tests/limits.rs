@@ -987,3 +987,55 @@ fn search_random_programs_for_broken_limits() {
         }
     }
 }
+
+/// At a junction of surface blocks where the surface's curvature jumps, the tool point's
+/// speed steps against the contact speed: `v·|m_b − m_a|` in one period, `m = dM/ds` of
+/// the contact path. That step and each block's profile along the tool point's path
+/// (`acc·|m|`) stay within the path acceleration together. LinuxCNC's limits on the
+/// seed's PLANE_CC part once put 962 + 315 mm/s² on the tool point there (1.28 times the
+/// limit; `blocks::surface_step_leaves`). `m` by central differences of 1e-7 in `t`
+/// (tolerance 1e-6 relative).
+#[test]
+fn a_surface_junction_s_speed_step_leaves_the_profile_within_the_acceleration() {
+    let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
+    let machine =
+        shared::machine::load(Some(&root.join("examples/machine-linuxcnc-sim.toml"))).unwrap();
+    let name = "seed-surface-planecc.stp";
+    let text = std::fs::read_to_string(root.join("examples").join(name)).unwrap();
+    let opts = interpreter::program::Options::default();
+    let blocks = interpreter::process::compile_source(name, &text, &opts, &machine, 1_000_000)
+        .unwrap()
+        .blocks;
+    let rate = |b: &CommandBlock, t: f64| {
+        let h = if t < 0.5 { 1e-7 } else { -1e-7 };
+        let c = shared::path::norm(shared::path::contact(b, t, &shared::path::surface_at(b, t)).d1);
+        let (p, q) = (shared::path::eval(b, t).p, shared::path::eval(b, t + h).p);
+        [0, 1, 2].map(|i| (q[i] - p[i]) / (h * c))
+    };
+    let mut steps = 0;
+    for w in blocks.windows(2) {
+        let (a, b) = (&w[0], &w[1]);
+        if !(a.is_surface() && b.is_surface()) || a.end_feed_mm_per_min <= 0.0 {
+            continue;
+        }
+        let (ma, mb) = (rate(a, 1.0), rate(b, 0.0));
+        let v = a.end_feed_mm_per_min / 60.0;
+        let step = v * shared::path::norm([mb[0] - ma[0], mb[1] - ma[1], mb[2] - ma[2]]) / 1e-3;
+        if step > 1.0 {
+            steps += 1;
+        }
+        for (blk, m) in [(a, ma), (b, mb)] {
+            let total = blk.acc_mm_per_s2 * shared::path::norm(m) + step;
+            assert!(
+                total <= machine.path_acc_mm_per_s2 * (1.0 + 1e-6),
+                "blocks {} and {}: {total} mm/s²",
+                a.seq,
+                b.seq
+            );
+        }
+    }
+    assert!(
+        steps > 0,
+        "no junction with a speed step: the test proves nothing"
+    );
+}
