@@ -1828,6 +1828,10 @@ pub fn plan_and<B: Plannable>(
     }
 }
 
+/// A block whose time the relaxation could cut by less than this (s) keeps its
+/// acceleration.
+const RELAX_NEGLIGIBLE_S: f64 = 1e-5;
+
 /// Each curve block's acceleration raised to what its planned speeds leave
 /// ([`relaxed_acc`]), after the last planning round: the planned speeds stay as they
 /// are (junction limits the interpolator never exceeds), the profile between them gets
@@ -1850,6 +1854,17 @@ fn relax<B: Plannable>(blocks: &mut [B], machine: &Machine, ceiling: &[f64]) {
         }
         let (lim, len) = (b.limits(), b.length_mm());
         if ceiling <= lim.acc {
+            continue;
+        }
+        // (Not where the most it could gain, at the highest acceleration the ceiling
+        // and the machine allow, is negligible: the samples cost more than that.)
+        let most = Jerk {
+            acc: ceiling.min(machine.path_acc_mm_per_s2.max(lim.acc)),
+            jerk: lim.jerk,
+        };
+        if block_time(lim, start, end, cap, len) - block_time(most, start, end, cap, len)
+            < RELAX_NEGLIGIBLE_S
+        {
             continue;
         }
         let acc = relaxed_acc(c, machine, cap, lim, (start, end), len).min(ceiling);

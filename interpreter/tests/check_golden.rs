@@ -241,34 +241,41 @@ M2
 /// demo, every_kind, g5_splines, the yz and zx butterflies, the g5 chitarra, delfino and
 /// mazatrol, and the g6 chitarras and delfinos (LinuxCNC machine: the butterfly at
 /// F6000 11.250 -> 11.134 s; built-in: 15.742 -> 15.262 s).
+/// Renewed for issue #23's planning cost, on purpose: a block whose time the relaxation
+/// could cut by less than 1e-5 s (`blocks::RELAX_NEGLIGIBLE_S`, by `block_time` at the
+/// most acceleration it could get) is not sampled again and keeps its acceleration.
+/// Changed: mixed, curves, g5_splines, the g5 chitarra and delfino, the g6 chitarras and
+/// delfinos (LinuxCNC machine: delfino 134.891 -> 134.893 s; built-in: the butterfly at
+/// F6000 15.262 -> 15.275 s); `cnc check` on 10 000 lines of `curves` 1.4 -> 1.1 times
+/// the time without the relaxation.
 const GOLDEN_BLOCKS: &[(&str, usize, u64)] = &[
     ("plain_g1", 99999, 0x2314c695b1663686),
-    ("mixed", 2080, 0x95605a5229f7ca1c),
-    ("curves", 3426, 0x072f425516df1de4),
+    ("mixed", 2080, 0xfa1fcceced432965),
+    ("curves", 3426, 0x35db6c85c050b9ee),
     ("demo", 23, 0x61a9c2126bc0de6f),
     ("every_kind", 24, 0x98ee4aa676ccb384),
     ("fanuc_ellipse.ngc", 7, 0x7e7fe26e96ab8b5f),
-    ("g5_splines.ngc", 36, 0x5f85ea24987c2a7d),
+    ("g5_splines.ngc", 36, 0xe75ea9cb41c526ee),
     ("o_words.ngc", 14, 0x341004163056a35e),
     ("seed004_fixed.ngc", 10, 0xf4a69d1642553741),
     ("seed004_table1.ngc", 1, 0x547761ab9c6006f2),
     ("g5_butterfly-xy.ngc", 69, 0x820bbee6a28da3a4),
     ("g5_butterfly-yz.ngc", 69, 0xea50db2d64d65e6c),
     ("g5_butterfly-zx.ngc", 69, 0xe534c94893a2a439),
-    ("g5_curva_chitarra.ngc", 57, 0xab2940804bb9d495),
-    ("g5_curva_delfino.ngc", 91, 0xcdc4ad9063d2300f),
+    ("g5_curva_chitarra.ngc", 57, 0x5c02221ffe3b4121),
+    ("g5_curva_delfino.ngc", 91, 0x8238646193f9f4e9),
     ("g5_curva_mazatrol.ngc", 26, 0x5d18690e891bd1c1),
     ("g5_curva_stella.ngc", 17, 0xe4673450da4ffb27),
     ("g5_leto-xy.ngc", 16, 0x8f5d6aa356024417),
     ("g5_nurbs-xy.ngc", 8, 0xbca3d3ec96c4491c),
     ("g5_nurbs-yz.ngc", 8, 0x5facf61993254d3c),
     ("g5_nurbs-zx.ngc", 8, 0xc0d25396dd53bcec),
-    ("g6_curva_chitarra_q1.ngc", 34, 0xbc0dddff26cab278),
-    ("g6_curva_chitarra_q2.ngc", 34, 0xc06511659c130384),
-    ("g6_curva_chitarra_q3.ngc", 34, 0xe248100449d158db),
-    ("g6_curva_delfino_q1.ngc", 67, 0x7895ef5643114f78),
-    ("g6_curva_delfino_q2.ngc", 67, 0x7895ef5643114f78),
-    ("g6_curva_delfino_q3.ngc", 67, 0x8dfadae5783fff72),
+    ("g6_curva_chitarra_q1.ngc", 34, 0x257f9e92d97ab7e8),
+    ("g6_curva_chitarra_q2.ngc", 34, 0x40b3ac93dbb68f70),
+    ("g6_curva_chitarra_q3.ngc", 34, 0xafc8b5a649f83bcf),
+    ("g6_curva_delfino_q1.ngc", 67, 0xe37ef98920f2dc9a),
+    ("g6_curva_delfino_q2.ngc", 67, 0xe37ef98920f2dc9a),
+    ("g6_curva_delfino_q3.ngc", 67, 0xf288c33df771ce20),
     ("g6_curva_mazatrol_q1_xy.ngc", 15, 0x9c5837882522e2ae),
     ("g6_curva_mazatrol_q1_yz.ngc", 14, 0xb6eda9c2fa28aa37),
     ("g6_curva_mazatrol_q1_zx.ngc", 14, 0x73b8859969558602),
