@@ -472,7 +472,7 @@ fn shape(g: Geometry, machine: &Machine, period_s: f64, feed_mm_s: f64, share: f
             sampled = if surface {
                 surface_samples(b)
             } else {
-                samples(b)
+                samples(b, false)
             };
             (&sampled.0, &sampled.1, &sampled.2)
         }
@@ -604,7 +604,7 @@ fn relaxed_acc(
     (start, end): (f64, f64),
     len: f64,
 ) -> f64 {
-    let (pts, dk, _, at) = samples(b);
+    let (pts, dk, _, at) = samples(b, true);
     let axes = machine.axes.as_array();
     let a_path = machine.path_acc_mm_per_s2;
     let j_path = machine.path_jerk_mm_per_s3;
@@ -642,8 +642,13 @@ fn relaxed_acc(
     if pts.is_empty() || lim.acc.partial_cmp(&top) != Some(std::cmp::Ordering::Less) {
         return lim.acc;
     }
-    let (mut lo, mut hi) = (lim.acc, top);
-    for _ in 0..20 {
+    highest_fitting(lim.acc, top, 20, fits)
+}
+
+/// The highest of `halvings` bisections of `[lo, hi]` where `fits` holds, `lo` taken to
+/// fit and `fits` to hold below any point it holds at.
+fn highest_fitting(mut lo: f64, mut hi: f64, halvings: usize, fits: impl Fn(f64) -> bool) -> f64 {
+    for _ in 0..halvings {
         let mid = 0.5 * (lo + hi);
         if fits(mid) {
             lo = mid;
@@ -800,7 +805,7 @@ type Frame = ([f64; 3], [f64; 3]);
 /// One sample: the frame and dk/ds.
 type Sample = (Frame, [f64; 3]);
 /// Where each sample lies along its block: the least and the most share of the block's
-/// length before it (see [`samples`]).
+/// length before it (see [`samples`]; empty unless asked for).
 type Samples = (Vec<Frame>, Vec<[f64; 3]>, Vec<f64>, Vec<[f64; 2]>);
 /// A measure of a sample, and the search of it between samples (at a parameter).
 type Measure<'a> = (fn(&Sample) -> f64, &'a dyn Fn(f64) -> Option<f64>);
@@ -848,7 +853,7 @@ fn golden_max(lo: f64, hi: f64, f: impl Fn(f64) -> Option<f64>) -> Option<f64> {
     Some(if fc >= fd { c } else { d })
 }
 
-fn samples(b: &CommandBlock) -> Samples {
+fn samples(b: &CommandBlock, places: bool) -> Samples {
     let (u0, u1) = path::domain(b);
     // A thousand points or more a block, nearly all inside the span of the one before:
     // the moving-data evaluator (see [`eval`]).
@@ -1031,16 +1036,20 @@ fn samples(b: &CommandBlock) -> Samples {
     // Each sample's place along the block, by the chords between the samples in order
     // (within a few thousandths of the arc: a tangent turns at most `MAX_TURN_RAD`
     // between two); a sample found by a search lies anywhere in its search's range.
-    let mut chords: Vec<f64> = Vec::with_capacity(us.len());
+    // Only where asked (`places`: [`relaxed_acc`]); none for [`shape`].
+    let mut chords: Vec<f64> = Vec::new();
     let mut total = 0.0;
-    let mut prev: Option<[f64; 3]> = None;
-    for &u in &us {
-        let p = ev.eval(u).p;
-        if let Some(q) = prev {
-            total += path::norm(sub(p, q));
+    if places {
+        chords.reserve(us.len());
+        let mut prev: Option<[f64; 3]> = None;
+        for &u in &us {
+            let p = ev.eval(u).p;
+            if let Some(q) = prev {
+                total += path::norm(sub(p, q));
+            }
+            chords.push(total);
+            prev = Some(p);
         }
-        chords.push(total);
-        prev = Some(p);
     }
     let share = |x: f64| if total > 0.0 { x / total } else { 0.0 };
     let mut at: Vec<[f64; 2]> = chords.iter().map(|&c| [share(c), share(c)]).collect();
@@ -1053,7 +1062,9 @@ fn samples(b: &CommandBlock) -> Samples {
             let b = us.partition_point(|&u| u < hi).min(us.len() - 1);
             [share(chords[a]), share(chords[b])]
         };
-        at.splice(n..n, extra_at.iter().map(|&r| place(r)));
+        if places {
+            at.splice(n..n, extra_at.iter().map(|&r| place(r)));
+        }
     }
     // Curvature jumps at interior knots where the curve is only C¹ (or less).
     let mut jumps: Vec<f64> = Vec::new();
@@ -1153,8 +1164,7 @@ fn surface_samples(b: &CommandBlock) -> Samples {
             }
         })
         .collect();
-    let n = pts.len();
-    (pts, dk, Vec::new(), vec![[0.0, 1.0]; n])
+    (pts, dk, Vec::new(), Vec::new())
 }
 
 /// Speed (mm/s) at which the junction between two motions with these shapes can be
@@ -1499,16 +1509,7 @@ impl Load {
         for (c, limit) in limits.iter().enumerate() {
             let room = share * limit;
             if self.jerk(c, v) > room {
-                let (mut lo, mut hi) = (0.0f64, v);
-                for _ in 0..64 {
-                    let mid = 0.5 * (lo + hi);
-                    if self.jerk(c, mid) <= room {
-                        lo = mid;
-                    } else {
-                        hi = mid;
-                    }
-                }
-                v = lo;
+                v = highest_fitting(0.0, v, 64, |x| self.jerk(c, x) <= room);
             }
         }
         v
@@ -1835,8 +1836,9 @@ const RELAX_NEGLIGIBLE_S: f64 = 1e-5;
 /// Each curve block's acceleration raised to what its planned speeds leave
 /// ([`relaxed_acc`]), after the last planning round: the planned speeds stay as they
 /// are (junction limits the interpolator never exceeds), the profile between them gets
-/// there sooner. Skipped: a block held at its cap at both ends (its speeds are the
-/// cap's). Never above `ceiling`, the most a junction's load leaves each block
+/// there sooner. Skipped where [`block_time`] says it could gain less than
+/// [`RELAX_NEGLIGIBLE_S`] (a block held at its cap at both ends gains nothing). Never
+/// above `ceiling`, the most a junction's load leaves each block
 /// ([`plan_split`]): what a kink's direction change leaves, and at a curvature jump the
 /// acceleration whose `3·a_t·|k|` stays within the load the junction speed was worked
 /// out with ([`Load::acc_ceiling`]).
@@ -1849,9 +1851,6 @@ fn relax<B: Plannable>(blocks: &mut [B], machine: &Machine, ceiling: &[f64]) {
             continue;
         };
         let (start, end, cap) = b.planned_mm_s();
-        if start >= cap && end >= cap {
-            continue;
-        }
         let (lim, len) = (b.limits(), b.length_mm());
         if ceiling <= lim.acc {
             continue;
@@ -1909,16 +1908,7 @@ fn block_time(lim: Jerk, start: f64, end: f64, cap: f64, len: f64) -> f64 {
     let peak = if fits(cap) {
         cap
     } else {
-        let (mut lo, mut hi) = (floor, cap.max(floor));
-        for _ in 0..40 {
-            let mid = 0.5 * (lo + hi);
-            if fits(mid) {
-                lo = mid;
-            } else {
-                hi = mid;
-            }
-        }
-        lo
+        highest_fitting(floor, cap.max(floor), 40, fits)
     };
     let ramps = lim.change_distance(start, peak) + lim.change_distance(peak, end);
     let held = (len - ramps).max(0.0);

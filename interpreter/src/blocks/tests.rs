@@ -487,7 +487,7 @@ proptest::proptest! {
         knots.extend((1..=extra).map(|i| i as f64 * 0.7));
         knots.extend(std::iter::repeat_n(extra as f64 * 0.7 + 1.3, degree + 1));
         let b = curve_block(3, &SplitCurve { degree, knots, ctrl }, Helix::NONE, 900.0);
-        let (pts, _, _, _) = samples(&b);
+        let (pts, _, _, _) = samples(&b, false);
         for i in 0..3 {
             let sampled = pts.iter().map(|(t, _)| t[i].abs()).fold(0.0f64, f64::max);
             let everywhere = largest_everywhere(&b, |u| frame(&b, u).map(|(t, _)| t[i].abs()));
