@@ -446,11 +446,12 @@ fn shape(g: Geometry, machine: &Machine, period_s: f64, feed_mm_s: f64, share: f
     // follows, at the fastest `M` moves for the contact feed (`ratio` = max |M'|/|C'|);
     // the caps and limits found for `M` are scaled back to the contact path, along which
     // the feed is programmed and the profile runs (conservative where the ratio varies;
-    // the ratio's own change along the block is left out of the tangential terms).
+    // the ratio's own change along the block, `r'·ṡ²`, is taken from the tangential
+    // acceleration below).
     let surface = matches!(g, Geometry::Curve(b) if b.is_surface());
-    let ratio = match g {
+    let (ratio, ratio_slope) = match g {
         Geometry::Curve(b) if surface => surface_speed_ratio(b),
-        _ => 1.0,
+        _ => (1.0, 0.0),
     };
     let feed_mm_s = feed_mm_s * ratio;
     let (one_pt, one_dk);
@@ -532,13 +533,18 @@ fn shape(g: Geometry, machine: &Machine, period_s: f64, feed_mm_s: f64, share: f
                 }
             }
         }
+        // A surface's tool point also changes its speed where the ratio does: `r'·ṡ²`
+        // along its tangent at the contact speed `ṡ` (at most `v / ratio`), taken from
+        // what the profile may use; the total along the tangent stays within `acc`.
+        let acc_total = acc;
+        let acc = acc - ratio_slope * (v / ratio) * (v / ratio);
         let mut jerk = j_path;
         for ((t, k), dk) in pts.iter().zip(dk) {
             let kappa = path::norm(*k);
-            jerk = jerk.min(j_path - 3.0 * v * acc * kappa - v * v * v * path::norm(*dk));
+            jerk = jerk.min(j_path - 3.0 * v * acc_total * kappa - v * v * v * path::norm(*dk));
             for (i, ax) in axes.iter().enumerate() {
                 if t[i].abs() > 1e-12 {
-                    let other = 3.0 * v * acc * k[i].abs() + v * v * v * dk[i].abs();
+                    let other = 3.0 * v * acc_total * k[i].abs() + v * v * v * dk[i].abs();
                     jerk = jerk.min((ax.max_jerk_mm_per_s3 - other) / t[i].abs());
                 }
             }
@@ -1122,11 +1128,14 @@ fn tool_point_frame(b: &CommandBlock, t: f64) -> Option<([f64; 3], [f64; 3], [f6
 }
 
 /// The largest ratio of the tool point's speed to the contact point's along a surface
-/// block (`(ρ + R)/ρ` on a convex section, below 1 on a concave one).
-fn surface_speed_ratio(b: &CommandBlock) -> f64 {
+/// block (`(ρ + R)/ρ` on a convex section, below 1 on a concave one), and the largest
+/// rate of change of that ratio per mm of the contact path (`|dr/ds|`, 1/mm).
+fn surface_speed_ratio(b: &CommandBlock) -> (f64, f64) {
     // Never below 1: where `M` is slower (a concave section) the contact path keeps the
     // machine's own limits rather than more.
     let mut ratio: f64 = 1.0;
+    let mut slope: f64 = 0.0;
+    let mut last: Option<(f64, f64)> = None;
     for i in 0..=SURFACE_SAMPLES {
         let t = i as f64 / SURFACE_SAMPLES as f64;
         let h = SURFACE_DT;
@@ -1134,11 +1143,25 @@ fn surface_speed_ratio(b: &CommandBlock) -> f64 {
         let m = sub(path::eval(b, tc + h).p, path::eval(b, tc - h).p);
         let c = path::norm(path::contact(b, tc, &path::surface_at(b, tc)).d1);
         if c > 1e-12 {
-            ratio = ratio.max(path::norm(m) / (2.0 * h * c));
+            let r = path::norm(m) / (2.0 * h * c);
+            ratio = ratio.max(r);
+            // The slope between two samples, over the contact length between them
+            // (their mean speed times the parameter step).
+            if let Some((r0, c0)) = last {
+                let ds = 0.5 * (c0 + c) / SURFACE_SAMPLES as f64;
+                slope = slope.max((r - r0).abs() / ds);
+            }
+            last = Some((r, c));
+        } else {
+            last = None;
         }
     }
-    ratio
+    (ratio, RATIO_SLOPE_MARGIN * slope)
 }
+
+/// The margin on the ratio's slope found between [`SURFACE_SAMPLES`]: a chord's slope
+/// is the mean over its interval, and the steepest point inside lies above it.
+const RATIO_SLOPE_MARGIN: f64 = 1.5;
 
 /// [`samples`] for a surface block: the frames of its tool point path `M`. A patch is
 /// smooth inside, so there are no curvature jumps within a block.

@@ -7,8 +7,9 @@
 //! `Δp/T`, acceleration `Δ²p/T²` and jerk `Δ³p/T³` against that axis's limits, and the
 //! path's acceleration and jerk (the vectors' norms) against `path_acc_mm_per_s2` and
 //! `path_jerk_mm_per_s3`. The jerk leaves out the three cycles after a junction whose
-//! tangent turns (a kink, which no finite jerk follows; as `interpreter/tests/limits.rs`
-//! does). The chord: each set-point is projected onto the exact curve of the block the
+//! tangent turns, or where a surface's tool point steps its speed (a kink, which no
+//! finite jerk follows; as `interpreter/tests/limits.rs` does; the acceleration is
+//! measured there too). The chord: each set-point is projected onto the exact curve of the block the
 //! engine reports (Gauss–Newton from the previous foot point), and the exact curve
 //! between two consecutive feet (eight intervals on each block it crosses, block ends
 //! included) is measured against the straight step: the largest distance, against
@@ -138,7 +139,11 @@ fn seg_dist(q: [f64; 3], a: [f64; 3], c: [f64; 3]) -> f64 {
     path::norm(sub(q, [a[0] + t * d[0], a[1] + t * d[1], a[2] + t * d[2]]))
 }
 
-/// The sequence numbers of the blocks after a junction whose tangent turns.
+/// The sequence numbers of the blocks after a junction whose tangent turns, or, between
+/// two surface blocks passed at speed, where the tool point's velocity per unit of
+/// contact speed steps in length or direction (beyond the differences' noise, 1e-5 of
+/// it): where a surface is only C¹, the ball's centre moves faster or slower for the same
+/// feed on either side, a step of its speed in one period that no finite jerk follows.
 fn kinks(blocks: &[CommandBlock]) -> HashSet<u64> {
     let motion = |b: &CommandBlock| b.kind == BlockKind::Motion as u32;
     blocks
@@ -150,10 +155,25 @@ fn kinks(blocks: &[CommandBlock]) -> HashSet<u64> {
             let a = point_d1(&w[0], u1 - 1e-9 * (u1 - u0)).1;
             let b = point_d1(&w[1], v0 + 1e-9 * (v1 - v0)).1;
             let cos = dot(a, b) / (path::norm(a) * path::norm(b));
-            cos.is_nan() || cos < 1.0 - 1e-12
+            let turns = cos.is_nan() || cos < 1.0 - 1e-12;
+            let steps =
+                w[0].is_surface() && w[1].is_surface() && w[0].end_feed_mm_per_min > 0.0 && {
+                    let (ra, rb) = (tool_rate(&w[0], 1.0), tool_rate(&w[1], 0.0));
+                    path::norm(sub(ra, rb)) > 1e-5 * path::norm(ra).max(path::norm(rb))
+                };
+            turns || steps
         })
         .map(|w| w[1].seq)
         .collect()
+}
+
+/// A surface block's tool point velocity per unit of contact speed at its start (`t` 0)
+/// or end (`t` 1), by a one-sided difference into the block.
+fn tool_rate(b: &CommandBlock, t: f64) -> [f64; 3] {
+    let h = if t < 0.5 { 1e-7 } else { -1e-7 };
+    let c = path::norm(path::contact(b, t, &path::surface_at(b, t)).d1);
+    let dm = sub(path::eval(b, t + h).p, path::eval(b, t).p);
+    dm.map(|x| x / (h * c))
 }
 
 /// Steps `blocks` (planned, numbered from 0) through the engine from the origin and
