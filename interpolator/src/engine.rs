@@ -741,9 +741,31 @@ impl Geometry {
     }
 }
 
+/// Loads `b`'s evaluators into `geom`: the motion at its start.
+fn load_motion(geom: &mut Geometry, b: &CommandBlock) -> Result<Motion, Fault> {
+    geom.load(b)?;
+    let (u0, u1) = path::domain(b);
+    let end = geom.eval(b, u1);
+    let at = geom.eval(b, u0);
+    Ok(Motion {
+        u: u0,
+        u_end: u1,
+        s_mm: 0.0,
+        end_mm: end.p,
+        end_out: geom.set_point(b, u1, &end),
+        at,
+        feed_mm_per_s: b.feed_mm_per_min / 60.0,
+    })
+}
+
 pub struct Engine {
     lim: Limits,
-    geom: Geometry,
+    geom: Box<Geometry>,
+    /// The evaluators of the next block held, loaded ahead in a cycle that crossed no
+    /// block end, and that block's start ([`Engine::preload`]): swapped in when the block
+    /// starts (boxed, so the swap moves two pointers, not two 4 KB evaluators).
+    next_geom: Box<Geometry>,
+    preloaded: Option<(u64, Motion)>,
     t_s: f64,
     cur: Current,
     /// The block last taken from the window: the motion's while [`Current::Motion`].
@@ -826,7 +848,12 @@ impl Engine {
         };
         Engine {
             lim,
-            geom: Geometry { curve, surf: None },
+            geom: Box::new(Geometry {
+                curve: curve.clone(),
+                surf: None,
+            }),
+            next_geom: Box::new(Geometry { curve, surf: None }),
+            preloaded: None,
             t_s: lim.period_ns as f64 * 1e-9,
             cur: Current::None,
             block: CommandBlock::empty(BlockKind::ProgramEnd, 0, 0),
@@ -1039,24 +1066,19 @@ impl Engine {
         self.seq = b.seq;
         self.cur = match b.kind() {
             Some(BlockKind::Motion) => {
-                self.geom.load(b)?;
-                let (u0, u1) = path::domain(b);
-                let end = self.geom.eval(b, u1);
-                let at = self.geom.eval(b, u0);
+                let m = match self.preloaded.take() {
+                    Some((seq, m)) if seq == b.seq => {
+                        core::mem::swap(&mut self.geom, &mut self.next_geom);
+                        m
+                    }
+                    _ => load_motion(&mut self.geom, b)?,
+                };
                 if b.is_surface() || self.out != self.pos {
                     // Into or out of a surface pass: the path point jumps between the
                     // contact point and the tool point (the set-point does not).
-                    self.pos = at.p;
+                    self.pos = m.at.p;
                 }
-                Current::Motion(Motion {
-                    u: u0,
-                    u_end: u1,
-                    s_mm: 0.0,
-                    end_mm: end.p,
-                    end_out: self.geom.set_point(b, u1, &end),
-                    at,
-                    feed_mm_per_s: b.feed_mm_per_min / 60.0,
-                })
+                Current::Motion(m)
             }
             Some(BlockKind::Dwell) => Current::Dwell {
                 cycles_left: b.dwell_ns.div_ceil(self.lim.period_ns.max(1)),
@@ -1069,6 +1091,23 @@ impl Engine {
             },
         };
         Ok(())
+    }
+
+    /// Loads the evaluators of the next block held, if a motion not loaded yet, into the
+    /// spare [`Geometry`], with its start, so that the cycle that crosses into it does
+    /// not (what [`Engine::start`] would do there, the same arithmetic on an evaluator
+    /// loaded afresh: the same set-points). Called at the end of a cycle that crossed no
+    /// block end: a block's load (half a microsecond for a line) then no longer adds to
+    /// the dearest cycles, those that cross a block end and take the next block in. A
+    /// block that fails to load is left to [`Engine::start`], which faults as before.
+    fn preload(&mut self) {
+        let Some(b) = self.window.get(0) else {
+            return;
+        };
+        if !is_motion(b) || self.preloaded.is_some_and(|(seq, _)| seq == b.seq) {
+            return;
+        }
+        self.preloaded = load_motion(&mut self.next_geom, b).ok().map(|m| (b.seq, m));
     }
 
     /// Speed the next motion may be entered with: the planned end speed if the next block
@@ -1852,6 +1891,9 @@ impl Engine {
             self.acc = 0.0;
             self.vel = [0.0; 3];
             return Err(f);
+        }
+        if !crossed {
+            self.preload();
         }
         let vel = rate(self.out, prev_out, t);
         let acc = rate(vel, self.vel, t);
