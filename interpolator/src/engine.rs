@@ -49,6 +49,14 @@
 //! further than its velocity allows in a period, or leave the travel, is never
 //! published (the engine holds the last one).
 //!
+//! A cycle that crosses a block end does the most besides the profile step: the next
+//! block's start, and a new block taken into the window. So the next block's evaluators
+//! are loaded ahead, in a cycle that crossed no block end, into a spare [`Geometry`]
+//! swapped in at its start ([`Engine::preload`]); the block being run is kept beside
+//! [`Current`], not copied out of it and back every cycle; and the lowest limits held are
+//! counted, not walked for at every block taken. (On `cycle/profile_worst`: its own p99
+//! 4.0 → 2.8 µs, the same set-points.)
+//!
 //! A fault does not freeze the set-point where it is: [`Engine::stop`] starts a controlled
 //! stop, as a real control does on a following-error or peer fault. From then on no block
 //! is taken from the source; any positive acceleration is dropped at once, so the speed
