@@ -481,7 +481,7 @@ fn surface_cubic_case() -> (Survey, Case<Repeat>) {
 fn worst_case() -> (Survey, Case<Tiny>) {
     let mut case = Case::new("worst", lim(PERIOD_NS, 256), [0.0; 3], Tiny::new());
     // Back to rest at the end of every stretch. (The planned top speed of a stretch is
-    // 34.8 mm/s; the engine reaches about 9 mm/s, see BENCHMARKS.md.)
+    // 34.8 mm/s; the engine reaches 27.2 mm/s, see BENCHMARKS.md.)
     let s = case.survey(SURVEY_CYCLES);
     assert!(
         s.top_mm_per_s > 5.0 && s.blocks >= 2000 && s.stops >= 10,

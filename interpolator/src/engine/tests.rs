@@ -814,6 +814,8 @@ fn the_window_keeps_each_blocks_figures_beside_it_as_the_ring_wraps() {
             );
             b.end_feed_mm_per_min = 60.0 * next as f64;
             b.acc_mm_per_s2 = 100.0 + next as f64;
+            // Equal jerks held together, the lowest leaving and coming back.
+            b.jerk_mm_per_s3 = [500.0, 300.0, 300.0, 800.0, 200.0][(next % 5) as usize];
             if next % 4 == 3 {
                 b.kind = BlockKind::Dwell as u32;
             }
@@ -829,11 +831,22 @@ fn the_window_keeps_each_blocks_figures_beside_it_as_the_ring_wraps() {
             assert_eq!(w.motion(i).is_some(), is_motion(b));
         }
         assert!(w.fig(w.len).is_none());
+        // The lowest limits held, kept by counting as blocks come and go, are those of a
+        // fresh walk over the motions held.
+        let fresh = (0..w.len)
+            .filter_map(|i| w.motion(i))
+            .fold(NO_LIMIT, |lo, f| min_lim(lo, f.lim));
+        assert_eq!(w.lowest, fresh, "round {round}");
         for _ in 0..=(round % 3) {
-            assert_eq!(w.pop().unwrap().seq, popped);
+            let mut b = CommandBlock::empty(BlockKind::ProgramEnd, 0, 0);
+            assert!(w.pop_into(&mut b));
+            assert_eq!(b.seq, popped);
             popped += 1;
         }
     }
+    let mut b = CommandBlock::empty(BlockKind::ProgramEnd, 0, 0);
+    while w.pop_into(&mut b) {}
+    assert_eq!((w.len, w.lowest, w.at_lowest), (0, NO_LIMIT, [0, 0]));
 }
 
 #[test]
