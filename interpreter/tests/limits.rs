@@ -1077,9 +1077,15 @@ fn the_tool_point_s_speed_ratio_changing_along_a_pass_stays_within_the_accelerat
 /// the look-ahead must keep every planned end speed whatever the plan. Traced: in block
 /// 15 (acceleration 92.9 mm/s²) the machine slows at about 47 mm/s² only and enters
 /// block 16 at 2.82 mm/s, where 1.77 was the most from which block 16 (0.026 mm, 33.8
-/// mm/s²) brakes to the 1.18 at its end; it then brakes at 33.8 and leaves at 2.49. It
-/// happens only when blocks 26 to 40 carry the raised speeds too (20 mm and more ahead):
-/// the fold of the far limits or the window's lowest limits are where to look. Run with
+/// mm/s²) brakes to the 1.18 at its end; it then brakes at 33.8 and leaves at 2.49. The
+/// engine's list of limits ahead holds that 1.18 from far back (at block 5, 1.08 mm
+/// before it, at 14.2 mm/s), judged under the lowest limits of the way (33.8 mm/s²):
+/// lost from the start, since braking from 14.2 to 1.18 at 33.8 takes 2.96 mm, while
+/// braking in each block under its own limits (218 to 401 mm/s² before block 15) would
+/// keep it. A lost limit is then braked for at less than the block allows. The
+/// planner's own plans never show this: each block can brake from its entry to its end
+/// under its own limits, so every further low is kept by the nearer ones (`implied`).
+/// (It needs blocks 26 to 40 raised too, which lowers the window's lowest jerk.) Run with
 /// `--ignored` to see it fail. The planned fields (seq, feed, start, end in mm/min;
 /// acc, jerk) overwrite the planner's on the same blocks.
 #[test]
