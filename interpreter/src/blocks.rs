@@ -1944,8 +1944,12 @@ fn block_time(lim: Jerk, start: f64, end: f64, cap: f64, len: f64) -> f64 {
 }
 
 /// The share the curvature may take in a curve's blocks whose planned speed reaches
-/// their cap (see [`shares`]).
-const VALLEY_SHARE: f64 = 0.9;
+/// their cap (see [`shares`]). (0.9 until the relaxation of each block's acceleration
+/// to what its speeds leave, [`relax`], gave the profile back what a larger share takes
+/// from it at the cap: 0.95 then made LinuxCNC's butterfly at F6000 11.134 -> 11.123 s
+/// and 10 000 lines of curves 825.902 -> 823.406 s on LinuxCNC's limits, every other
+/// row of the feed table the same; 0.98 made the butterfly 11.360 s.)
+const VALLEY_SHARE: f64 = 0.95;
 
 fn is_curve<B: Plannable>(b: &B) -> bool {
     b.is_motion()
@@ -1960,7 +1964,7 @@ fn is_curve<B: Plannable>(b: &B) -> bool {
 /// curvature's larger share raises those caps; the profile's smaller one is little
 /// used where the speed is held. Whether it pays is judged per curve by the planned
 /// times ([`plan_and`]): on a machine whose jerk is low next to its acceleration the
-/// climb in and out of a valley under a tenth of the jerk costs more than the higher cap
+/// climb in and out of a valley under a twentieth of the jerk costs more than the higher cap
 /// gains (built-in machine, butterfly at F6000: 15.4 s against 16.9 s), on one whose jerk
 /// is high it gains (LinuxCNC's limits: 12.07 s down to 11.25 s).
 fn shares<B: Plannable>(blocks: &[B]) -> Vec<f64> {

@@ -248,6 +248,11 @@ M2
 /// delfinos (LinuxCNC machine: delfino 134.891 -> 134.893 s; built-in: the butterfly at
 /// F6000 15.262 -> 15.275 s); `cnc check` on 10 000 lines of `curves` 1.4 -> 1.1 times
 /// the time without the relaxation.
+/// Renewed for issue #23, on purpose: the curvature's share in a curve's blocks whose
+/// planned speed reaches their cap is 0.95, not 0.9 (`blocks::VALLEY_SHARE`). Changed,
+/// with the same block counts: the g5 chitarra and delfino, the g6 delfinos (built-in
+/// machine: the same times to the millisecond; LinuxCNC machine: the butterfly at F6000
+/// 11.134 -> 11.123 s, 10 000 lines of curves 825.902 -> 823.406 s).
 const GOLDEN_BLOCKS: &[(&str, usize, u64)] = &[
     ("plain_g1", 99999, 0x2314c695b1663686),
     ("mixed", 2080, 0xfa1fcceced432965),
@@ -262,8 +267,8 @@ const GOLDEN_BLOCKS: &[(&str, usize, u64)] = &[
     ("g5_butterfly-xy.ngc", 69, 0x820bbee6a28da3a4),
     ("g5_butterfly-yz.ngc", 69, 0xea50db2d64d65e6c),
     ("g5_butterfly-zx.ngc", 69, 0xe534c94893a2a439),
-    ("g5_curva_chitarra.ngc", 57, 0x5c02221ffe3b4121),
-    ("g5_curva_delfino.ngc", 91, 0x8238646193f9f4e9),
+    ("g5_curva_chitarra.ngc", 57, 0xc4aba5360892cdec),
+    ("g5_curva_delfino.ngc", 91, 0x9cf3804d55fd880b),
     ("g5_curva_mazatrol.ngc", 26, 0x5d18690e891bd1c1),
     ("g5_curva_stella.ngc", 17, 0xe4673450da4ffb27),
     ("g5_leto-xy.ngc", 16, 0x8f5d6aa356024417),
@@ -273,9 +278,9 @@ const GOLDEN_BLOCKS: &[(&str, usize, u64)] = &[
     ("g6_curva_chitarra_q1.ngc", 34, 0x257f9e92d97ab7e8),
     ("g6_curva_chitarra_q2.ngc", 34, 0x40b3ac93dbb68f70),
     ("g6_curva_chitarra_q3.ngc", 34, 0xafc8b5a649f83bcf),
-    ("g6_curva_delfino_q1.ngc", 67, 0xe37ef98920f2dc9a),
-    ("g6_curva_delfino_q2.ngc", 67, 0xe37ef98920f2dc9a),
-    ("g6_curva_delfino_q3.ngc", 67, 0xf288c33df771ce20),
+    ("g6_curva_delfino_q1.ngc", 67, 0x0cca5e6eaaf0bdc1),
+    ("g6_curva_delfino_q2.ngc", 67, 0x0cca5e6eaaf0bdc1),
+    ("g6_curva_delfino_q3.ngc", 67, 0x2ca449e07daa6f77),
     ("g6_curva_mazatrol_q1_xy.ngc", 15, 0x9c5837882522e2ae),
     ("g6_curva_mazatrol_q1_yz.ngc", 14, 0xb6eda9c2fa28aa37),
     ("g6_curva_mazatrol_q1_zx.ngc", 14, 0x73b8859969558602),

@@ -138,10 +138,11 @@ fn curvature_limits_the_feed() {
     // gives the curvature half the path acceleration (v²/r <= 1000 mm/s²: 31.6 mm/s)
     // and half the jerk; on a circle the jerk at constant speed is v³/r² <= 25 000
     // mm/s³: 29.24 mm/s, the lower.
-    // Where the planned time is shorter so, the planner gives the curvature 0.9 instead
-    // (`blocks::shares`), and lowers that cap by fifths until the profile keeps its
-    // floor: here the block starts and ends at rest, the tangential limits that leaves
-    // are higher, and it takes 0.8 of the 0.9 share's cap (28.46 mm/s).
+    // Where the planned time is shorter so, the planner gives the curvature
+    // `VALLEY_SHARE` (0.95) instead (`blocks::shares`), and lowers that cap by fifths
+    // until the profile keeps its floor: here the block starts and ends at rest, the
+    // tangential limits that leaves are higher, and it takes 0.8 of that share's cap
+    // (28.97 mm/s).
     let b = planned("G0 X1\nG3 X1 Y0 I-1 J0 F6000\n");
     let cap = |share: f64| {
         (share * 2000.0f64 * 1.0)
@@ -149,7 +150,7 @@ fn curvature_limits_the_feed() {
             .min((share * 50_000.0f64 * 1.0).cbrt())
     };
     let got = b[1].feed_mm_per_min / 60.0;
-    let valley = 0.8 * cap(0.9);
+    let valley = 0.8 * cap(VALLEY_SHARE);
     assert!(
         (got - cap(0.5)).abs() < 0.01 || (got - valley).abs() < 0.01,
         "{got} mm/s: neither {} nor {valley}",
