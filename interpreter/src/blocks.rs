@@ -584,11 +584,11 @@ fn shape(g: Geometry, machine: &Machine, period_s: f64, feed_mm_s: f64, share: f
         dk_end: dk_last,
         surface_ratio: surface.then_some(ratio),
         m_start: match g {
-            Geometry::Curve(b) if surface => Some(tool_rate(b, 0.0)),
+            Geometry::Curve(b) if surface => Some(path::tool_rate(b, 0.0)),
             _ => None,
         },
         m_end: match g {
-            Geometry::Curve(b) if surface => Some(tool_rate(b, 1.0)),
+            Geometry::Curve(b) if surface => Some(path::tool_rate(b, 1.0)),
             _ => None,
         },
     }
@@ -675,19 +675,6 @@ fn min_cbrt(v: f64, x: f64) -> f64 {
         v
     } else {
         v.min(x.cbrt())
-    }
-}
-
-/// `M'/|C'|` of a surface block at an end (`t` 0 or 1): the tool point's velocity per
-/// unit of contact speed, by a one-sided difference into the block.
-fn tool_rate(b: &CommandBlock, t: f64) -> [f64; 3] {
-    let h = if t < 0.5 { 1e-7 } else { -1e-7 };
-    let c = path::norm(path::contact(b, t, &path::surface_at(b, t)).d1);
-    let dm = sub(path::eval(b, t + h).p, path::eval(b, t).p);
-    if c > 1e-12 {
-        dm.map(|x| x / (h * c))
-    } else {
-        [0.0; 3]
     }
 }
 

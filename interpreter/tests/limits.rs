@@ -321,15 +321,6 @@ fn a_fold_of_the_control_polygon_keeps_the_jerk() {
     assert!(w.acc <= 1.0 + 1e-3 && w.speed <= 1.0 + 1e-6, "{w:?}");
 }
 
-/// The tool point's velocity per unit of contact speed, `M'/|C'|`, at an end of a
-/// surface block (`t` 0 or 1), by a one-sided difference into the block.
-fn tool_rate(b: &CommandBlock, t: f64) -> [f64; 3] {
-    let h = if t < 0.5 { 1e-7 } else { -1e-7 };
-    let c = norm(shared::path::contact(b, t, &shared::path::surface_at(b, t)).d1);
-    let dm = sub(shared::path::eval(b, t + h).p, shared::path::eval(b, t).p);
-    dm.map(|x| x / (h * c))
-}
-
 /// Junctions passed at speed where the tool point's velocity per contact speed steps
 /// (beyond the differences' noise, about 1e-7 of it): the sequence numbers after them.
 fn tool_path_kinks(blocks: &[CommandBlock]) -> HashSet<u64> {
@@ -337,7 +328,10 @@ fn tool_path_kinks(blocks: &[CommandBlock]) -> HashSet<u64> {
         .windows(2)
         .filter(|w| w[0].is_surface() && w[1].is_surface() && w[0].end_feed_mm_per_min > 0.0)
         .filter(|w| {
-            let (a, b) = (tool_rate(&w[0], 1.0), tool_rate(&w[1], 0.0));
+            let (a, b) = (
+                shared::path::tool_rate(&w[0], 1.0),
+                shared::path::tool_rate(&w[1], 0.0),
+            );
             norm(sub(a, b)) > 1e-5 * norm(a).max(norm(b))
         })
         .map(|w| w[1].seq)
@@ -992,6 +986,17 @@ fn search_random_programs_for_broken_limits() {
     }
 }
 
+/// The seed's PLANE_CC part (`examples/seed-surface-planecc.stp`: its name and text) with
+/// LinuxCNC's limits (`examples/machine-linuxcnc-sim.toml`).
+fn planecc_on_linuxcnc_limits() -> (Machine, &'static str, String) {
+    let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
+    let machine =
+        shared::machine::load(Some(&root.join("examples/machine-linuxcnc-sim.toml"))).unwrap();
+    let name = "seed-surface-planecc.stp";
+    let text = std::fs::read_to_string(root.join("examples").join(name)).unwrap();
+    (machine, name, text)
+}
+
 /// At a junction of surface blocks where the surface's curvature jumps, the tool point's
 /// speed steps against the contact speed: `v·|m_b − m_a|` in one period, `m = dM/ds` of
 /// the contact path. That step and each block's profile along the tool point's path
@@ -1001,28 +1006,21 @@ fn search_random_programs_for_broken_limits() {
 /// (tolerance 1e-6 relative).
 #[test]
 fn a_surface_junction_s_speed_step_leaves_the_profile_within_the_acceleration() {
-    let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
-    let machine =
-        shared::machine::load(Some(&root.join("examples/machine-linuxcnc-sim.toml"))).unwrap();
-    let name = "seed-surface-planecc.stp";
-    let text = std::fs::read_to_string(root.join("examples").join(name)).unwrap();
+    let (machine, name, text) = planecc_on_linuxcnc_limits();
     let opts = interpreter::program::Options::default();
     let blocks = interpreter::process::compile_source(name, &text, &opts, &machine, 1_000_000)
         .unwrap()
         .blocks;
-    let rate = |b: &CommandBlock, t: f64| {
-        let h = if t < 0.5 { 1e-7 } else { -1e-7 };
-        let c = shared::path::norm(shared::path::contact(b, t, &shared::path::surface_at(b, t)).d1);
-        let (p, q) = (shared::path::eval(b, t).p, shared::path::eval(b, t + h).p);
-        [0, 1, 2].map(|i| (q[i] - p[i]) / (h * c))
-    };
     let mut steps = 0;
     for w in blocks.windows(2) {
         let (a, b) = (&w[0], &w[1]);
         if !(a.is_surface() && b.is_surface()) || a.end_feed_mm_per_min <= 0.0 {
             continue;
         }
-        let (ma, mb) = (rate(a, 1.0), rate(b, 0.0));
+        let (ma, mb) = (
+            shared::path::tool_rate(a, 1.0),
+            shared::path::tool_rate(b, 0.0),
+        );
         let v = a.end_feed_mm_per_min / 60.0;
         let step = v * shared::path::norm([mb[0] - ma[0], mb[1] - ma[1], mb[2] - ma[2]]) / 1e-3;
         if step > 1.0 {
@@ -1053,11 +1051,7 @@ fn a_surface_junction_s_speed_step_leaves_the_profile_within_the_acceleration() 
 /// each limit away from the junctions' speed steps (tolerance 1e-4).
 #[test]
 fn the_tool_point_s_speed_ratio_changing_along_a_pass_stays_within_the_acceleration() {
-    let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
-    let machine =
-        shared::machine::load(Some(&root.join("examples/machine-linuxcnc-sim.toml"))).unwrap();
-    let name = "seed-surface-planecc.stp";
-    let text = std::fs::read_to_string(root.join("examples").join(name)).unwrap();
+    let (machine, _, text) = planecc_on_linuxcnc_limits();
     let (blocks, _) = interpreter::surface_blocks::part_blocks(&text, &machine, PERIOD_NS).unwrap();
     let (blocks, cycles) = step_blocks(blocks, &machine);
     let w = check_with_kinks(&blocks, &cycles, &machine, &tool_path_kinks(&blocks));

@@ -126,6 +126,23 @@ pub fn tool_point(block: &CommandBlock, s: &SurfacePoint) -> [f64; 3] {
     ]
 }
 
+/// `M'/|C'|` of a validated surface block at an end of its pass (`t` 0 or 1): the tool
+/// reference point's velocity per unit of contact speed, by a one-sided difference of
+/// 1e-7 into the block (zero where the contact point stands still). Where the surface
+/// is only C¹ it differs between two blocks that meet, in length as well as direction:
+/// the ball's centre changes velocity there at any contact speed above zero. Reference
+/// evaluators: not for the cycle.
+pub fn tool_rate(block: &CommandBlock, t: f64) -> [f64; 3] {
+    let h = if t < 0.5 { 1e-7 } else { -1e-7 };
+    let c = norm(contact(block, t, &surface_at(block, t)).d1);
+    let (a, b) = (eval(block, t).p, eval(block, t + h).p);
+    if c > 1e-12 {
+        [0, 1, 2].map(|i| (b[i] - a[i]) / (h * c))
+    } else {
+        [0.0; 3]
+    }
+}
+
 /// The surface point of a validated surface block's pass at `t` (standard algorithm:
 /// not for the cycle, which keeps a moving-data evaluator).
 pub fn surface_at(block: &CommandBlock, t: f64) -> SurfacePoint {

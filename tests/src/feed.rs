@@ -158,22 +158,13 @@ fn kinks(blocks: &[CommandBlock]) -> HashSet<u64> {
             let turns = cos.is_nan() || cos < 1.0 - 1e-12;
             let steps =
                 w[0].is_surface() && w[1].is_surface() && w[0].end_feed_mm_per_min > 0.0 && {
-                    let (ra, rb) = (tool_rate(&w[0], 1.0), tool_rate(&w[1], 0.0));
+                    let (ra, rb) = (path::tool_rate(&w[0], 1.0), path::tool_rate(&w[1], 0.0));
                     path::norm(sub(ra, rb)) > 1e-5 * path::norm(ra).max(path::norm(rb))
                 };
             turns || steps
         })
         .map(|w| w[1].seq)
         .collect()
-}
-
-/// A surface block's tool point velocity per unit of contact speed at its start (`t` 0)
-/// or end (`t` 1), by a one-sided difference into the block.
-fn tool_rate(b: &CommandBlock, t: f64) -> [f64; 3] {
-    let h = if t < 0.5 { 1e-7 } else { -1e-7 };
-    let c = path::norm(path::contact(b, t, &path::surface_at(b, t)).d1);
-    let dm = sub(path::eval(b, t + h).p, path::eval(b, t).p);
-    dm.map(|x| x / (h * c))
 }
 
 /// Steps `blocks` (planned, numbered from 0) through the engine from the origin and
