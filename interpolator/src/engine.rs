@@ -47,7 +47,12 @@
 //! the travel, 6 to 8 µs when its control polygon crosses a limit; `block_check/*` in
 //! `benches/cycle.rs`.) The last guard, every cycle: a set-point that would step an axis
 //! further than its velocity allows in a period, or leave the travel, is never
-//! published (the engine holds the last one).
+//! published (the engine holds the last one). A plan valid field by field may still
+//! brake across several blocks into one of far lower limits, which the limits ahead,
+//! braked for under the lowest limits of the way, cannot keep: each block taken lowers
+//! the end speed before it, where it has lower limits than the block before and cannot
+//! brake from that end to its own by itself ([`Engine::keep_chain`]; the planner's plans
+//! never need it).
 //!
 //! A cycle that crosses a block end does the most besides the profile step: the next
 //! block's start, and a new block taken into the window. So the next block's evaluators
@@ -471,6 +476,19 @@ impl Window {
             }
             *slot = b;
             self.len += 1;
+        }
+    }
+
+    /// Lowers the planned end speed of the `i`-th block held to `v` mm/s (see
+    /// [`Engine::keep_chain`]).
+    fn lower_end(&mut self, i: usize, v: f64) {
+        if i >= self.len {
+            return;
+        }
+        let k = self.slot(i);
+        if let (Some(b), Some(fig)) = (self.buf.get_mut(k), self.figs.get_mut(k)) {
+            fig.end_mm_per_s = v;
+            b.end_feed_mm_per_min = v * 60.0;
         }
     }
 
@@ -1013,8 +1031,62 @@ impl Engine {
             self.expected_seq += 1;
             self.end_received = b.kind == BlockKind::ProgramEnd as u32;
             self.window.push(b);
+            self.keep_chain();
         }
         Ok(())
+    }
+
+    /// Lowers the planned end speed before the block just taken where that block has
+    /// lower limits than the one before it and cannot brake from that end speed to its
+    /// own within its length under them ([`shared::profile::Limits::reachable_speed`],
+    /// the function the planner uses, so its plans stay bit for bit as they are); and so
+    /// on back while an end is lowered. A plan that brakes across several blocks is valid
+    /// on the wire, but each limit ahead is braked for under the lowest limits of the way
+    /// to it: a low behind a block of far lower limits looked lost from the moment it came
+    /// into view, was braked for at that block's acceleration, too gently, and the
+    /// machine entered the block at 2.5 mm/s where 1.18 was planned, a weak axis's jerk
+    /// 1.65 times its limit (`limits.rs` in the planner's tests). With its entry kept by
+    /// the block before, that low follows from the nearer one, as on the planner's own
+    /// plans. Across blocks of equal limits, judging under the lowest limits is exact, and
+    /// a chain of tiny blocks braking together keeps its speed (entered at zero
+    /// acceleration each, it would crawl). At most one pass over the window a block; on
+    /// the planner's plans, one test.
+    fn keep_chain(&mut self) {
+        let mut i = self.window.len;
+        while let Some(fig) = i
+            .checked_sub(1)
+            .and_then(|k| self.window.motion(k))
+            .copied()
+        {
+            i -= 1;
+            let before = match i.checked_sub(1) {
+                Some(k) => self.window.motion(k).map(|f| (f.end_mm_per_s, f.lim)),
+                None => matches!(self.cur, Current::Motion(_)).then(|| {
+                    (
+                        self.block.end_feed_mm_per_min / 60.0,
+                        block_jerk(&self.block),
+                    )
+                }),
+            };
+            let Some((v, lim)) = before else {
+                return;
+            };
+            if fig.lim.acc >= lim.acc && fig.lim.jerk >= lim.jerk {
+                return;
+            }
+            let entry = fig.lim.reachable_speed(fig.end_mm_per_s, fig.length_mm);
+            // (A rounding's difference is no defect: the planner's plans stay untouched.)
+            if v <= entry * (1.0 + 1e-9) {
+                return;
+            }
+            match i.checked_sub(1) {
+                Some(k) => self.window.lower_end(k, entry),
+                None => {
+                    self.block.end_feed_mm_per_min = entry * 60.0;
+                    return;
+                }
+            }
+        }
     }
 
     /// The checks of a valid block against the machine, before it enters the window (so

@@ -1058,33 +1058,22 @@ fn the_tool_point_s_speed_ratio_changing_along_a_pass_stays_within_the_accelerat
     assert!(w.acc <= 1.0 + 1e-4, "acceleration {w:?}");
 }
 
-/// Known defect, not fixed (issue #23, 2026-11-26): the engine overshoots a planned end
-/// speed on a plan whose speeds brake across several blocks. The random search's case
-/// below (seed 5, weak X) was planned by a backward pass that let a block start above
-/// what it can brake for within its own length, by braking across up to 16 blocks to
-/// any end within them (tried for the feed and not kept). Every field stays within the
-/// caps and the machine, yet stepped through the engine the machine enters block 17 at
-/// 2.50 mm/s where 1.18 is planned, and X's jerk reaches 1.65 times its limit; the
-/// planner's own plan of the same blocks keeps every limit. The engine's own tests
-/// (`a_chain_of_tiny_segments_slowing_to_a_stop_does_not_crawl`) hand it plans that
-/// brake across blocks on purpose, so refusing such plans on receipt is not the fix:
-/// the look-ahead must keep every planned end speed whatever the plan. Traced: in block
-/// 15 (acceleration 92.9 mm/s²) the machine slows at about 47 mm/s² only and enters
-/// block 16 at 2.82 mm/s, where 1.77 was the most from which block 16 (0.026 mm, 33.8
-/// mm/s²) brakes to the 1.18 at its end; it then brakes at 33.8 and leaves at 2.49. The
-/// engine's list of limits ahead holds that 1.18 from far back (at block 5, 1.08 mm
-/// before it, at 14.2 mm/s), judged under the lowest limits of the way (33.8 mm/s²):
-/// lost from the start, since braking from 14.2 to 1.18 at 33.8 takes 2.96 mm, while
-/// braking in each block under its own limits (218 to 401 mm/s² before block 15) would
-/// keep it. A lost limit is then braked for at less than the block allows. The
-/// planner's own plans never show this: each block can brake from its entry to its end
-/// under its own limits, so every further low is kept by the nearer ones (`implied`).
-/// (It needs blocks 26 to 40 raised too, which lowers the window's lowest jerk.) Run with
-/// `--ignored` to see it fail. The planned fields (seq, feed, start, end in mm/min;
-/// acc, jerk) overwrite the planner's on the same blocks.
+/// A plan whose speeds brake across several blocks, into a block of far lower limits,
+/// keeps its junction speeds through the engine. The random search's case below (seed 5,
+/// weak X) was planned by a backward pass that let a block start above what it can brake
+/// for within its own length, braking across up to 16 blocks (tried for the feed and not
+/// kept). Every field stays within the caps and the machine. Before the engine kept each
+/// block's entry by the block before it (`Engine::keep_chain`), the machine entered block
+/// 17 at 2.50 mm/s where 1.18 is planned and X's jerk reached 1.65 times its limit: in
+/// block 15 (acceleration 92.9 mm/s²) it slowed at about 47 mm/s² only and entered block
+/// 16 (0.026 mm, 33.8 mm/s²) at 2.82 mm/s, where 1.77 was the most from which block 16
+/// brakes to its end. The 1.18 had been judged from 1.08 mm back at 14.2 mm/s under the
+/// lowest limits of the way (33.8 mm/s²), lost from first sight, and braked for at that.
+/// (It needs blocks 26 to 40 raised too, which lowers the window's lowest jerk.) The
+/// planned fields (seq, feed, start, end in mm/min; acc, jerk) overwrite the planner's on
+/// the same blocks. Tolerance 1e-3 on each axis's limits, as the random search.
 #[test]
-#[ignore]
-fn known_defect_a_plan_braking_across_blocks_makes_the_engine_overshoot_a_junction() {
+fn a_plan_braking_across_blocks_into_weaker_ones_keeps_the_junction_speeds() {
     const PLAN: &str = "
     0 5.717953409656562e3 0e0 3.3025256496707393e3 1.4153518119257678e3 3.0287139868750404e4
     1 4.956691352096438e3 3.3025256496707393e3 1.8079591251441602e3 7.928316680210784e2 1.0180272321264725e4
