@@ -1033,3 +1033,72 @@ fn crossing_finds_the_moment_a_point_is_passed_in_a_few_evaluations() {
     assert!(got >= 0.99 * stop, "{got} of {stop}");
     assert!(evals.get() <= 1 + SWITCH_STEPS + SWITCH_HALVINGS);
 }
+
+/// A plan valid field by field whose end speed before a block of far lower limits is
+/// more than that block can brake from by itself (it relies on braking across blocks):
+/// with one block of look-ahead, the weak block comes into view only once the machine
+/// is in the block before it at the feed. The engine keeps the weak block's entry from
+/// the block before (`Engine::keep_chain`): the machine enters it no faster than the
+/// highest speed from which it stops within its 0.05 mm under its own 30 mm/s², and
+/// brakes inside it within that. Before, it judged the stop under the weak block's
+/// limits from 50 mm/s, found it lost, braked at 30 mm/s² for it and entered the weak
+/// block at 46.9 mm/s. (Where the weak block's jerk is far lower too, the block end
+/// before it is braked for under that jerk, `Ahead::easing`, and one block of
+/// look-ahead shows it too late even so.) Tolerances: 1e-9 relative on the entry speed,
+/// 1e-6 on the braking's second differences.
+#[test]
+fn a_weak_block_is_entered_no_faster_than_it_can_brake_from() {
+    let (p0, p1, p2, p3) = (
+        [0.0; 3],
+        [20.0, 0.0, 0.0],
+        [25.0, 0.0, 0.0],
+        [25.05, 0.0, 0.0],
+    );
+    let mut weak = line(2, p2, p3, 3000.0, 3000.0, 0.0);
+    weak.acc_mm_per_s2 = 30.0;
+    let blocks = vec![
+        line(0, p0, p1, 3000.0, 0.0, 3000.0),
+        line(1, p1, p2, 3000.0, 3000.0, 3000.0),
+        weak,
+        CommandBlock::empty(BlockKind::ProgramEnd, 3, 4),
+    ];
+    let lim = Limits {
+        lookahead_blocks: 1,
+        ..limits()
+    };
+    let mut e = Engine::new(lim, [0.0; 3]);
+    let mut src = Blocks(blocks, 0);
+    let mut ticks = vec![];
+    for _ in 0..100_000 {
+        let t = e.tick(&mut src).unwrap();
+        ticks.push(t);
+        if t.state != TickState::Running {
+            break;
+        }
+    }
+    assert_eq!(ticks.last().unwrap().state, TickState::Done);
+    let weak_lim = Jerk {
+        acc: 30.0,
+        jerk: 50_000.0,
+    };
+    let entry = weak_lim.reachable_speed(0.0, 0.05);
+    // The speed of the first cycle that ends inside the weak block.
+    let inside = ticks
+        .iter()
+        .find(|t| t.block_seq == 2)
+        .map(|t| t.speed_mm_per_s)
+        .unwrap();
+    assert!(
+        inside <= entry * (1.0 + 1e-9),
+        "entered at {inside} mm/s, {entry} at most"
+    );
+    // Braking inside it within its acceleration (second differences of the set-points).
+    let period = 1e-3;
+    for w in ticks.windows(3).filter(|w| w[0].block_seq == 2) {
+        let a = (w[2].pos_mm[0] - 2.0 * w[1].pos_mm[0] + w[0].pos_mm[0]) / (period * period);
+        assert!(
+            a.abs() <= 30.0 * (1.0 + 1e-6),
+            "{a} mm/s² in the weak block"
+        );
+    }
+}
