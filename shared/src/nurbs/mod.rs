@@ -16,7 +16,7 @@ pub mod surface;
 
 pub use eval::{eval, eval_d1, find_span, CurvePoint};
 pub use knots::{insert_knot, split_at, split_to_capacity, SplitCurve};
-pub use length::arc_length;
+pub use length::{arc_length, arc_length_adaptive};
 
 /// The highest degree a block may carry (order 10: Fanuc's G06.2 rank limit we accept).
 pub const MAX_DEGREE: usize = 9;

@@ -217,6 +217,47 @@ fn arc_length_through_a_cusp_matches_the_closed_form() {
     );
 }
 
+/// The adaptive rule through the same cusp, from the fewest pieces (one, two and four a
+/// span), to the same tolerance as the fixed rule above: its halvings find the cusp.
+#[test]
+fn adaptive_arc_length_through_a_cusp_matches_the_closed_form() {
+    let side = |t: f64| ((4.0 + 9.0 * t * t).powf(1.5) - 8.0) / 27.0;
+    let exact = side(-0.3) + side(1.0);
+    for pieces in [1, 2, 4] {
+        let mut points = 0;
+        let len = arc_length_adaptive(&[-0.3, 1.0], pieces, |t| {
+            points += 1;
+            t.abs() * (4.0 + 9.0 * t * t).sqrt()
+        });
+        assert!(
+            (len - exact).abs() <= 1e-10,
+            "{pieces} pieces, {points} points: length {len}, exact {exact}: {:e}",
+            len - exact
+        );
+    }
+}
+
+/// The adaptive rule on the quarter circle of radius 10 (5π), to 1e-12 mm: a smooth
+/// span agrees with its halves after a few halvings.
+#[test]
+fn adaptive_arc_length_of_a_quarter_circle() {
+    let h = core::f64::consts::FRAC_1_SQRT_2;
+    let ctrl = [
+        [10.0, 0.0, 0.0, 1.0],
+        [10.0, 10.0, 0.0, h],
+        [0.0, 10.0, 0.0, 1.0],
+    ];
+    let knots = [0.0, 0.0, 0.0, 1.0, 1.0, 1.0];
+    let len = arc_length_adaptive(&knots, 4, |u| {
+        let d = eval(2, &knots, &ctrl, u).d1;
+        (d[0] * d[0] + d[1] * d[1]).sqrt()
+    });
+    assert!(
+        (len - 5.0 * core::f64::consts::PI).abs() < 1e-12,
+        "length {len}"
+    );
+}
+
 #[test]
 fn validation_names_the_problem() {
     let ctrl = [
