@@ -1177,7 +1177,11 @@ fn a_plan_braking_across_blocks_into_weaker_ones_keeps_the_junction_speeds() {
 /// window-end stop is judged without the easing of a block it has not seen. A fix must
 /// make the two agree (the stop at the end of a full window judged under the lowest jerk
 /// a next block may bring, or the braking from above a block end under the block's own
-/// jerk) and be judged by the random search at short windows. Run with `--ignored`.
+/// jerk) and be judged by the random search at short windows. Tried: braking for a block
+/// end under the way's own limits instead of the easing (`room`, the braking followed
+/// and its cheap test) passes this case, but the random search at 256 blocks then finds
+/// a weak X axis at 1.085 times its limit (seed 11, 600 cases, NURBS of order 4 to 6).
+/// Run with `--ignored`.
 #[test]
 #[ignore]
 fn known_defect_a_short_window_loses_a_junction_speed_behind_a_block_of_lower_jerk() {
