@@ -1181,11 +1181,13 @@ fn a_plan_braking_across_blocks_into_weaker_ones_keeps_the_junction_speeds() {
 /// end under the way's own limits instead of the easing (`room`, the braking followed
 /// and its cheap test) passes this case, but the random search at 256 blocks then finds
 /// a weak X axis at 1.085 times its limit (seed 11, 600 cases, NURBS of order 4 to 6).
-/// Not tried, and closed by induction: refuse on receipt a block whose acceleration or
-/// jerk is below a floor of the machine's (the planner's own `profile_floors`, 5 % of the
-/// weakest), and judge the stop at the end of a window that more blocks may follow under
-/// that floor too; whatever the next block brings then eases the last block's end no
-/// more slowly than its stop was judged under. Run with `--ignored`.
+/// Not tried: a jerk floor validated on receipt, with the stop at the end of a window
+/// that more blocks may follow judged under it, closes it by induction (whatever the next
+/// block brings then eases the last block's end no more slowly than its stop was judged
+/// under); but the planner lets a straight block's jerk go down to 1e-3 of its 5 % floor
+/// (`StraightLimits`), and under so low a jerk the window's end would bind everywhere.
+/// The planner and the engine must first agree on the jerk a block end is braked under.
+/// Run with `--ignored`.
 #[test]
 #[ignore]
 fn known_defect_a_short_window_loses_a_junction_speed_behind_a_block_of_lower_jerk() {
