@@ -833,83 +833,17 @@ const BRENT_STEPS: usize = 100;
 /// golden-section search of before stopped at. On a smooth valley the parabolas
 /// converge superlinearly, and closing the bracket round the valley takes most of the
 /// points (a parabola: 30 instead of 44). `None` where `f` has no value at a point it
-/// tries.
+/// tries. ([`crate::brent::minimise`] from the golden section's first point; the
+/// contour's nearest-point search is the same method.)
 pub(crate) fn brent_min(
     lo: f64,
     hi: f64,
     mut f: impl FnMut(f64) -> Option<f64>,
 ) -> Option<(f64, f64)> {
-    // 1 − 1/φ: the golden section's share of the larger side.
-    const C: f64 = 0.381_966_011_250_105_1;
-    // The least step, and a quarter of the bracket the search stops at.
-    let tol = 0.25e-9 * (hi - lo);
-    let (mut a, mut b) = (lo, hi);
-    let mut x = a + C * (b - a);
-    let mut fx = f(x)?;
-    // `w` the second best point, `v` the one before; `d` the last step, `e` the one before.
-    let (mut w, mut v, mut fw, mut fv) = (x, x, fx, fx);
-    let (mut d, mut e) = (0.0f64, 0.0f64);
-    for _ in 0..BRENT_STEPS {
-        let xm = 0.5 * (a + b);
-        if (x - xm).abs() <= 2.0 * tol - 0.5 * (b - a) {
-            break;
-        }
-        let mut parabolic = false;
-        if e.abs() > tol {
-            // The parabola through x, w, v: its vertex at x + p/q.
-            let r = (x - w) * (fx - fv);
-            let mut q = (x - v) * (fx - fw);
-            let mut p = (x - v) * q - (x - w) * r;
-            q = 2.0 * (q - r);
-            if q > 0.0 {
-                p = -p;
-            } else {
-                q = -q;
-            }
-            let before = e;
-            e = d;
-            // Taken where it stays inside the bracket and moves less than half the step
-            // before last (else the steps may not shrink).
-            if p.abs() < (0.5 * q * before).abs() && p > q * (a - x) && p < q * (b - x) {
-                d = p / q;
-                let u = x + d;
-                if u - a < 2.0 * tol || b - u < 2.0 * tol {
-                    d = tol.copysign(xm - x);
-                }
-                parabolic = true;
-            }
-        }
-        if !parabolic {
-            e = if x >= xm { a - x } else { b - x };
-            d = C * e;
-        }
-        let u = if d.abs() >= tol {
-            x + d
-        } else {
-            x + tol.copysign(d)
-        };
-        let fu = f(u)?;
-        if fu <= fx {
-            if u >= x {
-                a = x;
-            } else {
-                b = x;
-            }
-            (v, fv, w, fw, x, fx) = (w, fw, x, fx, u, fu);
-        } else {
-            if u < x {
-                a = u;
-            } else {
-                b = u;
-            }
-            if fu <= fw || w == x {
-                (v, fv, w, fw) = (w, fw, u, fu);
-            } else if fu <= fv || v == x || v == w {
-                (v, fv) = (u, fu);
-            }
-        }
-    }
-    Some((x, fx))
+    // The golden section's first point; the search stops at a quarter of the bracket.
+    let x = lo + 0.381_966_011_250_105_1 * (hi - lo);
+    let fx = f(x)?;
+    crate::brent::minimise(lo, hi, (x, fx), BRENT_STEPS, |_| 0.25e-9 * (hi - lo), f)
 }
 
 fn samples(b: &CommandBlock, places: bool) -> Samples {

@@ -306,77 +306,18 @@ impl<'a> Seg<'a> {
     /// distance, found whatever the speed of the curve, to a parameter tolerance near the
     /// rounding of `u` (the squared distance is flat only to second order, so its values
     /// resolve `u` far finer than the textbook `√ε` when the minimum is small).
-    fn minimise(&self, p: [f64; 3], mut a: f64, mut b: f64, x: (f64, f64)) -> (f64, f64) {
-        // (3 − √5) / 2: the golden section.
-        const GOLD: f64 = 0.381_966_011_250_105_1;
+    fn minimise(&self, p: [f64; 3], a: f64, b: f64, x: (f64, f64)) -> (f64, f64) {
         let f = |u: f64| {
             let c = eval(self.b, u).p;
             let r = [c[0] - p[0], c[1] - p[1], c[2] - p[2]];
-            dot(r, r)
+            Some(dot(r, r))
         };
-        let (mut x, mut fx) = (x.1, x.0 * x.0);
-        let (mut w, mut fw, mut v, mut fv) = (x, fx, x, fx);
-        // `d` the last step, `e` the one before.
-        let (mut d, mut e) = (0.0f64, 0.0f64);
-        for _ in 0..200 {
-            let m = 0.5 * (a + b);
-            let tol = 4.0 * f64::EPSILON * x.abs() + 1e-15 * (self.u1 - self.u0);
-            if (x - m).abs() <= 2.0 * tol - 0.5 * (b - a) {
-                break;
-            }
-            let mut golden = true;
-            if e.abs() > tol {
-                // The parabola through (v, fv), (w, fw), (x, fx).
-                let r = (x - w) * (fx - fv);
-                let mut q = (x - v) * (fx - fw);
-                let mut s = (x - v) * q - (x - w) * r;
-                q = 2.0 * (q - r);
-                if q > 0.0 {
-                    s = -s;
-                } else {
-                    q = -q;
-                }
-                if s.abs() < (0.5 * q * e).abs() && s > q * (a - x) && s < q * (b - x) {
-                    e = d;
-                    d = s / q;
-                    let u = x + d;
-                    if u - a < 2.0 * tol || b - u < 2.0 * tol {
-                        d = if x < m { tol } else { -tol };
-                    }
-                    golden = false;
-                }
-            }
-            if golden {
-                e = if x < m { b - x } else { a - x };
-                d = GOLD * e;
-            }
-            let u = if d.abs() >= tol {
-                x + d
-            } else {
-                x + tol.copysign(d)
-            };
-            let fu = f(u);
-            if fu <= fx {
-                if u < x {
-                    b = x;
-                } else {
-                    a = x;
-                }
-                (v, fv, w, fw, x, fx) = (w, fw, x, fx, u, fu);
-            } else {
-                if u < x {
-                    a = u;
-                } else {
-                    b = u;
-                }
-                if fu <= fw || w == x {
-                    (v, fv, w, fw) = (w, fw, u, fu);
-                } else if fu <= fv || v == x || v == w {
-                    (v, fv) = (u, fu);
-                }
-            }
+        let span = self.u1 - self.u0;
+        let tol = |x: f64| 4.0 * f64::EPSILON * x.abs() + 1e-15 * span;
+        match crate::brent::minimise(a, b, (x.1, x.0 * x.0), 200, tol, f) {
+            Some((u, d2)) => (d2.sqrt(), u),
+            None => x,
         }
-        (fx.sqrt(), x)
     }
 
     /// The closest point to `p` within one coarse sample of parameter `u` (`u` itself

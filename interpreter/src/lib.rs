@@ -18,6 +18,7 @@
 //!   command log again (`cnc replay`) and prints one (`cnc log show`).
 
 pub mod blocks;
+mod brent;
 pub mod cli;
 pub mod contour;
 pub mod estimate;

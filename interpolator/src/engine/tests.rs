@@ -41,7 +41,12 @@ fn limits() -> Limits {
 }
 
 fn run(blocks: Vec<CommandBlock>) -> Vec<Tick> {
-    let mut e = Engine::new(limits(), [0.0; 3]);
+    run_with(limits(), [0.0; 3], blocks)
+}
+
+/// [`run`] on the limits `lim`, the machine starting at `start`.
+fn run_with(lim: Limits, start: [f64; 3], blocks: Vec<CommandBlock>) -> Vec<Tick> {
+    let mut e = Engine::new(lim, start);
     let mut src = Blocks(blocks, 0);
     let mut out = vec![];
     for _ in 0..1_000_000 {
@@ -371,16 +376,11 @@ fn surface_pass_publishes_the_tool_point_over_the_exact_contact_path() {
     let quarter = core::f64::consts::FRAC_PI_2 * r;
     assert!((b.length_mm - quarter).abs() < 1e-9);
     let start = path::eval(&b, 0.0).p;
-    let mut e = Engine::new(limits(), start);
-    let mut src = Blocks(vec![b, CommandBlock::empty(BlockKind::ProgramEnd, 1, 2)], 0);
-    let mut ticks = vec![];
-    for _ in 0..100_000 {
-        let t = e.tick(&mut src).unwrap();
-        ticks.push(t);
-        if t.state != TickState::Running {
-            break;
-        }
-    }
+    let ticks = run_with(
+        limits(),
+        start,
+        vec![b, CommandBlock::empty(BlockKind::ProgramEnd, 1, 2)],
+    );
     assert_eq!(ticks.last().unwrap().state, TickState::Done);
     // Every set-point is the ball's reference point over a contact point of the exact
     // cylinder: the ball's centre M - (H - R)·z lies on the cylinder of radius r + R.
@@ -1066,16 +1066,7 @@ fn a_weak_block_is_entered_no_faster_than_it_can_brake_from() {
         lookahead_blocks: 1,
         ..limits()
     };
-    let mut e = Engine::new(lim, [0.0; 3]);
-    let mut src = Blocks(blocks, 0);
-    let mut ticks = vec![];
-    for _ in 0..100_000 {
-        let t = e.tick(&mut src).unwrap();
-        ticks.push(t);
-        if t.state != TickState::Running {
-            break;
-        }
-    }
+    let ticks = run_with(lim, [0.0; 3], blocks);
     assert_eq!(ticks.last().unwrap().state, TickState::Done);
     let weak_lim = Jerk {
         acc: 30.0,
