@@ -197,6 +197,17 @@ fn quarter_circle_is_exact() {
     );
 }
 
+/// The speed `|t|·√(4 + 9t²)` of the cusp the two length tests below cross, on
+/// `[-0.3, 1]`, and its length in closed form: `((4 + 9t²)^1.5 − 8)/27` each side of 0.
+fn cusp_speed(t: f64) -> f64 {
+    t.abs() * (4.0 + 9.0 * t * t).sqrt()
+}
+
+fn cusp_length() -> f64 {
+    let side = |t: f64| ((4.0 + 9.0 * t * t).powf(1.5) - 8.0) / 27.0;
+    side(-0.3) + side(1.0)
+}
+
 /// Arc length where the speed dips to zero inside a span, against the closed form: the
 /// semicubical parabola `(t², t³)` through its cusp at `t = 0`, whose speed
 /// `|t|·√(4 + 9t²)` is no polynomial there, from `t = -0.3` (so no piece boundary falls
@@ -205,9 +216,8 @@ fn quarter_circle_is_exact() {
 /// near-cusp span).
 #[test]
 fn arc_length_through_a_cusp_matches_the_closed_form() {
-    let side = |t: f64| ((4.0 + 9.0 * t * t).powf(1.5) - 8.0) / 27.0;
-    let exact = side(-0.3) + side(1.0);
-    let len = arc_length(&[-0.3, 1.0], 32, |t| t.abs() * (4.0 + 9.0 * t * t).sqrt());
+    let exact = cusp_length();
+    let len = arc_length(&[-0.3, 1.0], 32, cusp_speed);
     // Within a hundredth of a nanometre a piece (`ABS_TOL_MM`) of a few pieces at the
     // cusp: far below the 5e-8 mm within which the engine lands a stop.
     assert!(
@@ -221,13 +231,12 @@ fn arc_length_through_a_cusp_matches_the_closed_form() {
 /// span), to the same tolerance as the fixed rule above: its halvings find the cusp.
 #[test]
 fn adaptive_arc_length_through_a_cusp_matches_the_closed_form() {
-    let side = |t: f64| ((4.0 + 9.0 * t * t).powf(1.5) - 8.0) / 27.0;
-    let exact = side(-0.3) + side(1.0);
+    let exact = cusp_length();
     for pieces in [1, 2, 4] {
         let mut points = 0;
         let len = arc_length_adaptive(&[-0.3, 1.0], pieces, |t| {
             points += 1;
-            t.abs() * (4.0 + 9.0 * t * t).sqrt()
+            cusp_speed(t)
         });
         assert!(
             (len - exact).abs() <= 1e-10,
