@@ -1265,11 +1265,19 @@ impl Engine {
         let mut beyond = self.window.motion(i);
         loop {
             let next = beyond.map_or(lim, |f| f.lim);
-            if v >= lowest && next.jerk < kept_next_jerk && v.is_finite() {
+            if v >= lowest
+                && next.jerk < kept_next_jerk
+                && v.is_finite()
+                && !self.implied(last_low, since_low, next, v, d)
+            {
                 // Not lower than a nearer limit, but the block beyond it eases a rising
                 // speed off more slowly than any beyond those: a speed passed under a
                 // nearer one may still be rising here, and rise over this one after it
                 // (its `next`). Kept as it is; it does not take the place of the lowest.
+                // Unless the last low keeps it ([`Engine::implied`]): kept, a chain of
+                // blends at one speed whose jerks differ in the last digit had the line
+                // before it brake for the chain's far end under the chain's acceleration,
+                // a third of the line's (a raster's 20 mm pass 32 cycles slower).
                 kept_next_jerk = next.jerk;
                 if !keep(out, &mut n, Ahead { d, v, lim, next }) {
                     if let Some(last) = out.get_mut(MAX_AHEAD - 1) {
@@ -1279,26 +1287,7 @@ impl Engine {
             }
             if v < lowest {
                 lowest = v;
-                let implied = match (last_low, since_low) {
-                    // With two cycles' travel to spare: the braking for it then starts
-                    // a full cycle after the last low is passed, not inside the cycle
-                    // that crosses it.
-                    // (The spare first: on tiny blocks it alone exceeds the room.)
-                    // (Braked for under the jerk of the block beyond it too: see
-                    // [`Ahead::easing`].)
-                    (Some(low), Some(seg))
-                        if self.spare_exceeds(low, seg.jerk.min(next.jerk), d - low.d) =>
-                    {
-                        false
-                    }
-                    (Some(low), Some(seg)) => {
-                        let seg = eased(seg, next);
-                        let (peak, spare) = self.spare(low, seg);
-                        let room = d - low.d - spare;
-                        room >= 0.0 && seg.change_within(v, peak, room)
-                    }
-                    _ => false,
-                };
+                let implied = self.implied(last_low, since_low, next, v, d);
                 last_low = Some(Low {
                     d,
                     v,
@@ -1359,6 +1348,35 @@ impl Engine {
             };
         }
         n
+    }
+
+    /// Whether the limit `v`, `d` mm ahead with the block `next` beyond it, is kept by
+    /// keeping the last low (`last_low`, the blocks since it having the limits
+    /// `since_low`): those blocks alone can brake from what the low may be passed with
+    /// to `v` within the distance between them, with two cycles' travel to spare (the
+    /// braking for it then starts a full cycle after the low is passed, not inside the
+    /// cycle that crosses it), under the jerk of the block beyond it too (see
+    /// [`Ahead::easing`]).
+    #[inline]
+    fn implied(
+        &self,
+        last_low: Option<Low>,
+        since_low: Option<Jerk>,
+        next: Jerk,
+        v: f64,
+        d: f64,
+    ) -> bool {
+        let (Some(low), Some(seg)) = (last_low, since_low) else {
+            return false;
+        };
+        // (The spare first: on tiny blocks it alone exceeds the room.)
+        if self.spare_exceeds(low, seg.jerk.min(next.jerk), d - low.d) {
+            return false;
+        }
+        let seg = eased(seg, next);
+        let (peak, spare) = self.spare(low, seg);
+        let room = d - low.d - spare;
+        room >= 0.0 && seg.change_within(v, peak, room)
     }
 
     /// The highest speed, and the distance to allow for, past a low `low` before the
@@ -1878,9 +1896,13 @@ impl Engine {
                             let (v1, a1, mut ds) = self.profile_step(&m);
                             // Arriving at a stop: land on it exactly rather than creep
                             // the last fraction of a jerk step: within a thousandth of
-                            // a jerk step's distance, when the speed and acceleration
-                            // left are a hundredth of one step's (so the jump dropping
-                            // them leaves is far below the jerk limit). A landing with
+                            // a jerk step's distance, when the speed left is a hundredth
+                            // of one step's and the acceleration a thousandth (the jump
+                            // dropping it adds a thousandth of the jerk for a period:
+                            // with a hundredth, the next move starting in the next
+                            // cycle overlapped this braking's last jerk phase, 1.0026
+                            // times the jerk at a `G0 Z1`/`G1 Z-1` reversal of
+                            // LinuxCNC's g6 chitarra). A landing with
                             // more left (the braking ends a fraction of a period into
                             // the next cycle) runs on: dropped at once, it put up to 70
                             // mm/s² into one period, and a next move starting in the
@@ -1895,11 +1917,23 @@ impl Engine {
                             if v_exit <= 0.0
                                 && s_rem - ds <= snap
                                 && v1 <= 10.0 * snap / t
-                                && a1.abs() <= 10.0 * snap / (t * t)
+                                && a1.abs() <= snap / (t * t)
                             {
                                 ds = s_rem;
                                 v1 = 0.0;
                                 a1 = 0.0;
+                            }
+                            // Nor is one cut by the block-end test below (within 1e-9
+                            // mm of the end) while it has more acceleration left: the
+                            // step stops short by its last nanometre, and the next
+                            // cycle ends the braking and the block.
+                            let shed = snap / (t * t);
+                            if v_exit <= 0.0
+                                && !self.stopping
+                                && ds >= s_rem - 1e-9
+                                && a1.abs() > shed
+                            {
+                                ds = (s_rem - 2e-9).max(0.0);
                             }
                             if self.stopping {
                                 self.stop_left_mm -= ds;

@@ -266,34 +266,42 @@ M2
 /// slower); the same block counts, and every machining time of the peers and the
 /// examples the same to the millisecond on both machines. Unchanged: plain_g1,
 /// o_words, seed004_table1, g5_curva_stella.
+/// Renewed for issue #23, on purpose: `blocks::shape` bisects its last step down of a
+/// cap (to the highest that leaves the profile its floors, not a whole fifth below),
+/// `G64` blends take part in the share rounds like any curve, and a curve run's
+/// judgement counts the block before it, braking under the lower jerk of the two
+/// (`blocks::times`). Changed, with the same block counts: mixed, curves, g5_splines,
+/// the g5 chitarra and delfino, the g6 chitarras and delfinos (built-in machine: the g6
+/// chitarras 58.656 -> 58.325 s, cam-circle 1.994 -> 1.776 s, cam-polygon 7.182 ->
+/// 6.404 s; LinuxCNC machine: chitarra 186.211 -> 186.216 s).
 const GOLDEN_BLOCKS: &[(&str, usize, u64)] = &[
     ("plain_g1", 99999, 0x2314c695b1663686),
-    ("mixed", 2080, 0x16da0dbec9234e78),
-    ("curves", 3426, 0x10b89aac365c4446),
+    ("mixed", 2080, 0x79861b3a05228567),
+    ("curves", 3426, 0xfc0915dfbcf43e95),
     ("demo", 23, 0x70a63a635f31a4ff),
     ("every_kind", 24, 0xf676e445eab79c17),
     ("fanuc_ellipse.ngc", 7, 0xa35475d3b8b1d4ba),
-    ("g5_splines.ngc", 36, 0xed45fc71eef32cb8),
+    ("g5_splines.ngc", 36, 0xbbccd3265c70217b),
     ("o_words.ngc", 14, 0x341004163056a35e),
     ("seed004_fixed.ngc", 10, 0x0cbba02580e9dbab),
     ("seed004_table1.ngc", 1, 0x547761ab9c6006f2),
     ("g5_butterfly-xy.ngc", 69, 0x9ba864cd95897112),
     ("g5_butterfly-yz.ngc", 69, 0x67c61ff47dadec68),
     ("g5_butterfly-zx.ngc", 69, 0xdb329070a628fce5),
-    ("g5_curva_chitarra.ngc", 57, 0x934f255fc86c87af),
-    ("g5_curva_delfino.ngc", 91, 0xb764e68d565e5605),
+    ("g5_curva_chitarra.ngc", 57, 0x57e8c1c2a5be13f5),
+    ("g5_curva_delfino.ngc", 91, 0x31aa37554a9240ec),
     ("g5_curva_mazatrol.ngc", 26, 0xcb5de93385d0cf76),
     ("g5_curva_stella.ngc", 17, 0xe4673450da4ffb27),
     ("g5_leto-xy.ngc", 16, 0xd4e1280e6b859543),
     ("g5_nurbs-xy.ngc", 8, 0xefa3f4b2a46de8af),
     ("g5_nurbs-yz.ngc", 8, 0xf48da55f0bf4428f),
     ("g5_nurbs-zx.ngc", 8, 0x514bb438ddd1deef),
-    ("g6_curva_chitarra_q1.ngc", 34, 0x66efc5f8b72725d0),
-    ("g6_curva_chitarra_q2.ngc", 34, 0x778f67a254c93918),
-    ("g6_curva_chitarra_q3.ngc", 34, 0x3c89174d6742a7d7),
-    ("g6_curva_delfino_q1.ngc", 67, 0xf6c7137e6bc2c514),
-    ("g6_curva_delfino_q2.ngc", 67, 0xf6c7137e6bc2c514),
-    ("g6_curva_delfino_q3.ngc", 67, 0xcbde05c64924363a),
+    ("g6_curva_chitarra_q1.ngc", 34, 0x5e8e3978eec6a9cf),
+    ("g6_curva_chitarra_q2.ngc", 34, 0xe853f7e316a5a03b),
+    ("g6_curva_chitarra_q3.ngc", 34, 0x5a05ddc831ce2b80),
+    ("g6_curva_delfino_q1.ngc", 67, 0xa39c13d7d20aa87e),
+    ("g6_curva_delfino_q2.ngc", 67, 0xa39c13d7d20aa87e),
+    ("g6_curva_delfino_q3.ngc", 67, 0x71be3194306ce84c),
     ("g6_curva_mazatrol_q1_xy.ngc", 15, 0x87cf77f716b8fc98),
     ("g6_curva_mazatrol_q1_yz.ngc", 14, 0x029d7b42a2e005d1),
     ("g6_curva_mazatrol_q1_zx.ngc", 14, 0x35b48db448395ac4),

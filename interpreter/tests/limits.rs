@@ -1203,3 +1203,31 @@ fn known_defect_a_short_window_loses_a_junction_speed_behind_a_block_of_lower_je
     let w = check(&blocks, &cycles, &machine);
     assert!(w.axis <= 1.0 + 1e-3, "{w:?}");
 }
+
+/// A stop between two moves in one direction keeps the jerk: the engine does not cut a
+/// braking to a stop while it has acceleration to shed, so the next move does not start
+/// while the braking's last jerk phase still runs. LinuxCNC's g6 chitarra (quadrant 3)
+/// goes `G0 Z1` then `G1 Z-1 F500`, both down; its rapid's braking ended 5.2 µs into
+/// the next period and was cut at the period, and the move down, whose jerk points the
+/// same way, overlapped it for those 5.2 µs: 1.0026 times the jerk for a period, on the
+/// built-in machine with the plan of this change (a plan's phases decide whether a stop
+/// lands so). The whole program, every limit within 1e-4 ([`check`]).
+#[test]
+fn a_stop_between_two_moves_down_keeps_the_jerk() {
+    let machine = Machine::default();
+    let text = std::fs::read_to_string(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../tests/peers/linuxcnc/g6_curva_chitarra_q3.ngc"
+    ))
+    .unwrap();
+    let (blocks, cycles) = step(&text, &machine);
+    let w = check(&blocks, &cycles, &machine);
+    for (what, v) in [
+        ("speed", w.speed),
+        ("acc", w.acc),
+        ("jerk", w.jerk),
+        ("axis", w.axis),
+    ] {
+        assert!(v <= 1.0 + 1e-4, "{what} {v} times the limit: {w:?}");
+    }
+}
