@@ -1152,3 +1152,59 @@ fn a_chain_held_at_one_speed_is_braked_for_under_the_limits_before_it() {
         );
     }
 }
+
+/// A chain of 10 µm blocks slowing to a stop every 200 of them, at a 100 µs period
+/// (the chain of the cycle bench's `profile_worst`), runs to its end. A braking to a
+/// stop is held back from its last nanometres at most once: held back every cycle
+/// while it still had acceleration to shed, one such braking never ended and the
+/// engine faulted, stalled (found by the bench, not by a test).
+#[test]
+fn a_chain_of_tiny_blocks_with_stops_runs_to_its_end_at_100_us() {
+    let j = Jerk {
+        acc: 2000.0,
+        jerk: 50_000.0,
+    };
+    let (tiny, every) = (0.01, 200usize);
+    let span = every as f64 * tiny;
+    let end_speed = |x: f64| {
+        (j.reachable_speed(0.0, x)
+            .min(j.reachable_speed(0.0, span - x))
+            * 60.0)
+            .min(3000.0)
+    };
+    let mut blocks = Vec::new();
+    for k in 0..3 {
+        for i in 0..every {
+            let (a, b) = (i as f64 * tiny, (i + 1) as f64 * tiny);
+            let end = if i + 1 == every { 0.0 } else { end_speed(b) };
+            let shift = k as f64 * span;
+            blocks.push(line(
+                (k * every + i) as u64,
+                [a + shift, 0.0, 0.0],
+                [b + shift, 0.0, 0.0],
+                3000.0,
+                end_speed(a),
+                end,
+            ));
+        }
+    }
+    let n = blocks.len() as u64;
+    blocks.push(CommandBlock::empty(BlockKind::ProgramEnd, n, n as u32 + 1));
+    let lim = Limits {
+        max_following_error_mm: 1.0,
+        ..Limits::new(&Machine::default(), 100_000)
+    };
+    let mut e = Engine::new(lim, [0.0; 3]);
+    let mut src = Blocks(blocks, 0);
+    let mut last = None;
+    for _ in 0..1_000_000 {
+        let t = e.tick(&mut src).unwrap_or_else(|f| panic!("fault: {f:?}"));
+        last = Some(t);
+        if t.state != TickState::Running {
+            break;
+        }
+    }
+    let last = last.unwrap();
+    assert_eq!(last.state, TickState::Done);
+    assert_eq!(last.pos_mm, [3.0 * span, 0.0, 0.0]);
+}
