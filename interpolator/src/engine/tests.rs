@@ -1194,17 +1194,9 @@ fn a_chain_of_tiny_blocks_with_stops_runs_to_its_end_at_100_us() {
         max_following_error_mm: 1.0,
         ..Limits::new(&Machine::default(), 100_000)
     };
-    let mut e = Engine::new(lim, [0.0; 3]);
-    let mut src = Blocks(blocks, 0);
-    let mut last = None;
-    for _ in 0..1_000_000 {
-        let t = e.tick(&mut src).unwrap_or_else(|f| panic!("fault: {f:?}"));
-        last = Some(t);
-        if t.state != TickState::Running {
-            break;
-        }
-    }
-    let last = last.unwrap();
+    // (`run_with` unwraps each tick: a fault fails the test.)
+    let ticks = run_with(lim, [0.0; 3], blocks);
+    let last = ticks.last().unwrap();
     assert_eq!(last.state, TickState::Done);
     assert_eq!(last.pos_mm, [3.0 * span, 0.0, 0.0]);
 }
