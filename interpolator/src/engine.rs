@@ -1913,11 +1913,13 @@ impl Engine {
                                 * t
                                 * t
                                 * t;
+                            // (The acceleration a landing may drop: `snap / T²`.)
+                            let shed = snap / (t * t);
                             let (mut v1, mut a1) = (v1, a1);
                             if v_exit <= 0.0
                                 && s_rem - ds <= snap
                                 && v1 <= 10.0 * snap / t
-                                && a1.abs() <= snap / (t * t)
+                                && a1.abs() <= shed
                             {
                                 ds = s_rem;
                                 v1 = 0.0;
@@ -1930,7 +1932,6 @@ impl Engine {
                             // or less left the block ends, whatever the braking still
                             // holds, or a braking that cannot shed it in a period, on
                             // a chain of 10 µm blocks at 100 µs, never ended).
-                            let shed = snap / (t * t);
                             if v_exit <= 0.0
                                 && !self.stopping
                                 && s_rem > 1e-8

@@ -425,9 +425,12 @@ fn profile_floors(machine: &Machine) -> (f64, f64) {
     (0.05 * acc, 0.05 * jerk)
 }
 
-/// Most times [`shape`] lowers a cap by a fifth to leave the profile its floor: to
-/// 0.26 of the cap at most.
+/// Most times [`shape`] lowers a cap by a fifth ([`LOWER_STEP`]) to leave the profile
+/// its floor: to 0.26 of the cap at most.
 const LOWER_STEPS: usize = 6;
+
+/// What one of [`shape`]'s steps down leaves of a cap.
+const LOWER_STEP: f64 = 0.8;
 
 /// Bisections of [`shape`]'s last step down: the cap within 0.25/2^10 (0.02 %) of the
 /// highest that leaves the profile its floors.
@@ -570,17 +573,17 @@ fn shape(g: Geometry, machine: &Machine, period_s: f64, feed_mm_s: f64, share: f
         if (acc >= acc_min && jerk >= jerk_min) || v * 0.8 < 4.0 * slowest || v.is_nan() {
             break;
         }
-        v *= 0.8;
+        v *= LOWER_STEP;
         (acc, jerk) = leftover(v);
     }
     // The last step down overshoots by up to a fifth: the highest cap between it and the
     // one before that still leaves the floors, by bisection (to 0.02 %). Where the
     // curvature takes most of the jerk (`VALLEY_SHARE`), the leftover falls steeply
-    // with the cap and a whole step threw away what the larger share gained (LinuxCNC's
-    // CAM circle on the built-in machine: its blends at 32.4 mm/s with 0.95, 32.7 with
-    // half, 40.5 with the bisection).
+    // with the cap and a whole step threw away what the larger share gained (the CAM
+    // circle, `examples/cam-circle.ngc`, on the built-in machine: its blends at 32.4
+    // mm/s with 0.95, 32.7 with half, 40.5 with the bisection).
     if v < v0 && acc >= acc_min && jerk >= jerk_min {
-        let (mut lo, mut hi) = (v, (v / 0.8).min(v0));
+        let (mut lo, mut hi) = (v, (v / LOWER_STEP).min(v0));
         for _ in 0..LOWER_BISECTIONS {
             let mid = 0.5 * (lo + hi);
             let (a, j) = leftover(mid);
@@ -1926,13 +1929,15 @@ fn relax<B: Plannable>(blocks: &mut [B], machine: &Machine, ceiling: &[f64]) {
 /// quickly as its limits allow, the braking under the lower jerk of its own and the
 /// next block's. That is how the interpolator brakes for a block's end
 /// (`interpolator::engine`, `Ahead::easing`): a curve given [`VALLEY_SHARE`] leaves
-/// its profile a twentieth of the jerk, and the line before it then brakes under that
-/// twentieth (a raster's 90° blends at `P0.1` on LinuxCNC's limits: each 20 mm pass
-/// 451 -> 483 cycles, which its own limits did not show).
+/// its profile a twentieth of the jerk, and the line before it brakes under that
+/// twentieth. (Measured against each block under its own limits, the peers and the
+/// examples plan the same but for the CAM circle, 1.774 -> 1.776 s on the built-in
+/// machine: the model is kept for being the engine's, not for a gain.)
 fn times<B: Plannable>(blocks: &[B]) -> Vec<f64> {
-    (0..blocks.len())
-        .map(|k| {
-            let b = &blocks[k];
+    blocks
+        .iter()
+        .enumerate()
+        .map(|(k, b)| {
             if !b.is_motion() {
                 return 0.0;
             }
@@ -1940,8 +1945,8 @@ fn times<B: Plannable>(blocks: &[B]) -> Vec<f64> {
             let lim = b.limits();
             let down = match blocks.get(k + 1) {
                 Some(n) if n.is_motion() => Jerk {
-                    acc: lim.acc,
                     jerk: lim.jerk.min(n.limits().jerk),
+                    ..lim
                 },
                 _ => lim,
             };
@@ -1989,7 +1994,7 @@ const VALLEY_SHARE: f64 = 0.95;
 /// A block the share rounds of [`plan_and`] and [`relax`] work on: a motion along a
 /// curve (arcs, NURBS and `G64` blends), not a surface block. (Blends were left out
 /// until [`shape`] bisected its last step down; with them the CAM examples on the
-/// built-in machine went circle 1.994 -> 1.774 s, polygon 7.182 -> 6.404 s.)
+/// built-in machine went circle 1.994 -> 1.776 s, polygon 7.182 -> 6.404 s.)
 fn is_curve<B: Plannable>(b: &B) -> bool {
     b.is_motion() && matches!(b.geometry(), Geometry::Curve(c) if !c.is_surface())
 }
