@@ -274,6 +274,12 @@ M2
 /// the g5 chitarra and delfino, the g6 chitarras and delfinos (built-in machine: the g6
 /// chitarras 58.656 -> 58.325 s, cam-circle 1.994 -> 1.776 s, cam-polygon 7.182 ->
 /// 6.404 s; LinuxCNC machine: chitarra 186.211 -> 186.216 s).
+/// Renewed for issue #23, on purpose: each share round is relaxed before it is judged
+/// (`blocks::relax` in every round of `blocks::plan_and`, as the interpolator runs it),
+/// and a second round gives the larger share to the curve blocks that reach their cap
+/// only once their neighbours have it (`blocks::SHARE_ROUNDS`). Changed, with the same
+/// block count: g5_splines (built-in machine 1.239 -> 1.237 s); every other fingerprint
+/// is as before (LinuxCNC machine: the butterfly at F6000 11.124 -> 11.074 s).
 const GOLDEN_BLOCKS: &[(&str, usize, u64)] = &[
     ("plain_g1", 99999, 0x2314c695b1663686),
     ("mixed", 2080, 0x79861b3a05228567),
@@ -281,7 +287,7 @@ const GOLDEN_BLOCKS: &[(&str, usize, u64)] = &[
     ("demo", 23, 0x70a63a635f31a4ff),
     ("every_kind", 24, 0xf676e445eab79c17),
     ("fanuc_ellipse.ngc", 7, 0xa35475d3b8b1d4ba),
-    ("g5_splines.ngc", 36, 0xbbccd3265c70217b),
+    ("g5_splines.ngc", 36, 0xa48d9c956d900c96),
     ("o_words.ngc", 14, 0x341004163056a35e),
     ("seed004_fixed.ngc", 10, 0x0cbba02580e9dbab),
     ("seed004_table1.ngc", 1, 0x547761ab9c6006f2),

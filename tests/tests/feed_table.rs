@@ -252,3 +252,37 @@ fn the_chord_measure_is_the_sagitta_on_a_circle() {
     assert!((measured - sag).abs() <= 1e-3 * sag, "{measured} vs {sag}");
     assert!(w.off_curve_mm <= 1e-9, "{w:?}");
 }
+
+/// Issue #23's goal against LinuxCNC: on LinuxCNC's limits (the LinuxCNC machine file),
+/// every program LinuxCNC 2.9 was timed on (`LINUXCNC_S`) takes no longer with us. Our
+/// time is machining time from the planned blocks stepped through the interpolator's
+/// engine (`interpreter::estimate`, as `cnc check --estimate`: a count of 1 ms cycles,
+/// the same on every machine, not a wall-clock timing). Tolerance: none; LinuxCNC's
+/// times are its first to last moving sample, to the millisecond.
+#[test]
+fn linuxcnc_s_programs_are_no_slower_on_its_limits() {
+    let (_, m) = &machines()[1];
+    let programs = programs();
+    let mut slower = Vec::new();
+    for (name, linuxcnc) in LINUXCNC_S {
+        let (_, text) = programs.iter().find(|(n, _)| n == name).unwrap();
+        let opts = interpreter::program::Options::default();
+        let blocks = interpreter::process::compile_source(name, text, &opts, m, PERIOD_NS)
+            .unwrap()
+            .blocks;
+        let ours = interpreter::estimate::estimate(&blocks, m, PERIOD_NS)
+            .unwrap()
+            .time_s;
+        println!("{name}: ours {ours:.3} s, LinuxCNC 2.9 {linuxcnc:.3} s");
+        if ours > *linuxcnc {
+            slower.push(format!(
+                "{name}: {ours:.3} s against LinuxCNC's {linuxcnc:.3} s"
+            ));
+        }
+    }
+    assert!(
+        slower.is_empty(),
+        "slower than LinuxCNC 2.9:\n{}",
+        slower.join("\n")
+    );
+}
