@@ -33,10 +33,14 @@
 //!   linear in the unknowns: its norm within `path_jerk_mm_per_s3` (a cone), each axis's
 //!   component within that axis's jerk;
 //! * **`κ'`** is the difference of the curvature vectors over a window around the node at
-//!   least `v̄·T` long (`T` the period): on a smooth curve this is the derivative; where
-//!   the curvature jumps (a knot of a quadratic, a junction without a kink) it gives the
-//!   jerk `v²·Δκ/T` of an acceleration step taken in one period, as the engine takes it
-//!   and as the feed table's jerk measure (third differences of set-points) sees it;
+//!   least `v̄·T` long (`T` the period) and at least a cell on each side: on a smooth
+//!   curve this is the derivative;
+//! * **curvature jumps** (a knot of a quadratic, a junction without a kink): the
+//!   acceleration steps by `v²·Δκ` within one period, which the feed table's jerk
+//!   measure (third differences of set-points) sees as at least half of `v²·|Δκ|/T`
+//!   whatever the step's phase ([`STEP_JERK_SHARE`]): `x ≤ 2·J·T/|Δκ|` at the node,
+//!   path and each axis (the window of `κ'` above spreads the step over two cells, a
+//!   fifteenth of what the measure sees at 100 mm/s on a 0.25 mm grid);
 //! * **kinks** (a junction whose tangent turns, or a cell the grid could not resolve or
 //!   that merging made, turning more than `2·MAX_TURN_RAD`): no jerk constraint at them
 //!   (no finite jerk follows a kink; the feed table's jerk measure leaves out the three
@@ -220,6 +224,9 @@ fn nodes(grid: &[GridPoint], lim: &JerkLimits) -> Vec<Node> {
     for i in 0..n {
         if angle(out[i].t_in, out[i].t_out) > 1e-9 {
             out[i].kink = true;
+        } else {
+            let cap2 = step_cap2(out[i].k_in, out[i].k_out, lim);
+            out[i].cap2 = out[i].cap2.min(cap2);
         }
         if i + 1 < n && angle(out[i].t_out, out[i + 1].t_in) > 2.0 * MAX_TURN_RAD {
             let cap = kink_cap(out[i].t_out, out[i + 1].t_in, lim);
@@ -230,6 +237,36 @@ fn nodes(grid: &[GridPoint], lim: &JerkLimits) -> Vec<Node> {
         }
     }
     out
+}
+
+/// The least share of an acceleration step `Δa` that the set-points' jerk (their third
+/// difference over `T³`) shows, whatever the step's phase between two set-points: a step
+/// a share `φ` of a period after a set-point enters three third differences by
+/// `(1 − φ)²/2`, `(1 + 2φ − 2φ²)/2` and `φ²/2` of `Δa/T`, the largest of which is
+/// between 1/2 (a step on a set-point) and 3/4 (half-way, the planner's
+/// `SAMPLED_STEP`, which must hold for every phase).
+pub const STEP_JERK_SHARE: f64 = 0.5;
+
+/// The largest speed² at a node whose curvature jumps from `k_in` to `k_out` without a
+/// turn (a quadratic's knot, a line meeting an arc): the acceleration steps by
+/// `v²·Δκ` there, which the set-points show as a jerk of at least
+/// [`STEP_JERK_SHARE`]`·v²·|Δκ|/T`, path (norm) and each axis (component). (Taken over
+/// the window of `κ'` instead, two cells of the grid, a quadratic's knots were passed
+/// at up to twice the speed the measure allows.)
+fn step_cap2(k_in: [f64; 3], k_out: [f64; 3], lim: &JerkLimits) -> f64 {
+    let d = [k_out[0] - k_in[0], k_out[1] - k_in[1], k_out[2] - k_in[2]];
+    let t = lim.base.period_s;
+    let mut cap2 = f64::INFINITY;
+    let n = norm(d);
+    if n > 0.0 {
+        cap2 = lim.path_jerk * t / (STEP_JERK_SHARE * n);
+    }
+    for (k, dk) in d.iter().enumerate() {
+        if *dk != 0.0 {
+            cap2 = cap2.min(lim.axis_jerk[k] * t / (STEP_JERK_SHARE * dk.abs()));
+        }
+    }
+    cap2
 }
 
 /// The speed of a turn from `a` to `b` within one period `T`: its velocity change

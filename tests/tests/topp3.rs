@@ -144,6 +144,38 @@ fn a_circle_cruises_where_the_centripetal_jerk_is_the_limit() {
     assert!(o.jerk_ratio <= topp3::KEEP_JERK, "{}", o.jerk_ratio);
 }
 
+/// A line running tangentially into an arc of radius `r`: the acceleration steps by
+/// `v²/r` at the junction, which the set-points show as at least half of `v²/(r·T)`
+/// (`topp3::STEP_JERK_SHARE`), so the reference passes the junction at no more than
+/// `sqrt(2·J·T·r)` (22.36 mm/s at J 50 000 mm/s³, T 1 ms, r 5 mm), and, the cap binding
+/// (the arc alone allows 100 mm/s), within 1e-2 of it (the trust region's `δ`, as the
+/// circle's cruise above), on the feed table's grid (`JERK_STEP_MM`, 0.25 mm). Before
+/// the step's bound, the curvature's difference over two cells of that grid let it pass
+/// at 38.0 mm/s (on a grid of 0.02 mm, whose two cells are about `v·T`, the difference
+/// alone held it to 20.3 mm/s: the step's bound matters on coarse grids).
+#[test]
+fn a_curvature_jump_is_passed_at_the_speed_of_its_step() {
+    let m = machine(2000.0, 50_000.0, 20_000.0);
+    let r: f64 = 5.0;
+    let o = optimum_at(
+        "G1 X10 F6000\nG3 X10 Y10 I0 J5\nM2\n",
+        &m,
+        tests::feed::JERK_STEP_MM,
+    );
+    let i =
+        o.s.iter()
+            .enumerate()
+            .min_by(|a, b| (a.1 - 10.0).abs().total_cmp(&(b.1 - 10.0).abs()))
+            .unwrap()
+            .0;
+    let v = o.speed[i];
+    let want = (2.0 * 50_000.0 * 1e-3 * r).sqrt();
+    println!("junction at s {:.6}: {v:.4} mm/s", o.s[i]);
+    assert!(v <= want * (1.0 + 1e-6), "{v} above {want}");
+    assert_rel("junction speed", v, want, 1e-2);
+    assert!(o.jerk_ratio <= topp3::KEEP_JERK, "{}", o.jerk_ratio);
+}
+
 /// With a jerk limit that never binds (1e9 mm/s³) the jerk-limited reference is the
 /// acceleration-only one: on a line and a circle at A 1000 mm/s² within 1e-3 (the
 /// cells' times: the second-order reference times each cell with its own acceleration

@@ -624,3 +624,33 @@ fn an_acceleration_step_moves_the_sampled_jerk_by_three_quarters_at_most() {
     assert!(worst <= bound * (1.0 + 1e-9), "{worst} > {bound}");
     assert!(worst >= bound * (1.0 - 1e-9), "{worst} < {bound}");
 }
+
+/// A curvature jump without a kink (a line running tangentially into an arc, a
+/// quadratic's knot) is passed at the highest speed whose acceleration step, with the
+/// normal jerk there, stays within `JUMP_SHARE` of the jerk (`Load::jerk_speed`), not
+/// at what the blocks' own profiles have left of it: the step is normal to the path and
+/// the profiles beside it are left what it leaves (`junction_leaves`). Closed form on
+/// the default machine (path and axis jerk J = 50 000 mm/s³, period T = 1 ms): a line
+/// into an arc of radius r = 5 mm at `v` steps the acceleration by `v²/r`, which the
+/// set-points show as `SAMPLED_STEP·v²/(r·T)`, and the arc's tangential acceleration
+/// `a` adds `3·a·v/r`; so `v` is the root of `0.75·v²/(r·T) + 3·a·v/r = 0.8·J`, between
+/// its value at the machine's whole acceleration (`a` = 2000 mm/s², the lowest) and at
+/// the arc's own (`a` its planned acceleration, the highest). Tolerance 1e-9 relative.
+/// (Before, the jump's speed was also held to the blocks' leftover jerk: 10.93 mm/s here.)
+#[test]
+fn a_curvature_jump_is_passed_at_the_speed_its_share_of_the_jerk_allows() {
+    let b = planned("G1 X10 F6000\nG3 X10 Y10 I0 J5\nM2\n");
+    let m = Machine::default();
+    let (r, t, j) = (5.0, 1e-3, m.path_jerk_mm_per_s3);
+    let root = |a: f64| {
+        let (c2, c1) = (SAMPLED_STEP / (r * t), 3.0 * a / r);
+        (-c1 + (c1 * c1 + 4.0 * c2 * JUMP_SHARE * j).sqrt()) / (2.0 * c2)
+    };
+    let v = b[0].end_feed_mm_per_min / 60.0;
+    let (lo, hi) = (root(m.path_acc_mm_per_s2), root(b[1].acc_mm_per_s2));
+    println!("junction {v} mm/s, closed form between {lo} and {hi}");
+    assert!(
+        v >= lo * (1.0 - 1e-9) && v <= hi * (1.0 + 1e-9),
+        "{v} not in [{lo}, {hi}]"
+    );
+}
