@@ -630,14 +630,16 @@ fn shape(g: Geometry, machine: &Machine, period_s: f64, feed_mm_s: f64, share: f
 /// is sharpest near the slower end (a valley's flank), that leaves the profile more of
 /// the acceleration than [`shape`]'s worst case at the cap. The jerk stays `lim.jerk`:
 /// the acceleration found keeps it within every limit too. Never less than `lim.acc`.
-fn relaxed_acc(
+#[allow(clippy::too_many_arguments)]
+fn relaxed_limits(
     b: &CommandBlock,
     machine: &Machine,
     cap: f64,
     lim: Jerk,
     (start, end): (f64, f64),
     len: f64,
-) -> f64 {
+    ceiling: Jerk,
+) -> Jerk {
     let (pts, dk, _, at) = samples(b, true);
     let axes = machine.axes.as_array();
     let a_path = machine.path_acc_mm_per_s2;
@@ -673,10 +675,38 @@ fn relaxed_acc(
         .fold(a_path, |m, ax| m.max(ax.max_acc_mm_per_s2));
     // (`lim.acc` itself fits: [`shape`] found it at the cap, the envelope's highest;
     // not asked again, as a limit it binds exactly may round either way.)
-    if pts.is_empty() || lim.acc.partial_cmp(&top) != Some(std::cmp::Ordering::Less) {
-        return lim.acc;
+    if pts.is_empty() {
+        return lim;
     }
-    highest_fitting(lim.acc, top, 20, fits)
+    let acc = if lim.acc.partial_cmp(&top) == Some(std::cmp::Ordering::Less) {
+        highest_fitting(lim.acc, top, 20, fits)
+            .min(ceiling.acc)
+            .max(lim.acc)
+    } else {
+        lim.acc
+    };
+    // The jerk the profile may use at those speeds with that acceleration: what
+    // `3·v·a·|k|` and `v³·|dk/ds|` leave of the path's and each axis's, as [`shape`]
+    // takes it at the cap (the speed envelope's highest).
+    let mut jerk = j_path.min(ceiling.jerk);
+    for (((t, k), dk), x) in pts.iter().zip(&dk).zip(&at) {
+        let (lo, hi) = ((x[0] - MARGIN).max(0.0), (x[1] + MARGIN).min(1.0));
+        let v = cap
+            .min((start * start + 2.0 * acc * hi * len).sqrt())
+            .min((end * end + 2.0 * acc * (1.0 - lo) * len).sqrt());
+        let jn = v * v * v * path::norm(*dk);
+        jerk = jerk.min(j_path - 3.0 * v * acc * path::norm(*k) - jn);
+        for (i, ax) in axes.iter().enumerate() {
+            if t[i].abs() > 1e-12 {
+                let other = 3.0 * v * acc * k[i].abs() + v * v * v * dk[i].abs();
+                jerk = jerk.min((ax.max_jerk_mm_per_s3 - other) / t[i].abs());
+            }
+        }
+    }
+    Jerk {
+        acc,
+        jerk: jerk.max(lim.jerk),
+    }
 }
 
 /// The highest of `halvings` bisections of `[lo, hi]` where `fits` holds, `lo` taken to
@@ -1057,7 +1087,7 @@ fn samples(b: &CommandBlock, places: bool) -> Samples {
     // Each sample's place along the block, by the chords between the samples in order
     // (within a few thousandths of the arc: a tangent turns at most `MAX_TURN_RAD`
     // between two); a sample found by a search lies anywhere in its search's range.
-    // Only where asked (`places`: [`relaxed_acc`]); none for [`shape`].
+    // Only where asked (`places`: [`relaxed_limits`]); none for [`shape`].
     let mut chords: Vec<f64> = Vec::new();
     let mut total = 0.0;
     if places {
@@ -1835,6 +1865,7 @@ pub fn plan_and<B: Plannable>(
     // Each round plans from the programmed feeds.
     let feeds: Vec<f64> = blocks.iter().map(|b| b.feed_mm_per_min()).collect();
     let mut memo = vec![None; blocks.len()];
+    let mut last_ceiling = Vec::new();
     let mut round = |blocks: &mut Vec<B>, shares: &[f64]| {
         for (b, f) in blocks.iter_mut().zip(&feeds) {
             if b.is_motion() {
@@ -1843,7 +1874,8 @@ pub fn plan_and<B: Plannable>(
             }
         }
         let ceiling = plan_split(blocks, machine, period_ns, &|i| shares[i], |_, _| {});
-        relax(blocks, machine, &ceiling, &mut memo);
+        relax(blocks, machine, &ceiling, &mut memo, false);
+        last_ceiling = ceiling;
         times(blocks)
     };
     let mut shares = vec![NORMAL_SHARE; blocks.len()];
@@ -1879,6 +1911,14 @@ pub fn plan_and<B: Plannable>(
         shares = trial;
         before = if kept { after } else { round(blocks, &shares) };
     }
+    // The jerk once, on the plan kept: in every round it doubled the planning's cost
+    // (nearly every curve block sampled again each round) for the same plan; once, it
+    // costs a third more on curves (`cnc check` on 480 lines of the bench's `curves`,
+    // 866 M -> 1152 M instructions). Held to blocks that cannot reach their cap, or to
+    // a tenfold negligible gain, it saved a twentieth of that and lost a third of the
+    // gain (the butterfly at F6000 on the built-in machine 13.888 -> 13.945 / 13.914 s).
+    let mut fresh = vec![None; blocks.len()];
+    relax(blocks, machine, &last_ceiling, &mut fresh, true);
     // (Last to first, as the backward pass hands them over.)
     for (i, b) in blocks.iter().enumerate().rev() {
         done(i, b);
@@ -1886,7 +1926,7 @@ pub fn plan_and<B: Plannable>(
 }
 
 /// A block's relaxed acceleration and the figures it was found from (see [`relax`]).
-type RelaxMemo = ([u64; 6], f64);
+type RelaxMemo = ([u64; 7], Jerk);
 
 /// Most planning rounds of [`plan_and`] that give the curve blocks reaching their cap
 /// the larger share. (One until the rounds were judged on relaxed plans: a second then
@@ -1915,7 +1955,7 @@ fn curve_runs<B: Plannable>(blocks: &[B]) -> Vec<(usize, usize)> {
 const RELAX_NEGLIGIBLE_S: f64 = 1e-5;
 
 /// Each curve block's acceleration raised to what its planned speeds leave
-/// ([`relaxed_acc`]), in every planning round: the planned speeds stay as they
+/// ([`relaxed_limits`]), and its jerk to what those speeds leave, in every planning round: the planned speeds stay as they
 /// are (junction limits the interpolator never exceeds), the profile between them gets
 /// there sooner. Skipped where [`block_time`] says it could gain less than
 /// [`RELAX_NEGLIGIBLE_S`] (a block held at its cap at both ends gains nothing). Never
@@ -1930,8 +1970,9 @@ const RELAX_NEGLIGIBLE_S: f64 = 1e-5;
 fn relax<B: Plannable>(
     blocks: &mut [B],
     machine: &Machine,
-    ceiling: &[f64],
+    ceiling: &[Jerk],
     memo: &mut [Option<RelaxMemo>],
+    jerk: bool,
 ) {
     for ((b, &ceiling), memo) in blocks.iter_mut().zip(ceiling).zip(memo) {
         if !is_curve(b) {
@@ -1942,39 +1983,54 @@ fn relax<B: Plannable>(
         };
         let (start, end, cap) = b.planned_mm_s();
         let (lim, len) = (b.limits(), b.length_mm());
-        if ceiling <= lim.acc {
+        // The most the ceiling and the machine allow (the jerk only where asked).
+        let most = Jerk {
+            acc: ceiling.acc.min(machine.path_acc_mm_per_s2.max(lim.acc)),
+            jerk: if jerk {
+                ceiling.jerk.min(machine.path_jerk_mm_per_s3.max(lim.jerk))
+            } else {
+                lim.jerk
+            },
+        };
+        if most.acc <= lim.acc && most.jerk <= lim.jerk {
             continue;
         }
-        // (Not where the most it could gain, at the highest acceleration the ceiling
-        // and the machine allow, is negligible: the samples cost more than that.)
+        // (Not where the most it could gain is negligible: the samples cost more than
+        // that.)
         let most = Jerk {
-            acc: ceiling.min(machine.path_acc_mm_per_s2.max(lim.acc)),
-            jerk: lim.jerk,
+            acc: most.acc.max(lim.acc),
+            jerk: most.jerk.max(lim.jerk),
         };
         if block_time(lim, start, end, cap, len) - block_time(most, start, end, cap, len)
             < RELAX_NEGLIGIBLE_S
         {
             continue;
         }
-        let key = [start, end, cap, lim.acc, lim.jerk, ceiling].map(f64::to_bits);
-        let acc = match memo {
-            Some((k, acc)) if *k == key => *acc,
+        let key = [
+            start,
+            end,
+            cap,
+            lim.acc,
+            lim.jerk,
+            ceiling.acc,
+            ceiling.jerk,
+        ]
+        .map(f64::to_bits);
+        let relaxed = match memo {
+            Some((k, relaxed)) if *k == key => *relaxed,
             _ => {
-                let acc = relaxed_acc(c, machine, cap, lim, (start, end), len).min(ceiling);
-                *memo = Some((key, acc));
-                acc
+                let relaxed = relaxed_limits(c, machine, cap, lim, (start, end), len, ceiling);
+                *memo = Some((key, relaxed));
+                relaxed
             }
         };
-        if acc > lim.acc {
+        let relaxed = Jerk {
+            jerk: if jerk { relaxed.jerk } else { lim.jerk },
+            ..relaxed
+        };
+        if relaxed.acc > lim.acc || relaxed.jerk > lim.jerk {
             let feed = b.feed_mm_per_min();
-            b.set_caps(
-                len,
-                feed,
-                Jerk {
-                    acc,
-                    jerk: lim.jerk,
-                },
-            );
+            b.set_caps(len, feed, relaxed);
         }
     }
 }
@@ -2174,21 +2230,27 @@ fn split_at_kinks<B: Plannable>(blocks: &mut Vec<B>, machine: &Machine, period_n
 }
 
 /// [`plan_and`] once the blocks are split at their kinks; returns the most acceleration
-/// the junctions' loads leave each block (for [`relax`]).
+/// and jerk the junctions' loads leave each block (for [`relax`]).
 fn plan_split<B: Plannable>(
     blocks: &mut [B],
     machine: &Machine,
     period_ns: u64,
     share: &dyn Fn(usize) -> f64,
     done: impl FnMut(usize, &B),
-) -> Vec<f64> {
+) -> Vec<Jerk> {
     let period_s = period_ns as f64 * 1e-9;
     let n = blocks.len();
     // Junction speed limits (mm/s) at the end of each block, each found as soon as the
     // block after it has its shape (a junction needs only its two blocks').
     let mut end = crate::pages::filled(n, 0.0f64);
-    // The most acceleration a junction's load leaves each block (see [`relax`]).
-    let mut ceiling = crate::pages::filled(n, f64::INFINITY);
+    // The most acceleration and jerk a junction's load leaves each block (see [`relax`]).
+    let mut ceiling = crate::pages::filled(
+        n,
+        Jerk {
+            acc: f64::INFINITY,
+            jerk: f64::INFINITY,
+        },
+    );
     // The shapes of the block before and of this one (where they are motions), taking
     // turns (`i % 2`), each worked out where it stays: a shape is 248 bytes, and making
     // one and handing it on were copies a block.
@@ -2252,8 +2314,11 @@ fn plan_split<B: Plannable>(
                             // (Worked out in `junction_leaves`: kept as they are.)
                             None => (blocks[j].limits().acc, blocks[i].limits().acc),
                         };
-                        ceiling[j] = ceiling[j].min(left.acc).min(ca);
-                        ceiling[i] = ceiling[i].min(left.acc).min(cb);
+                        for (x, k) in [(j, ca), (i, cb)] {
+                            let c = &mut ceiling[x];
+                            c.acc = c.acc.min(left.acc).min(k);
+                            c.jerk = c.jerk.min(left.jerk);
+                        }
                     }
                     if let Some(k) = kink.filter(|_| end[j] > 0.0) {
                         let at = s - blocks[i].length_mm();
@@ -2277,7 +2342,7 @@ fn plan_split<B: Plannable>(
                                 .zip(&mut ceiling[first..=last.min(i)])
                             {
                                 keep_within(b, left);
-                                *c = c.min(left.acc);
+                                c.acc = c.acc.min(left.acc);
                             }
                         }
                     }

@@ -288,34 +288,42 @@ M2
 /// g5_splines 1.237 -> 1.235 s, the butterfly at F6000 15.295 -> 14.284 s, 10 000
 /// lines of curves 1193.025 -> 1183.041 s; LinuxCNC machine: chitarra 186.217 ->
 /// 186.213 s).
+/// Renewed for issue #23, on purpose: the relaxation raises a curve block's tangential
+/// jerk too, once the share rounds are done, to what `3·v·a·|k|` and `v³·|dk/ds|`
+/// leave at the speeds the block can have between its planned ends
+/// (`blocks::relaxed_limits`), never above what the junctions' loads leave it. Changed, with the same block counts: mixed, curves, demo,
+/// g5_splines, the g5 chitarra and delfino, the g6 chitarras and delfinos (built-in
+/// machine: the butterfly at F6000 14.284 -> 13.888 s, the g6 chitarra q1 58.325 ->
+/// 58.321 s, cam-circle 1.776 -> 1.771 s; LinuxCNC machine: delfino 134.894 -> 134.887
+/// s); every other fingerprint is as before.
 const GOLDEN_BLOCKS: &[(&str, usize, u64)] = &[
     ("plain_g1", 99999, 0x2314c695b1663686),
-    ("mixed", 2080, 0xb165fe5a72a331d9),
-    ("curves", 3426, 0x9cf077c8b023f01d),
-    ("demo", 23, 0x76c0ac509fbd02b3),
+    ("mixed", 2080, 0x4890522ea35fff2c),
+    ("curves", 3426, 0x9c71bfd2189b203a),
+    ("demo", 23, 0x6b6ca349a7e1ef7f),
     ("every_kind", 24, 0xf676e445eab79c17),
     ("fanuc_ellipse.ngc", 7, 0xa35475d3b8b1d4ba),
-    ("g5_splines.ngc", 36, 0x79b5ea06fec1d846),
+    ("g5_splines.ngc", 36, 0xd1a6f8672aada2c6),
     ("o_words.ngc", 14, 0x341004163056a35e),
     ("seed004_fixed.ngc", 10, 0x0cbba02580e9dbab),
     ("seed004_table1.ngc", 1, 0x547761ab9c6006f2),
     ("g5_butterfly-xy.ngc", 69, 0x9ba864cd95897112),
     ("g5_butterfly-yz.ngc", 69, 0x67c61ff47dadec68),
     ("g5_butterfly-zx.ngc", 69, 0xdb329070a628fce5),
-    ("g5_curva_chitarra.ngc", 57, 0xf101305c6a05784f),
-    ("g5_curva_delfino.ngc", 91, 0x31aa37554a9240ec),
+    ("g5_curva_chitarra.ngc", 57, 0x8031492f4dde54a7),
+    ("g5_curva_delfino.ngc", 91, 0x5945605506aadb32),
     ("g5_curva_mazatrol.ngc", 26, 0xcb5de93385d0cf76),
     ("g5_curva_stella.ngc", 17, 0xe4673450da4ffb27),
     ("g5_leto-xy.ngc", 16, 0xd4e1280e6b859543),
     ("g5_nurbs-xy.ngc", 8, 0xefa3f4b2a46de8af),
     ("g5_nurbs-yz.ngc", 8, 0xf48da55f0bf4428f),
     ("g5_nurbs-zx.ngc", 8, 0x514bb438ddd1deef),
-    ("g6_curva_chitarra_q1.ngc", 34, 0x5e8e3978eec6a9cf),
-    ("g6_curva_chitarra_q2.ngc", 34, 0xe853f7e316a5a03b),
-    ("g6_curva_chitarra_q3.ngc", 34, 0x5a05ddc831ce2b80),
-    ("g6_curva_delfino_q1.ngc", 67, 0xa39c13d7d20aa87e),
-    ("g6_curva_delfino_q2.ngc", 67, 0xa39c13d7d20aa87e),
-    ("g6_curva_delfino_q3.ngc", 67, 0x71be3194306ce84c),
+    ("g6_curva_chitarra_q1.ngc", 34, 0x62e157d9f618d821),
+    ("g6_curva_chitarra_q2.ngc", 34, 0xe7a8fae3211d10b1),
+    ("g6_curva_chitarra_q3.ngc", 34, 0x446aaff6dc7144a6),
+    ("g6_curva_delfino_q1.ngc", 67, 0x2bf858052821c17c),
+    ("g6_curva_delfino_q2.ngc", 67, 0x2bf858052821c17c),
+    ("g6_curva_delfino_q3.ngc", 67, 0xa864433ea9f63286),
     ("g6_curva_mazatrol_q1_xy.ngc", 15, 0x87cf77f716b8fc98),
     ("g6_curva_mazatrol_q1_yz.ngc", 14, 0x029d7b42a2e005d1),
     ("g6_curva_mazatrol_q1_zx.ngc", 14, 0x35b48db448395ac4),
