@@ -254,19 +254,26 @@ pub const STEP_JERK_SHARE: f64 = 0.5;
 /// the window of `κ'` instead, two cells of the grid, a quadratic's knots were passed
 /// at up to twice the speed the measure allows.)
 fn step_cap2(k_in: [f64; 3], k_out: [f64; 3], lim: &JerkLimits) -> f64 {
-    let d = [k_out[0] - k_in[0], k_out[1] - k_in[1], k_out[2] - k_in[2]];
     let t = lim.base.period_s;
-    let mut cap2 = f64::INFINITY;
+    least_over(
+        [k_out[0] - k_in[0], k_out[1] - k_in[1], k_out[2] - k_in[2]],
+        lim.path_jerk * t / STEP_JERK_SHARE,
+        lim.axis_jerk.map(|j| j * t / STEP_JERK_SHARE),
+    )
+}
+
+/// The least of `path / |d|` and each axis's `axis[k] / |d_k|` (a zero part bounds
+/// nothing): the largest multiple of `d` within the path's (norm) and each axis's
+/// (component) limits.
+fn least_over(d: [f64; 3], path: f64, axis: [f64; 3]) -> f64 {
     let n = norm(d);
-    if n > 0.0 {
-        cap2 = lim.path_jerk * t / (STEP_JERK_SHARE * n);
-    }
-    for (k, dk) in d.iter().enumerate() {
+    let mut least = if n > 0.0 { path / n } else { f64::INFINITY };
+    for (dk, a) in d.iter().zip(axis) {
         if *dk != 0.0 {
-            cap2 = cap2.min(lim.axis_jerk[k] * t / (STEP_JERK_SHARE * dk.abs()));
+            least = least.min(a / dk.abs());
         }
     }
-    cap2
+    least
 }
 
 /// The speed of a turn from `a` to `b` within one period `T`: its velocity change
@@ -274,19 +281,12 @@ fn step_cap2(k_in: [f64; 3], k_out: [f64; 3], lim: &JerkLimits) -> f64 {
 /// acceleration taken on and off in one period keeps the jerk, `v·|b − a|/T² ≤ J`, each
 /// for the path (norm) and each axis (component).
 fn kink_cap(a: [f64; 3], b: [f64; 3], lim: &JerkLimits) -> f64 {
-    let d = [b[0] - a[0], b[1] - a[1], b[2] - a[2]];
     let t = lim.base.period_s;
-    let mut cap = f64::INFINITY;
-    let n = norm(d);
-    if n > 0.0 {
-        cap = (lim.base.path_acc * t).min(lim.path_jerk * t * t) / n;
-    }
-    for (k, dk) in d.iter().enumerate() {
-        if *dk != 0.0 {
-            cap = cap.min((lim.base.axis_acc[k] * t).min(lim.axis_jerk[k] * t * t) / dk.abs());
-        }
-    }
-    cap
+    least_over(
+        [b[0] - a[0], b[1] - a[1], b[2] - a[2]],
+        (lim.base.path_acc * t).min(lim.path_jerk * t * t),
+        [0, 1, 2].map(|k| (lim.base.axis_acc[k] * t).min(lim.axis_jerk[k] * t * t)),
+    )
 }
 
 /// The grid with each cell beside a rest point (longer than [`GRADE_MIN_MM`]) cut into
