@@ -622,14 +622,16 @@ fn shape(g: Geometry, machine: &Machine, period_s: f64, feed_mm_s: f64, share: f
     }
 }
 
-/// The tangential acceleration a curve block's profile may use at the speeds it can have,
-/// not only at its cap: it enters at `start` at most and leaves at `end` at most (mm/s,
-/// the planned junction speeds, which the interpolator never exceeds), and changes its
-/// speed by `acc` at most, so at a share `x` of its length `len` its speed is within
-/// `min(cap, √(start² + 2·acc·x·len), √(end² + 2·acc·(1 − x)·len))`. Where the curvature
-/// is sharpest near the slower end (a valley's flank), that leaves the profile more of
-/// the acceleration than [`shape`]'s worst case at the cap. The jerk stays `lim.jerk`:
-/// the acceleration found keeps it within every limit too. Never less than `lim.acc`.
+/// The tangential acceleration and jerk a curve block's profile may use at the speeds it
+/// can have, not only at its cap: it enters at `start` at most and leaves at `end` at
+/// most (mm/s, the planned junction speeds, which the interpolator never exceeds), and
+/// changes its speed by `acc` at most, so at a share `x` of its length `len` its speed is
+/// within `min(cap, √(start² + 2·acc·x·len), √(end² + 2·acc·(1 − x)·len))`. Where the
+/// curvature is sharpest near the slower end (a valley's flank), that leaves the profile
+/// more than [`shape`]'s worst case at the cap. The acceleration is the highest that
+/// keeps every limit with `lim.jerk`; the jerk then what `3·v·a·|k|` and `v³·|dk/ds|`
+/// leave at those speeds. Neither is less than `lim`'s nor (unless `lim`'s is) above
+/// `ceiling`, what the junctions' loads leave the block.
 #[allow(clippy::too_many_arguments)]
 fn relaxed_limits(
     b: &CommandBlock,
@@ -1925,7 +1927,7 @@ pub fn plan_and<B: Plannable>(
     }
 }
 
-/// A block's relaxed acceleration and the figures it was found from (see [`relax`]).
+/// A block's relaxed limits and the figures they were found from (see [`relax`]).
 type RelaxMemo = ([u64; 7], Jerk);
 
 /// Most planning rounds of [`plan_and`] that give the curve blocks reaching their cap
@@ -1954,9 +1956,9 @@ fn curve_runs<B: Plannable>(blocks: &[B]) -> Vec<(usize, usize)> {
 /// acceleration.
 const RELAX_NEGLIGIBLE_S: f64 = 1e-5;
 
-/// Each curve block's acceleration raised to what its planned speeds leave
-/// ([`relaxed_limits`]), and its jerk to what those speeds leave, in every planning round: the planned speeds stay as they
-/// are (junction limits the interpolator never exceeds), the profile between them gets
+/// Each curve block's acceleration (and, with `jerk`, its jerk) raised to what its
+/// planned speeds leave ([`relaxed_limits`]): the planned speeds stay as they are
+/// (junction limits the interpolator never exceeds), the profile between them gets
 /// there sooner. Skipped where [`block_time`] says it could gain less than
 /// [`RELAX_NEGLIGIBLE_S`] (a block held at its cap at both ends gains nothing). Never
 /// above `ceiling`, the most a junction's load leaves each block
@@ -1983,24 +1985,25 @@ fn relax<B: Plannable>(
         };
         let (start, end, cap) = b.planned_mm_s();
         let (lim, len) = (b.limits(), b.length_mm());
-        // The most the ceiling and the machine allow (the jerk only where asked).
+        // The most the ceiling and the machine allow (the jerk only where asked); not
+        // where that is no more, or gains too little for the samples' cost.
         let most = Jerk {
-            acc: ceiling.acc.min(machine.path_acc_mm_per_s2.max(lim.acc)),
+            acc: ceiling
+                .acc
+                .min(machine.path_acc_mm_per_s2.max(lim.acc))
+                .max(lim.acc),
             jerk: if jerk {
-                ceiling.jerk.min(machine.path_jerk_mm_per_s3.max(lim.jerk))
+                ceiling
+                    .jerk
+                    .min(machine.path_jerk_mm_per_s3.max(lim.jerk))
+                    .max(lim.jerk)
             } else {
                 lim.jerk
             },
         };
-        if most.acc <= lim.acc && most.jerk <= lim.jerk {
+        if most == lim {
             continue;
         }
-        // (Not where the most it could gain is negligible: the samples cost more than
-        // that.)
-        let most = Jerk {
-            acc: most.acc.max(lim.acc),
-            jerk: most.jerk.max(lim.jerk),
-        };
         if block_time(lim, start, end, cap, len) - block_time(most, start, end, cap, len)
             < RELAX_NEGLIGIBLE_S
         {
@@ -2112,8 +2115,9 @@ fn is_curve<B: Plannable>(b: &B) -> bool {
 
 /// The share of each block's acceleration and jerk the curvature may take in the next
 /// planning round: [`VALLEY_SHARE`] in a curve's blocks whose speed, as planned in the
-/// round before (half in the first), reaches their cap (the bottom of a valley of the speed, or a stretch held at it:
-/// there the cap, not the profile's own budget, is what binds), half elsewhere. The
+/// round before (half in the first), reaches their cap (the bottom of a valley of the
+/// speed, or a stretch held at it: there the cap, not the profile's own budget, is what
+/// binds), half elsewhere. The
 /// curvature's larger share raises those caps; the profile's smaller one is little
 /// used where the speed is held. Whether it pays is judged per curve by the planned
 /// times ([`plan_and`]): on a machine whose jerk is low next to its acceleration the
