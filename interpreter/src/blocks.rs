@@ -643,23 +643,106 @@ fn relaxed_limits(
     ceiling: Jerk,
 ) -> Jerk {
     let (pts, dk, _, at) = samples(b, true);
-    let axes = machine.axes.as_array();
-    let a_path = machine.path_acc_mm_per_s2;
-    let j_path = machine.path_jerk_mm_per_s3;
-    // A margin on each place for the chords' shortfall against the arc.
+    relaxed_at(
+        (&pts, &dk, &at),
+        machine,
+        cap,
+        lim,
+        (start, end),
+        len,
+        ceiling,
+    )
+}
+
+/// [`relaxed_limits`] from the block's samples, taken once by a caller that asks for
+/// several planned speeds.
+#[allow(clippy::too_many_arguments)]
+fn relaxed_at(
+    samples: (&[Frame], &[[f64; 3]], &[[f64; 2]]),
+    machine: &Machine,
+    cap: f64,
+    lim: Jerk,
+    ends: (f64, f64),
+    len: f64,
+    ceiling: Jerk,
+) -> Jerk {
+    let env = Envelope {
+        samples,
+        machine,
+        cap,
+        ends,
+        len,
+    };
+    let top = machine
+        .axes
+        .as_array()
+        .iter()
+        .fold(machine.path_acc_mm_per_s2, |m, ax| {
+            m.max(ax.max_acc_mm_per_s2)
+        });
+    // (`lim.acc` itself fits: [`shape`] found it at the cap, the envelope's highest;
+    // not asked again, as a limit it binds exactly may round either way.)
+    if samples.0.is_empty() {
+        return lim;
+    }
+    let acc = if lim.acc.partial_cmp(&top) == Some(std::cmp::Ordering::Less) {
+        highest_fitting(lim.acc, top, 20, |a| env.fits(a, lim.jerk))
+            .min(ceiling.acc)
+            .max(lim.acc)
+    } else {
+        lim.acc
+    };
+    Jerk {
+        acc,
+        jerk: env.jerk_left(acc).min(ceiling.jerk).max(lim.jerk),
+    }
+}
+
+/// A curve block's samples (tangent and curvature, the curvature's rate, and the share
+/// of the length each stands for) with the speeds it can have there: within its `cap`,
+/// entered at `ends.0` and left at `ends.1` at most (mm/s), `len` mm long.
+struct Envelope<'a> {
+    samples: (&'a [Frame], &'a [[f64; 3]], &'a [[f64; 2]]),
+    machine: &'a Machine,
+    cap: f64,
+    ends: (f64, f64),
+    len: f64,
+}
+
+impl Envelope<'_> {
+    /// A margin on each place for the chords' shortfall against the arc.
     const MARGIN: f64 = 0.01;
-    let fits = |a: f64| {
-        pts.iter().zip(&dk).zip(&at).all(|(((t, k), dk), x)| {
-            let (lo, hi) = ((x[0] - MARGIN).max(0.0), (x[1] + MARGIN).min(1.0));
+
+    /// Each sample with the highest speed the profile can have there when it changes
+    /// its speed by `a` at most.
+    fn each(&self, a: f64) -> impl Iterator<Item = ((&Frame, &[f64; 3]), f64)> + '_ {
+        let (pts, dk, at) = self.samples;
+        let ((start, end), len, cap) = (self.ends, self.len, self.cap);
+        pts.iter().zip(dk).zip(at).map(move |(p, x)| {
+            let (lo, hi) = (
+                (x[0] - Self::MARGIN).max(0.0),
+                (x[1] + Self::MARGIN).min(1.0),
+            );
             let v = cap
                 .min((start * start + 2.0 * a * hi * len).sqrt())
                 .min((end * end + 2.0 * a * (1.0 - lo) * len).sqrt());
+            (p, v)
+        })
+    }
+
+    /// Whether a profile changing its speed by `a` at most, with the jerk `j`, keeps the
+    /// path's and each axis's acceleration and jerk everywhere.
+    fn fits(&self, a: f64, j: f64) -> bool {
+        let m = self.machine;
+        let (a_path, j_path) = (m.path_acc_mm_per_s2, m.path_jerk_mm_per_s3);
+        let axes = m.axes.as_array();
+        self.each(a).all(|(((t, k), dk), v)| {
             let kappa = path::norm(*k);
             let an = v * v * kappa;
             let jn = v * v * v * path::norm(*dk);
             if a * a + an * an > a_path * a_path
                 || 6.0 * v * kappa * a + jn > j_path
-                || lim.jerk + 3.0 * v * a * kappa + jn > j_path
+                || j + 3.0 * v * a * kappa + jn > j_path
             {
                 return false;
             }
@@ -668,46 +751,30 @@ fn relaxed_limits(
                 let jn_i = v * v * v * dki;
                 a * ti + v * v * ki <= ax.max_acc_mm_per_s2
                     && 6.0 * v * ki * a + jn_i <= ax.max_jerk_mm_per_s3
-                    && lim.jerk * ti + 3.0 * v * a * ki + jn_i <= ax.max_jerk_mm_per_s3
+                    && j * ti + 3.0 * v * a * ki + jn_i <= ax.max_jerk_mm_per_s3
             })
         })
-    };
-    let top = axes
-        .iter()
-        .fold(a_path, |m, ax| m.max(ax.max_acc_mm_per_s2));
-    // (`lim.acc` itself fits: [`shape`] found it at the cap, the envelope's highest;
-    // not asked again, as a limit it binds exactly may round either way.)
-    if pts.is_empty() {
-        return lim;
     }
-    let acc = if lim.acc.partial_cmp(&top) == Some(std::cmp::Ordering::Less) {
-        highest_fitting(lim.acc, top, 20, fits)
-            .min(ceiling.acc)
-            .max(lim.acc)
-    } else {
-        lim.acc
-    };
-    // The jerk the profile may use at those speeds with that acceleration: what
-    // `3·v·a·|k|` and `v³·|dk/ds|` leave of the path's and each axis's, as [`shape`]
-    // takes it at the cap (the speed envelope's highest).
-    let mut jerk = j_path.min(ceiling.jerk);
-    for (((t, k), dk), x) in pts.iter().zip(&dk).zip(&at) {
-        let (lo, hi) = ((x[0] - MARGIN).max(0.0), (x[1] + MARGIN).min(1.0));
-        let v = cap
-            .min((start * start + 2.0 * acc * hi * len).sqrt())
-            .min((end * end + 2.0 * acc * (1.0 - lo) * len).sqrt());
-        let jn = v * v * v * path::norm(*dk);
-        jerk = jerk.min(j_path - 3.0 * v * acc * path::norm(*k) - jn);
-        for (i, ax) in axes.iter().enumerate() {
-            if t[i].abs() > 1e-12 {
-                let other = 3.0 * v * acc * k[i].abs() + v * v * v * dk[i].abs();
-                jerk = jerk.min((ax.max_jerk_mm_per_s3 - other) / t[i].abs());
+
+    /// The jerk the profile may use with the acceleration `a`: what `3·v·a·|k|` and
+    /// `v³·|dk/ds|` leave of the path's and each axis's, as [`shape`] takes it at the cap
+    /// (the speed envelope's highest).
+    fn jerk_left(&self, a: f64) -> f64 {
+        let m = self.machine;
+        let j_path = m.path_jerk_mm_per_s3;
+        let axes = m.axes.as_array();
+        let mut jerk = j_path;
+        for (((t, k), dk), v) in self.each(a) {
+            let jn = v * v * v * path::norm(*dk);
+            jerk = jerk.min(j_path - 3.0 * v * a * path::norm(*k) - jn);
+            for (i, ax) in axes.iter().enumerate() {
+                if t[i].abs() > 1e-12 {
+                    let other = 3.0 * v * a * k[i].abs() + v * v * v * dk[i].abs();
+                    jerk = jerk.min((ax.max_jerk_mm_per_s3 - other) / t[i].abs());
+                }
             }
         }
-    }
-    Jerk {
-        acc,
-        jerk: jerk.max(lim.jerk),
+        jerk
     }
 }
 
@@ -2357,7 +2424,7 @@ fn plan_split<B: Plannable>(
             }
         }
     }
-    backward(blocks, &mut end, done);
+    backward(blocks, &mut end, machine, &ceiling, done);
     ceiling
     // No forward pass: the interpolator accelerates as fast as its limits allow by
     // itself, along the whole path at once. A forward pass (each block's end speed
@@ -2366,9 +2433,96 @@ fn plan_split<B: Plannable>(
     // from rest, a crawl.
 }
 
+/// Bisections of [`braking_relaxed`]'s entry speed.
+const BRAKING_BISECTIONS: usize = 12;
+
+/// The highest entry speed, at most `entry`, from which curve block `b` can brake to
+/// `end` within its length under the jerk the speeds between the two leave it (with
+/// its acceleration as it is: [`Envelope::jerk_left`]), and `b` given that jerk; where
+/// it has more than before, also judged under the next block's limits (`next`): the
+/// interpolator brakes for each speed ahead under the lowest limits of the way to it.
+/// Braking, the block runs no faster than its entry, and below its cap the curvature's
+/// `v³·|dk/ds|` and `3·v·a·|k|` take less of the jerk: a block too short for its
+/// braking to reach its acceleration brakes by its jerk, which [`shape`] took at the
+/// cap. `reach`, the entry from which it can brake under its limits as they are, is
+/// returned (and the block left as it is) where it is not a curve or gains nothing.
+fn braking_relaxed<B: Plannable>(
+    b: &mut B,
+    machine: &Machine,
+    ceiling: Jerk,
+    next: Option<Jerk>,
+    end: f64,
+    entry: f64,
+    reach: f64,
+) -> f64 {
+    if !is_curve(b) {
+        return reach;
+    }
+    let Geometry::Curve(c) = b.geometry() else {
+        return reach;
+    };
+    let (lim, len, feed) = (b.limits(), b.length_mm(), b.feed_mm_per_min());
+    let (pts, dk, _, at) = samples(c, true);
+    if pts.is_empty() {
+        return reach;
+    }
+    let most = ceiling
+        .jerk
+        .min(machine.path_jerk_mm_per_s3.max(lim.jerk))
+        .max(lim.jerk);
+    let brakes = |v: f64| {
+        let env = Envelope {
+            samples: (&pts, &dk, &at),
+            machine,
+            cap: feed / 60.0,
+            ends: (v, end),
+            len,
+        };
+        let l = Jerk {
+            jerk: env.jerk_left(lim.acc).min(most).max(lim.jerk),
+            ..lim
+        };
+        let judged = match next {
+            Some(n) => Jerk {
+                acc: l.acc.min(n.acc),
+                jerk: l.jerk.min(n.jerk),
+            },
+            None => l,
+        };
+        (judged.reachable_speed(end, len) >= v).then_some(l)
+    };
+    let (mut lo, mut hi) = (reach, entry);
+    let mut best = brakes(entry).map(|l| (entry, l));
+    if best.is_none() {
+        for _ in 0..BRAKING_BISECTIONS {
+            let mid = 0.5 * (lo + hi);
+            match brakes(mid) {
+                Some(l) => {
+                    lo = mid;
+                    best = Some((mid, l));
+                }
+                None => hi = mid,
+            }
+        }
+    }
+    match best {
+        Some((v, l)) => {
+            b.set_caps(len, feed, l);
+            v
+        }
+        None => reach,
+    }
+}
+
 /// The backward pass of [`plan_split`] over the junction speed limits `end` (mm/s, at
 /// each block's end; overwritten with the planned speeds).
-fn backward<B: Plannable>(blocks: &mut [B], end: &mut [f64], mut done: impl FnMut(usize, &B)) {
+fn backward<B: Plannable>(
+    blocks: &mut [B],
+    end: &mut [f64],
+    machine: &Machine,
+    ceiling: &[Jerk],
+    mut done: impl FnMut(usize, &B),
+) {
     let n = blocks.len();
     // Backward pass: every block must be able to slow to its end speed. A block's end
     // speed is final once the block after it has been passed, so its feeds are set here.
@@ -2390,7 +2544,23 @@ fn backward<B: Plannable>(blocks: &mut [B], end: &mut [f64], mut done: impl FnMu
         let start = if entry < end[i] || (entry == end[i] && entry != 0.0) {
             entry
         } else {
-            entry.min(blocks[i].limits().reachable_speed(end[i], len))
+            let reach = blocks[i].limits().reachable_speed(end[i], len);
+            let lim = blocks[i].limits();
+            // Where the braking reaches the block's acceleration, the jerk is not what
+            // binds it.
+            if entry <= reach || reach - end[i] >= lim.acc * lim.acc / lim.jerk {
+                entry.min(reach)
+            } else {
+                let next = blocks
+                    .get(i + 1)
+                    .filter(|n| n.is_motion())
+                    .map(|n| n.limits());
+                let ceiling = ceiling.get(i).copied().unwrap_or(Jerk {
+                    acc: f64::INFINITY,
+                    jerk: f64::INFINITY,
+                });
+                braking_relaxed(&mut blocks[i], machine, ceiling, next, end[i], entry, reach)
+            }
         };
         blocks[i].set_feeds(start * 60.0, end[i] * 60.0);
         done(i, &blocks[i]);

@@ -296,34 +296,41 @@ M2
 /// machine: the butterfly at F6000 14.284 -> 13.888 s, the g6 chitarra q1 58.325 ->
 /// 58.321 s, cam-circle 1.776 -> 1.771 s; LinuxCNC machine: delfino 134.894 -> 134.887
 /// s); every other fingerprint is as before.
+/// Renewed for issue #23, on purpose: a curve block that brakes by its jerk (too short
+/// for its braking to reach its acceleration) is planned under the jerk the speeds
+/// between its ends leave it, and given that jerk (`blocks::braking_relaxed`). Changed,
+/// with the same block counts: mixed, curves, g5_splines, the g5 chitarra and
+/// delfino, the g6 chitarras and delfinos (built-in machine: cam-circle 1.771 -> 1.708
+/// s, the butterfly at F6000 13.888 -> 13.810 s, the g6 delfino q1 42.312 -> 42.298 s;
+/// LinuxCNC machine: every time as before); every other fingerprint is as before.
 const GOLDEN_BLOCKS: &[(&str, usize, u64)] = &[
     ("plain_g1", 99999, 0x2314c695b1663686),
-    ("mixed", 2080, 0x4890522ea35fff2c),
-    ("curves", 3426, 0x9c71bfd2189b203a),
+    ("mixed", 2080, 0xe61fe347db5b904b),
+    ("curves", 3426, 0x56dc1f361b5895da),
     ("demo", 23, 0x6b6ca349a7e1ef7f),
     ("every_kind", 24, 0xf676e445eab79c17),
     ("fanuc_ellipse.ngc", 7, 0xa35475d3b8b1d4ba),
-    ("g5_splines.ngc", 36, 0xd1a6f8672aada2c6),
+    ("g5_splines.ngc", 36, 0x1cd77cc5d59c2f49),
     ("o_words.ngc", 14, 0x341004163056a35e),
     ("seed004_fixed.ngc", 10, 0x0cbba02580e9dbab),
     ("seed004_table1.ngc", 1, 0x547761ab9c6006f2),
     ("g5_butterfly-xy.ngc", 69, 0x9ba864cd95897112),
     ("g5_butterfly-yz.ngc", 69, 0x67c61ff47dadec68),
     ("g5_butterfly-zx.ngc", 69, 0xdb329070a628fce5),
-    ("g5_curva_chitarra.ngc", 57, 0x8031492f4dde54a7),
-    ("g5_curva_delfino.ngc", 91, 0x5945605506aadb32),
+    ("g5_curva_chitarra.ngc", 57, 0xbbc2e7251311e3c5),
+    ("g5_curva_delfino.ngc", 91, 0x3c1d2932f56231bf),
     ("g5_curva_mazatrol.ngc", 26, 0xcb5de93385d0cf76),
     ("g5_curva_stella.ngc", 17, 0xe4673450da4ffb27),
     ("g5_leto-xy.ngc", 16, 0xd4e1280e6b859543),
     ("g5_nurbs-xy.ngc", 8, 0xefa3f4b2a46de8af),
     ("g5_nurbs-yz.ngc", 8, 0xf48da55f0bf4428f),
     ("g5_nurbs-zx.ngc", 8, 0x514bb438ddd1deef),
-    ("g6_curva_chitarra_q1.ngc", 34, 0x62e157d9f618d821),
-    ("g6_curva_chitarra_q2.ngc", 34, 0xe7a8fae3211d10b1),
-    ("g6_curva_chitarra_q3.ngc", 34, 0x446aaff6dc7144a6),
-    ("g6_curva_delfino_q1.ngc", 67, 0x2bf858052821c17c),
-    ("g6_curva_delfino_q2.ngc", 67, 0x2bf858052821c17c),
-    ("g6_curva_delfino_q3.ngc", 67, 0xa864433ea9f63286),
+    ("g6_curva_chitarra_q1.ngc", 34, 0xede9ddbb7f8e4098),
+    ("g6_curva_chitarra_q2.ngc", 34, 0x61c6599d7f911618),
+    ("g6_curva_chitarra_q3.ngc", 34, 0xee209a74ad8ccffb),
+    ("g6_curva_delfino_q1.ngc", 67, 0xc6c84dd838337080),
+    ("g6_curva_delfino_q2.ngc", 67, 0xc6c84dd838337080),
+    ("g6_curva_delfino_q3.ngc", 67, 0x31c4bd6631bbad62),
     ("g6_curva_mazatrol_q1_xy.ngc", 15, 0x87cf77f716b8fc98),
     ("g6_curva_mazatrol_q1_yz.ngc", 14, 0x029d7b42a2e005d1),
     ("g6_curva_mazatrol_q1_zx.ngc", 14, 0x35b48db448395ac4),
