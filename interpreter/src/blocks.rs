@@ -2433,14 +2433,17 @@ fn plan_split<B: Plannable>(
     // from rest, a crawl.
 }
 
-/// Bisections of [`braking_relaxed`]'s entry speed.
-const BRAKING_BISECTIONS: usize = 12;
+/// Steps of [`braking_relaxed`]'s search for the entry, each two evaluations of the
+/// limits.
+const BRAKING_STEPS: usize = 2;
 
-/// The highest entry speed, at most `entry`, from which curve block `b` can brake to
-/// `end` within its length under the jerk the speeds between the two leave it (with
-/// its acceleration as it is: [`Envelope::jerk_left`]), and `b` given that jerk; where
-/// it has more than before, also judged under the next block's limits (`next`): the
-/// interpolator brakes for each speed ahead under the lowest limits of the way to it.
+/// An entry speed, at most `entry`, from which curve block `b` can brake to `end`
+/// within its length under the jerk that the speeds up to a little above it leave (with
+/// its acceleration as it is: [`Envelope::jerk_left`]), and `b` given that jerk: the
+/// highest such, approached from below in [`BRAKING_STEPS`] (on the CAM circle and the
+/// butterfly as fast as twelve bisections, at a third of the evaluations). Judged also
+/// under the next block's limits (`next`): the interpolator brakes for each speed ahead
+/// under the lowest limits of the way to it.
 /// Braking, the block runs no faster than its entry, and below its cap the curvature's
 /// `v³·|dk/ds|` and `3·v·a·|k|` take less of the jerk: a block too short for its
 /// braking to reach its acceleration brakes by its jerk, which [`shape`] took at the
@@ -2470,7 +2473,9 @@ fn braking_relaxed<B: Plannable>(
         .jerk
         .min(machine.path_jerk_mm_per_s3.max(lim.jerk))
         .max(lim.jerk);
-    let brakes = |v: f64| {
+    // The entry from which the limits that the speeds up to `v` leave brake to `end`
+    // (with those limits): it falls as `v` rises, since the limits do.
+    let from = |v: f64| {
         let env = Envelope {
             samples: (&pts, &dk, &at),
             machine,
@@ -2489,28 +2494,26 @@ fn braking_relaxed<B: Plannable>(
             },
             None => l,
         };
-        (judged.reachable_speed(end, len) >= v).then_some(l)
+        (judged.reachable_speed(end, len), l)
     };
-    let (mut lo, mut hi) = (reach, entry);
-    let mut best = brakes(entry).map(|l| (entry, l));
-    if best.is_none() {
-        for _ in 0..BRAKING_BISECTIONS {
-            let mid = 0.5 * (lo + hi);
-            match brakes(mid) {
-                Some(l) => {
-                    lo = mid;
-                    best = Some((mid, l));
-                }
-                None => hi = mid,
-            }
-        }
+    let (at_entry, l) = from(entry);
+    if at_entry >= entry {
+        b.set_caps(len, feed, l);
+        return entry;
     }
-    match best {
-        Some((v, l)) => {
-            b.set_caps(len, feed, l);
-            v
-        }
-        None => reach,
+    // The highest entry `v*` with `from(v*) = v*`: from above it, `from` falls below it,
+    // and from below, rises above; so `from` taken again and again from `entry` gives
+    // entries alternately below it (each one it can brake from) and above, closing in.
+    let (mut below, mut l) = (at_entry, l);
+    for _ in 0..BRAKING_STEPS {
+        let (above, _) = from(below);
+        (below, l) = from(above);
+    }
+    if below > reach {
+        b.set_caps(len, feed, l);
+        below
+    } else {
+        reach
     }
 }
 
