@@ -1928,12 +1928,13 @@ pub fn plan_and<B: Plannable>(
 ) {
     split_at_kinks(blocks, machine, period_ns);
     if !blocks.iter().any(is_curve) {
-        plan_split(blocks, machine, period_ns, &|_| NORMAL_SHARE, done);
+        plan_split(blocks, machine, period_ns, &|_| NORMAL_SHARE, &mut [], done);
         return;
     }
     // Each round plans from the programmed feeds.
     let feeds: Vec<f64> = blocks.iter().map(|b| b.feed_mm_per_min()).collect();
     let mut memo = vec![None; blocks.len()];
+    let mut brakes = vec![None; blocks.len()];
     let mut last_ceiling = Vec::new();
     let mut round = |blocks: &mut Vec<B>, shares: &[f64]| {
         for (b, f) in blocks.iter_mut().zip(&feeds) {
@@ -1942,7 +1943,14 @@ pub fn plan_and<B: Plannable>(
                 b.set_caps(length, *f, limits);
             }
         }
-        let ceiling = plan_split(blocks, machine, period_ns, &|i| shares[i], |_, _| {});
+        let ceiling = plan_split(
+            blocks,
+            machine,
+            period_ns,
+            &|i| shares[i],
+            &mut brakes,
+            |_, _| {},
+        );
         relax(blocks, machine, &ceiling, &mut memo, false);
         last_ceiling = ceiling;
         times(blocks)
@@ -2307,6 +2315,7 @@ fn plan_split<B: Plannable>(
     machine: &Machine,
     period_ns: u64,
     share: &dyn Fn(usize) -> f64,
+    memo: &mut [Option<BrakeMemo>],
     done: impl FnMut(usize, &B),
 ) -> Vec<Jerk> {
     let period_s = period_ns as f64 * 1e-9;
@@ -2424,7 +2433,7 @@ fn plan_split<B: Plannable>(
             }
         }
     }
-    backward(blocks, &mut end, machine, &ceiling, done);
+    backward(blocks, &mut end, machine, &ceiling, memo, done);
     ceiling
     // No forward pass: the interpolator accelerates as fast as its limits allow by
     // itself, along the whole path at once. A forward pass (each block's end speed
@@ -2432,6 +2441,12 @@ fn plan_split<B: Plannable>(
     // staircase of stops in acceleration at every block end: on a chain of tiny segments
     // from rest, a crawl.
 }
+
+/// A block's [`braking_relaxed`] and the figures it was found from (its end speed, the
+/// entry asked for, the entry its limits allow, its limits, the next block's, the
+/// junctions' jerk ceiling and its cap): a later share round that plans a block the same
+/// takes it from there instead of sampling the curve again.
+type BrakeMemo = ([u64; 9], f64, Option<Jerk>);
 
 /// Steps of [`braking_relaxed`]'s search for the entry, each two evaluations of the
 /// limits.
@@ -2447,27 +2462,28 @@ const BRAKING_STEPS: usize = 2;
 /// Braking, the block runs no faster than its entry, and below its cap the curvature's
 /// `v³·|dk/ds|` and `3·v·a·|k|` take less of the jerk: a block too short for its
 /// braking to reach its acceleration brakes by its jerk, which [`shape`] took at the
-/// cap. `reach`, the entry from which it can brake under its limits as they are, is
-/// returned (and the block left as it is) where it is not a curve or gains nothing.
+/// cap. Returns the entry and the limits to give the block; `reach`, the entry from
+/// which it can brake under its limits as they are, and none where it is not a curve
+/// or gains nothing.
 fn braking_relaxed<B: Plannable>(
-    b: &mut B,
+    b: &B,
     machine: &Machine,
     ceiling: Jerk,
     next: Option<Jerk>,
     end: f64,
     entry: f64,
     reach: f64,
-) -> f64 {
+) -> (f64, Option<Jerk>) {
     if !is_curve(b) {
-        return reach;
+        return (reach, None);
     }
     let Geometry::Curve(c) = b.geometry() else {
-        return reach;
+        return (reach, None);
     };
     let (lim, len, feed) = (b.limits(), b.length_mm(), b.feed_mm_per_min());
     let (pts, dk, _, at) = samples(c, true);
     if pts.is_empty() {
-        return reach;
+        return (reach, None);
     }
     let most = ceiling
         .jerk
@@ -2498,8 +2514,7 @@ fn braking_relaxed<B: Plannable>(
     };
     let (at_entry, l) = from(entry);
     if at_entry >= entry {
-        b.set_caps(len, feed, l);
-        return entry;
+        return (entry, Some(l));
     }
     // The highest entry `v*` with `from(v*) = v*`: from above it, `from` falls below it,
     // and from below, rises above; so `from` taken again and again from `entry` gives
@@ -2510,10 +2525,9 @@ fn braking_relaxed<B: Plannable>(
         (below, l) = from(above);
     }
     if below > reach {
-        b.set_caps(len, feed, l);
-        below
+        (below, Some(l))
     } else {
-        reach
+        (reach, None)
     }
 }
 
@@ -2524,6 +2538,7 @@ fn backward<B: Plannable>(
     end: &mut [f64],
     machine: &Machine,
     ceiling: &[Jerk],
+    memo: &mut [Option<BrakeMemo>],
     mut done: impl FnMut(usize, &B),
 ) {
     let n = blocks.len();
@@ -2562,7 +2577,35 @@ fn backward<B: Plannable>(
                     acc: f64::INFINITY,
                     jerk: f64::INFINITY,
                 });
-                braking_relaxed(&mut blocks[i], machine, ceiling, next, end[i], entry, reach)
+                let b = &mut blocks[i];
+                let key = [
+                    end[i],
+                    entry,
+                    reach,
+                    lim.acc,
+                    lim.jerk,
+                    next.map_or(-1.0, |n| n.acc),
+                    next.map_or(-1.0, |n| n.jerk),
+                    ceiling.jerk,
+                    b.feed_mm_per_min(),
+                ]
+                .map(f64::to_bits);
+                let (v, given) = match memo.get(i) {
+                    Some(Some((k, v, given))) if *k == key => (*v, *given),
+                    _ => {
+                        let (v, given) =
+                            braking_relaxed(b, machine, ceiling, next, end[i], entry, reach);
+                        if let Some(m) = memo.get_mut(i) {
+                            *m = Some((key, v, given));
+                        }
+                        (v, given)
+                    }
+                };
+                if let Some(l) = given {
+                    let (len, feed) = (b.length_mm(), b.feed_mm_per_min());
+                    b.set_caps(len, feed, l);
+                }
+                v
             }
         };
         blocks[i].set_feeds(start * 60.0, end[i] * 60.0);
