@@ -301,7 +301,7 @@ M2
 /// between its ends leave it, and given that jerk (`blocks::braking_relaxed`). Changed,
 /// with the same block counts: mixed, curves, g5_splines, the g5 chitarra and
 /// delfino, the g6 chitarras and delfinos (built-in machine: cam-circle 1.771 -> 1.708
-/// s, the butterfly at F6000 13.888 -> 13.810 s, the g6 delfino q1 42.312 -> 42.298 s;
+/// s, the butterfly at F6000 13.888 -> 13.771 s, the g6 delfino q1 42.312 -> 42.298 s;
 /// LinuxCNC machine: every time as before); every other fingerprint is as before.
 const GOLDEN_BLOCKS: &[(&str, usize, u64)] = &[
     ("plain_g1", 99999, 0x2314c695b1663686),
