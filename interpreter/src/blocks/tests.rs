@@ -559,11 +559,20 @@ fn a_block_left_slowly_may_change_speed_faster_where_it_is_straighter() {
         lim.jerk
     );
     println!("relaxed {relaxed:?} from {lim:?}");
-    // The dense check.
+    keeps_limits(&b, &m, (cap, start, end), relaxed);
+}
+
+/// Panics unless `lim` keeps the path's and each axis's acceleration and jerk at each of
+/// 4000 points of `b`, checked with the general evaluator (`path::eval`), the arc length
+/// by the trapezoid rule and `dk/ds` by differences, at the highest speed the block can
+/// have there: within `cap`, from `start` and down to `end` (mm/s) changing its speed
+/// by `lim.acc` at most. Tolerance: 1e-9 relative on the acceleration, 1e-3 on the jerk
+/// (the differences' error).
+fn keeps_limits(b: &CommandBlock, m: &Machine, (cap, start, end): (f64, f64, f64), lim: Jerk) {
     const N: usize = 4000;
-    let (u0, u1) = path::domain(&b);
+    let (u0, u1) = path::domain(b);
     let pts: Vec<_> = (0..=N)
-        .map(|i| path::eval(&b, u0 + (u1 - u0) * i as f64 / N as f64))
+        .map(|i| path::eval(b, u0 + (u1 - u0) * i as f64 / N as f64))
         .collect();
     let du = (u1 - u0) / N as f64;
     let mut at = vec![0.0; N + 1];
@@ -579,7 +588,7 @@ fn a_block_left_slowly_may_change_speed_faster_where_it_is_straighter() {
             (t, [0, 1, 2].map(|i| (e.d2[i] - along * t[i]) / (sp * sp)))
         })
         .collect();
-    let axes = m.axes.as_array();
+    let acc = lim.acc;
     for i in 1..N {
         let (t, k) = frames[i];
         let dk =
@@ -594,19 +603,18 @@ fn a_block_left_slowly_may_change_speed_faster_where_it_is_straighter() {
             a_path <= m.path_acc_mm_per_s2 * (1.0 + 1e-9),
             "point {i}: {a_path}"
         );
-        let jerk = relaxed.jerk + 3.0 * v * acc * kappa + v.powi(3) * path::norm(dk);
+        let jerk = lim.jerk + 3.0 * v * acc * kappa + v.powi(3) * path::norm(dk);
         assert!(
             jerk <= m.path_jerk_mm_per_s3 * (1.0 + 1e-3),
             "point {i}: {jerk}"
         );
-        for (c, ax) in axes.iter().enumerate() {
+        for (c, ax) in m.axes.as_array().iter().enumerate() {
             let a = acc * t[c].abs() + v * v * k[c].abs();
             assert!(
                 a <= ax.max_acc_mm_per_s2 * (1.0 + 1e-9),
                 "point {i} axis {c}: {a}"
             );
-            let j =
-                relaxed.jerk * t[c].abs() + 3.0 * v * acc * k[c].abs() + v.powi(3) * dk[c].abs();
+            let j = lim.jerk * t[c].abs() + 3.0 * v * acc * k[c].abs() + v.powi(3) * dk[c].abs();
             assert!(
                 j <= ax.max_jerk_mm_per_s3 * (1.0 + 1e-3),
                 "point {i} axis {c}: jerk {j}"
@@ -722,60 +730,7 @@ fn a_chain_of_short_blends_brakes_by_the_jerk_its_speeds_leave() {
             "block {}: starts at {start} mm/s, its limits {lim:?} brake from {reach}",
             b.seq
         );
-        // The dense check, at the speeds the block can have.
-        const N: usize = 4000;
-        let (u0, u1) = path::domain(b);
-        let pts: Vec<_> = (0..=N)
-            .map(|i| path::eval(b, u0 + (u1 - u0) * i as f64 / N as f64))
-            .collect();
-        let du = (u1 - u0) / N as f64;
-        let mut at = vec![0.0; N + 1];
-        for i in 1..=N {
-            at[i] = at[i - 1] + 0.5 * du * (path::norm(pts[i].d1) + path::norm(pts[i - 1].d1));
-        }
-        let frames: Vec<([f64; 3], [f64; 3])> = pts
-            .iter()
-            .map(|e| {
-                let sp = path::norm(e.d1);
-                let t = e.d1.map(|x| x / sp);
-                let along = dot(e.d2, t);
-                (t, [0, 1, 2].map(|i| (e.d2[i] - along * t[i]) / (sp * sp)))
-            })
-            .collect();
-        let acc = lim.acc;
-        for i in 1..N {
-            let (t, k) = frames[i];
-            let dk = [0, 1, 2]
-                .map(|c| (frames[i + 1].1[c] - frames[i - 1].1[c]) / (at[i + 1] - at[i - 1]));
-            let x = at[i];
-            let v = cap
-                .min((start * start + 2.0 * acc * x).sqrt())
-                .min((end * end + 2.0 * acc * (at[N] - x)).sqrt());
-            let kappa = path::norm(k);
-            let a_path = (acc * acc + (v * v * kappa).powi(2)).sqrt();
-            assert!(
-                a_path <= m.path_acc_mm_per_s2 * (1.0 + 1e-9),
-                "point {i}: {a_path}"
-            );
-            let jerk = lim.jerk + 3.0 * v * acc * kappa + v.powi(3) * path::norm(dk);
-            assert!(
-                jerk <= m.path_jerk_mm_per_s3 * (1.0 + 1e-3),
-                "point {i}: {jerk}"
-            );
-            for (c, ax) in m.axes.as_array().iter().enumerate() {
-                let a = acc * t[c].abs() + v * v * k[c].abs();
-                assert!(
-                    a <= ax.max_acc_mm_per_s2 * (1.0 + 1e-9),
-                    "point {i} axis {c}: {a}"
-                );
-                let j =
-                    lim.jerk * t[c].abs() + 3.0 * v * acc * k[c].abs() + v.powi(3) * dk[c].abs();
-                assert!(
-                    j <= ax.max_jerk_mm_per_s3 * (1.0 + 1e-3),
-                    "point {i} axis {c}: {j}"
-                );
-            }
-        }
+        keeps_limits(b, &m, (cap, start, end), lim);
     }
     assert!(braking >= 10, "only {braking} braking blends");
 }
