@@ -1991,8 +1991,9 @@ pub fn plan_and<B: Plannable>(
         before = if kept { after } else { round(blocks, &shares) };
     }
     // The jerk once, on the plan kept (but for the blocks braking by their jerk, which
-    // `braking_relaxed` gives theirs in every round): in every round it doubled the planning's cost
-    // (nearly every curve block sampled again each round) for the same plan; once, it
+    // `braking_relaxed` gives theirs in every round): in every round it doubled the
+    // planning's cost (nearly every curve block sampled again each round) for the same
+    // plan; once, it
     // costs a third more on curves (`cnc check` on 480 lines of the bench's `curves`,
     // 866 M -> 1152 M instructions). Held to blocks that cannot reach their cap, or to
     // a tenfold negligible gain, it saved a twentieth of that and lost a third of the
@@ -2002,6 +2003,21 @@ pub fn plan_and<B: Plannable>(
     // (Last to first, as the backward pass hands them over.)
     for (i, b) in blocks.iter().enumerate().rev() {
         done(i, b);
+    }
+}
+
+/// The most a block's limits `lim` may be raised to: what the junctions' loads leave it
+/// (`ceiling`) and the machine's path limits allow, never below `lim` itself.
+fn raised_within(lim: Jerk, ceiling: Jerk, machine: &Machine) -> Jerk {
+    Jerk {
+        acc: ceiling
+            .acc
+            .min(machine.path_acc_mm_per_s2.max(lim.acc))
+            .max(lim.acc),
+        jerk: ceiling
+            .jerk
+            .min(machine.path_jerk_mm_per_s3.max(lim.jerk))
+            .max(lim.jerk),
     }
 }
 
@@ -2065,19 +2081,10 @@ fn relax<B: Plannable>(
         let (lim, len) = (b.limits(), b.length_mm());
         // The most the ceiling and the machine allow (the jerk only where asked); not
         // where that is no more, or gains too little for the samples' cost.
+        let most = raised_within(lim, ceiling, machine);
         let most = Jerk {
-            acc: ceiling
-                .acc
-                .min(machine.path_acc_mm_per_s2.max(lim.acc))
-                .max(lim.acc),
-            jerk: if jerk {
-                ceiling
-                    .jerk
-                    .min(machine.path_jerk_mm_per_s3.max(lim.jerk))
-                    .max(lim.jerk)
-            } else {
-                lim.jerk
-            },
+            jerk: if jerk { most.jerk } else { lim.jerk },
+            ..most
         };
         if most == lim {
             continue;
@@ -2451,6 +2458,56 @@ fn plan_split<B: Plannable>(
 /// takes it from there instead of sampling the curve again.
 type BrakeMemo = ([u64; 9], f64, Option<Jerk>);
 
+/// What [`braking_relaxed`] works from, besides the block and the machine.
+struct Braking {
+    ceiling: Jerk,
+    next: Option<Jerk>,
+    end: f64,
+    entry: f64,
+    reach: f64,
+}
+
+impl Braking {
+    /// [`braking_relaxed`] for `b`, taken from `memo` where it holds this block's result
+    /// for the same figures (and kept there): `b` given the limits found, and its entry
+    /// returned.
+    fn apply<B: Plannable>(
+        &self,
+        b: &mut B,
+        machine: &Machine,
+        memo: Option<&mut Option<BrakeMemo>>,
+    ) -> f64 {
+        let lim = b.limits();
+        let key = [
+            self.end,
+            self.entry,
+            self.reach,
+            lim.acc,
+            lim.jerk,
+            self.next.map_or(-1.0, |n| n.acc),
+            self.next.map_or(-1.0, |n| n.jerk),
+            self.ceiling.jerk,
+            b.feed_mm_per_min(),
+        ]
+        .map(f64::to_bits);
+        let (v, given) = match memo {
+            Some(Some((k, v, given))) if *k == key => (*v, *given),
+            memo => {
+                let found = braking_relaxed(b, machine, self);
+                if let Some(m) = memo {
+                    *m = Some((key, found.0, found.1));
+                }
+                found
+            }
+        };
+        if let Some(l) = given {
+            let (len, feed) = (b.length_mm(), b.feed_mm_per_min());
+            b.set_caps(len, feed, l);
+        }
+        v
+    }
+}
+
 /// Steps of [`braking_relaxed`]'s search for the entry, each two evaluations of the
 /// limits.
 const BRAKING_STEPS: usize = 2;
@@ -2460,25 +2517,24 @@ const BRAKING_STEPS: usize = 2;
 /// its acceleration as it is: [`Envelope::jerk_left`]), and `b` given that jerk: near
 /// the highest such, after [`BRAKING_STEPS`] (the butterfly at F6000 on the built-in
 /// machine 13.771 s, against 13.810 s with twelve bisections, at under half the
-/// evaluations). Judged also under
-/// the lower of these limits and the next block's (`next`): the interpolator brakes for
-/// each speed ahead under the lowest limits of the way to it, and the next block's are
-/// the way's first.
+/// evaluations). Judged also under the lower of these limits and the next block's
+/// (`next`): the interpolator brakes for each speed ahead under the lowest limits of
+/// the way to it, and the next block's are the way's first.
+///
 /// Braking, the block runs no faster than its entry, and below its cap the curvature's
 /// `v³·|dk/ds|` and `3·v·a·|k|` take less of the jerk: a block too short for its
 /// braking to reach its acceleration brakes by its jerk, which [`shape`] took at the
 /// cap. Returns the entry and the limits to give the block; `reach`, the entry from
 /// which it can brake under its limits as they are, and none where it is not a curve
 /// or gains nothing.
-fn braking_relaxed<B: Plannable>(
-    b: &B,
-    machine: &Machine,
-    ceiling: Jerk,
-    next: Option<Jerk>,
-    end: f64,
-    entry: f64,
-    reach: f64,
-) -> (f64, Option<Jerk>) {
+fn braking_relaxed<B: Plannable>(b: &B, machine: &Machine, brake: &Braking) -> (f64, Option<Jerk>) {
+    let &Braking {
+        ceiling,
+        next,
+        end,
+        entry,
+        reach,
+    } = brake;
     if !is_curve(b) {
         return (reach, None);
     }
@@ -2490,10 +2546,7 @@ fn braking_relaxed<B: Plannable>(
     if pts.is_empty() {
         return (reach, None);
     }
-    let most = ceiling
-        .jerk
-        .min(machine.path_jerk_mm_per_s3.max(lim.jerk))
-        .max(lim.jerk);
+    let most = raised_within(lim, ceiling, machine).jerk;
     // The entry from which the limits that the speeds up to `v` leave brake to `end`
     // (with those limits): it falls as `v` rises, since the limits do.
     let from = |v: f64| {
@@ -2570,8 +2623,8 @@ fn backward<B: Plannable>(
         let start = if entry < end[i] || (entry == end[i] && entry != 0.0) {
             entry
         } else {
-            let reach = blocks[i].limits().reachable_speed(end[i], len);
             let lim = blocks[i].limits();
+            let reach = lim.reachable_speed(end[i], len);
             // Where the braking reaches the block's acceleration, the jerk binds only its
             // two ends (`a/j`), and a raised jerk buys little: left as it is (relaxing
             // there moved LinuxCNC's butterfly at F6000 11.074 -> 11.163 s through the
@@ -2587,35 +2640,14 @@ fn backward<B: Plannable>(
                     acc: f64::INFINITY,
                     jerk: f64::INFINITY,
                 });
-                let b = &mut blocks[i];
-                let key = [
-                    end[i],
+                let brake = Braking {
+                    ceiling,
+                    next,
+                    end: end[i],
                     entry,
                     reach,
-                    lim.acc,
-                    lim.jerk,
-                    next.map_or(-1.0, |n| n.acc),
-                    next.map_or(-1.0, |n| n.jerk),
-                    ceiling.jerk,
-                    b.feed_mm_per_min(),
-                ]
-                .map(f64::to_bits);
-                let (v, given) = match memo.get(i) {
-                    Some(Some((k, v, given))) if *k == key => (*v, *given),
-                    _ => {
-                        let (v, given) =
-                            braking_relaxed(b, machine, ceiling, next, end[i], entry, reach);
-                        if let Some(m) = memo.get_mut(i) {
-                            *m = Some((key, v, given));
-                        }
-                        (v, given)
-                    }
                 };
-                if let Some(l) = given {
-                    let (len, feed) = (b.length_mm(), b.feed_mm_per_min());
-                    b.set_caps(len, feed, l);
-                }
-                v
+                brake.apply(&mut blocks[i], machine, memo.get_mut(i))
             }
         };
         blocks[i].set_feeds(start * 60.0, end[i] * 60.0);
