@@ -54,6 +54,10 @@ pub enum Command {
         /// directory (LinuxCNC's SUBROUTINE_PATH); may be given several times.
         #[arg(long, value_name = "DIR")]
         subroutine_path: Vec<PathBuf>,
+        /// The tool table `G41`/`G42` take the cutter's radius from (LinuxCNC's `.tbl`
+        /// format: `T1 P1 D6.0 ;comment`, diameters in mm). `G41.1`/`G42.1 D…` need none.
+        #[arg(long, value_name = "FILE")]
+        tool_table: Option<PathBuf>,
     },
     /// Replay a command log through a fresh stack, without the NC program. Under the
     /// lock-step servo the new setpoints.csv and feedback.csv equal the original run's,
@@ -121,6 +125,9 @@ pub enum Role {
         /// Where subroutine files are looked for (see `cnc run --subroutine-path`).
         #[arg(long)]
         subroutine_path: Vec<PathBuf>,
+        /// The tool table (see `cnc run --tool-table`).
+        #[arg(long)]
+        tool_table: Option<PathBuf>,
     },
     Interpolator(interpolator::cli::Args),
     ServoSim(servo_sim::cli::Args),
@@ -274,6 +281,7 @@ pub fn main() -> ExitCode {
             period_us,
             dialect,
             subroutine_path,
+            tool_table,
         } => {
             let machine = match shared::machine::load(machine.as_deref()) {
                 Ok(m) => m,
@@ -303,9 +311,18 @@ pub fn main() -> ExitCode {
             // Subroutine files are looked for beside the program first, as LinuxCNC
             // looks in the directory of the program it opened.
             let beside = program.parent().map(std::path::Path::to_path_buf);
+            let tools = match tool_table
+                .as_deref()
+                .map(crate::program::tools::ToolTable::load)
+                .transpose()
+            {
+                Ok(t) => t,
+                Err(e) => return fail(e),
+            };
             let opts = crate::program::Options {
                 dialect,
                 subroutine_dirs: beside.into_iter().chain(subroutine_path).collect(),
+                tools,
             };
             match process::check_with(text, &opts, &machine, period_ns) {
                 Ok((prog, blocks)) if estimate => {
@@ -383,6 +400,7 @@ pub fn main() -> ExitCode {
             throttle_ms,
             dialect,
             subroutine_path,
+            tool_table,
         }) => run_interpreter_streaming(
             &common,
             program,
@@ -394,6 +412,7 @@ pub fn main() -> ExitCode {
                 throttle: throttle_ms.map(std::time::Duration::from_millis),
                 dialect,
                 subroutine_dirs: subroutine_path,
+                tool_table,
             },
         ),
         Command::Role(Role::Interpolator(args)) => match interpolator::cli::run(&args) {

@@ -126,6 +126,11 @@ pub struct RunArgs {
     /// may be given more than once.
     #[arg(long)]
     pub subroutine_path: Vec<PathBuf>,
+    /// The tool table `G41`/`G42` take the cutter's radius from: LinuxCNC's `.tbl`
+    /// format (`T1 P1 D6.0 Z0 ;6 mm end mill`, diameters in mm). `G41.1`/`G42.1 D…`
+    /// (the diameter on the line) need none. The run directory keeps a copy.
+    #[arg(long, value_name = "FILE")]
+    pub tool_table: Option<PathBuf>,
 }
 
 /// How long the survivors of a failed process get to stop by themselves.
@@ -348,9 +353,15 @@ fn run_inner(args: &RunArgs) -> Result<bool, String> {
         .into_iter()
         .chain(args.subroutine_path.iter().cloned())
         .collect();
+    let tools = args
+        .tool_table
+        .as_deref()
+        .map(crate::program::tools::ToolTable::load)
+        .transpose()?;
     let opts = crate::program::Options {
         dialect: args.dialect,
         subroutine_dirs: subroutine_dirs.clone(),
+        tools,
     };
     let blocks = match process::compile_source(&src.name, &src.text, &opts, &machine, period_ns) {
         Ok(c) => c.blocks,
@@ -382,6 +393,11 @@ fn run_inner(args: &RunArgs) -> Result<bool, String> {
     }
     for d in &subroutine_dirs {
         input.extend(["--subroutine-path".into(), d.display().to_string()]);
+    }
+    if let Some(path) = &args.tool_table {
+        let copy = dir.join("tool.tbl");
+        std::fs::copy(path, &copy).map_err(|e| format!("{}: {e}", copy.display()))?;
+        input.extend(["--tool-table".into(), copy.display().to_string()]);
     }
     // The length of the run for a progress bar, only where one is drawn.
     let expected_cycles = progress_wanted().then(|| {

@@ -227,6 +227,8 @@ pub struct Streaming {
     pub dialect: Option<program::Dialect>,
     /// Where subroutine files are looked for, in order (see [`program::Options`]).
     pub subroutine_dirs: Vec<PathBuf>,
+    /// The tool table file `G41`/`G42` take radii from (`--tool-table`).
+    pub tool_table: Option<PathBuf>,
 }
 
 impl Default for Streaming {
@@ -236,6 +238,7 @@ impl Default for Streaming {
             throttle: None,
             dialect: None,
             subroutine_dirs: Vec::new(),
+            tool_table: None,
         }
     }
 }
@@ -317,6 +320,11 @@ pub fn run_streaming<S: Service>(
             let opts = program::Options {
                 dialect: streaming.dialect,
                 subroutine_dirs: streaming.subroutine_dirs.clone(),
+                tools: streaming
+                    .tool_table
+                    .as_deref()
+                    .map(program::tools::ToolTable::load)
+                    .transpose()?,
             };
             let c = compile_source(&name, &src.text, &opts, &cfg.machine, cfg.period_ns)?;
             dialect = c.dialect.map(|d| d.name().to_string());

@@ -22,6 +22,7 @@
 //! program stops (`M0 M1`) are moves too, so the planner and the reports can see them.
 
 mod arc;
+mod comp;
 pub mod dialect;
 mod fanuc;
 mod feed;
@@ -29,6 +30,7 @@ mod flow;
 mod linuxcnc;
 mod plain;
 mod subfile;
+pub mod tools;
 mod usage;
 
 use crate::parse::{flow, Diagnostic, LineReader, OKind, Params, Word};
@@ -185,6 +187,8 @@ pub struct Options {
     /// `o<name>` itself, in this order: the program's own directory first, then those
     /// of `--subroutine-path` (see [`subfile`]). Empty: no files are looked for.
     pub subroutine_dirs: Vec<std::path::PathBuf>,
+    /// The tool table `G41`/`G42` take the radius from (`--tool-table`, see [`tools`]).
+    pub tools: Option<tools::ToolTable>,
 }
 
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -217,8 +221,21 @@ struct State {
     feed: f64,
     /// `G93`: F on each feed move says in how many minutes⁻¹ the move is done.
     inverse_time: bool,
-    /// `G41`/`G42` is active (refused, but remembered so `G06.2` can say PS1006).
+    /// `G41`/`G42` is active (or was asked for and refused: remembered so that `G06.2`
+    /// can say PS1006).
     cutter_comp: bool,
+    /// Cutter radius compensation while it is on (see [`comp`]).
+    comp: Option<comp::Comp>,
+    /// After `G40`: where the tool is, off the programmed point by the radius, for the
+    /// move that takes it back to the programmed path.
+    exit_from: Option<[f64; 3]>,
+    /// Compensation made a move (see the end of [`interpret_lines`]).
+    comp_used: bool,
+    /// The tool table, if the program was given one.
+    tools: Option<tools::ToolTable>,
+    /// The tool the last `T` word selected, and the one in the spindle (`M6`; 0: none).
+    selected_tool: Option<u32>,
+    spindle_tool: u32,
     nurbs: Option<linuxcnc::NurbsOpen>,
     /// After a `G5`: the offset of the next `G5`'s first control point from its start
     /// (minus the last `P Q`), used when that `G5` leaves out `I J`.
@@ -366,6 +383,12 @@ fn interpret_lines(text: &str, opts: &Options, way: Way) -> Result<Program, Vec<
         feed: 0.0,
         inverse_time: false,
         cutter_comp: false,
+        comp: None,
+        exit_from: None,
+        comp_used: false,
+        tools: opts.tools.clone(),
+        selected_tool: None,
+        spindle_tool: 0,
         nurbs: None,
         g5_tangent: None,
         spindle: (SpindleDir::Off, 0.0),
@@ -563,6 +586,12 @@ fn interpret_lines(text: &str, opts: &Options, way: Way) -> Result<Program, Vec<
             }
         }
     }
+    // A compensated move cut short to nothing at a concave corner: LinuxCNC sends it,
+    // it moves nothing, and a block must have a length.
+    if st.comp_used {
+        prog.moves
+            .retain(|m| !matches!(m, Move::Line { from, to, .. } if from == to));
+    }
     errors.iter_mut().for_each(|d| units.locate(d));
     if errors.is_empty() {
         Ok(prog)
@@ -706,6 +735,8 @@ struct LineCodes<'a> {
     /// Fanuc `G05`/`G05.1` (high-precision / AI contour control on or off).
     fanuc_mode: Option<&'a Word>,
     path: Option<(&'a Word, u32)>,
+    /// `G40`, `G41`, `G41.1`, `G42`, `G42.1`.
+    comp: Option<(&'a Word, u32)>,
 }
 
 fn execute(st: &mut State, lw: &LineWords, moves: &mut Vec<Move>) -> Result<(), Diagnostic> {
@@ -719,9 +750,11 @@ fn execute(st: &mut State, lw: &LineWords, moves: &mut Vec<Move>) -> Result<(), 
     // field by field, then read back as wider words than were written, which the
     // processor cannot forward from its stores (a stall of its own, every line).
     let mut codes = LineCodes::default();
+    let (plane, inverse) = (st.plane, st.inverse_time);
     g_codes(st, lw, &mut codes)?;
     // G20/G21 on this line already apply to its own numbers.
     let unit = if st.inch { 25.4 } else { 1.0 };
+    comp_codes(st, lw, &codes, plane, inverse, unit, moves)?;
 
     // An open Fanuc curve takes its control point and knot blocks; any other command
     // ends it (an alarm), and the line then runs as it would have.
@@ -746,6 +779,11 @@ fn execute(st: &mut State, lw: &LineWords, moves: &mut Vec<Move>) -> Result<(), 
             f.value * unit
         };
     }
+    if let Some(t) = lw.get('T') {
+        if t.value >= 0.0 && t.value.fract() == 0.0 && t.value <= u32::MAX as f64 {
+            st.selected_tool = Some(t.value as u32);
+        }
+    }
     let mut end = false;
     let mut stop = None;
     let mut spindle = st.spindle;
@@ -757,14 +795,31 @@ fn execute(st: &mut State, lw: &LineWords, moves: &mut Vec<Move>) -> Result<(), 
     }
     for w in lw.words.iter().filter(|w| w.letter == 'M') {
         match gcode(w) {
-            Some(20) | Some(300) => end = true,
-            Some(0) => stop = Some(StopKind::Pause),
-            Some(10) => stop = Some(StopKind::OptionalPause),
+            Some(20) | Some(300) => {
+                end = true;
+                comp::settle(st, lw, moves)?;
+                st.comp = None;
+                st.cutter_comp = false;
+            }
+            Some(0) => {
+                stop = Some(StopKind::Pause);
+                comp::settle(st, lw, moves)?;
+            }
+            Some(10) => {
+                stop = Some(StopKind::OptionalPause);
+                comp::settle(st, lw, moves)?;
+            }
             Some(30) => spindle.0 = SpindleDir::Clockwise,
             Some(40) => spindle.0 = SpindleDir::CounterClockwise,
             Some(50) => spindle.0 = SpindleDir::Off,
-            // tool change, coolant: accepted, nothing of ours depends on them
-            Some(60 | 70 | 80 | 90) => {}
+            // The tool change (`G41`/`G42` take its radius); coolant: accepted, nothing
+            // of ours depends on it.
+            Some(60) => {
+                if let Some(t) = st.selected_tool {
+                    st.spindle_tool = t;
+                }
+            }
+            Some(70 | 80 | 90) => {}
             _ => return Err(lw.err("modal", w.col, format!("M{} is not supported", w.value))),
         }
     }
@@ -808,7 +863,7 @@ fn execute(st: &mut State, lw: &LineWords, moves: &mut Vec<Move>) -> Result<(), 
 }
 
 /// The letters of the words [`check_letters`] lets pass.
-const KNOWN_LETTERS: u32 = letter_bits("GMXYZIJKRFPLNSTQ");
+const KNOWN_LETTERS: u32 = letter_bits("GMXYZIJKRFPLNSTQD");
 
 /// The first word of a letter met before on its line (`G` and `M` aside), or of a letter
 /// this stack does not know, as an error.
@@ -824,7 +879,7 @@ fn check_letters(lw: &LineWords) -> Result<(), Diagnostic> {
         }
         match w.letter {
             'G' | 'M' | 'X' | 'Y' | 'Z' | 'I' | 'J' | 'K' | 'R' | 'F' | 'P' | 'L' | 'N' | 'S'
-            | 'T' | 'Q' => {}
+            | 'T' | 'Q' | 'D' => {}
             'A' | 'B' | 'C' | 'U' | 'V' | 'W' => {
                 return Err(lw.err(
                     "word",
@@ -856,7 +911,7 @@ fn g_codes<'a>(st: &mut State, lw: &'a LineWords, c: &mut LineCodes<'a>) -> Resu
             900 | 910 => 3,
             901 | 911 => 4,
             930 | 940 => 5,
-            400 | 410 | 420 => 7,
+            400 | 410 | 411 | 420 | 421 => 7,
             490 => 8,
             540..=590 => 12,
             610 | 611 | 640 => 13,
@@ -904,18 +959,7 @@ fn g_codes<'a>(st: &mut State, lw: &'a LineWords, c: &mut LineCodes<'a>) -> Resu
                 }
                 st.inverse_time = inverse;
             }
-            400 => st.cutter_comp = false,
-            410 | 420 => {
-                // Remembered so that a G06.2 can name Fanuc's PS1006, then refused.
-                st.cutter_comp = true;
-                return Err(lw.err("G41/G42",
-                    w.col,
-                    format!(
-                        "G{}: cutter radius compensation is not supported yet; program the tool centre path with G40",
-                        w.value
-                    ),
-                ));
-            }
+            400 | 410 | 411 | 420 | 421 => c.comp = Some((w, code)),
             610 | 611 | 640 => c.path = Some((w, code)),
             _ => {} // G49, G54..G59 (zero offsets), G96/G97: accepted, no effect yet
         }
@@ -962,6 +1006,22 @@ fn motion(
     end: bool,
 ) -> Result<(), Diagnostic> {
     let motion_word = codes.motion.map(|m| m.0);
+    let curve = codes.g62.or(codes.nurbs_open).or(match codes.motion {
+        Some((w, Motion::Cubic | Motion::Quadratic)) => Some(w),
+        _ => None,
+    });
+    if let Some(w) = curve.filter(|_| st.comp.is_some() || st.exit_from.is_some()) {
+        let why = if st.comp.is_some() {
+            "cutter radius compensation is on (G41/G42): it works on straight moves and arcs only; turn it off with G40 first"
+        } else {
+            "the move just after G40 must be straight (G0 or G1): it takes the tool from its offset path back to the programmed one"
+        };
+        return Err(lw.err(
+            "G41/G42",
+            w.col,
+            format!("G{} curve while {why}", shown(w.value)),
+        ));
+    }
     // G6.2 is LinuxCNC's NURBS with a method Q, or Fanuc's G06.2.
     if st.g62.is_none() {
         let fanuc_open = match codes.g62 {
@@ -1097,20 +1157,44 @@ fn motion(
                     "axis words without an active motion (G0, G1, G2, G3)",
                 ))
             }
-            Motion::Rapid => push_line(moves, lw.line, st.pos, target, true, 0.0),
-            Motion::Linear => {
-                need_feed(st, lw, col)?;
-                push_line(moves, lw.line, st.pos, target, false, st.feed)
+            Motion::Rapid | Motion::Linear => {
+                let rapid = st.motion == Motion::Rapid;
+                let feed = if rapid {
+                    0.0
+                } else {
+                    need_feed(st, lw, col)?;
+                    st.feed
+                };
+                if comp::active(st) {
+                    comp::straight(st, lw, target, rapid, moves)?;
+                    st.comp_used = true;
+                } else {
+                    let from = st.exit_from.take().unwrap_or(st.pos);
+                    push_line(moves, lw.line, from, target, rapid, feed);
+                }
             }
             Motion::Arc { ccw } => {
                 need_feed(st, lw, col)?;
+                if st.exit_from.is_some() {
+                    return Err(lw.err(
+                        "G41/G42",
+                        col,
+                        "the move just after G40 must be straight (G0 or G1), not an arc: it takes the tool from its offset path back to the programmed one",
+                    ));
+                }
                 let m = arc::arc(st, lw, target, ccw, unit, col)?;
                 // The arc may end a rounding off the programmed end (see `arc`): the
                 // next move starts where it ends.
                 if let Move::Arc { to, .. } = m {
                     target = to;
                 }
-                moves.push(m);
+                if comp::active(st) {
+                    let r_form = lw.get('R').map(|w| (w.value * unit).abs());
+                    comp::arc(st, lw, m, r_form, moves)?;
+                    st.comp_used = true;
+                } else {
+                    moves.push(m);
+                }
             }
             Motion::Cubic | Motion::Quadratic => {
                 need_feed(st, lw, col)?;
@@ -1125,6 +1209,66 @@ fn motion(
             w.col,
             format!("G{} spline without its end point (X and Y)", w.value),
         ));
+    }
+    Ok(())
+}
+
+/// The line's compensation code (`G40`, `G41`, `G42`, `G41.1`, `G42.1`) and what may
+/// not change while compensation is on (the plane, the feed mode), in LinuxCNC's
+/// order: plane first, then compensation. `plane` and `inverse`
+/// are as they were before the line.
+fn comp_codes(
+    st: &mut State,
+    lw: &LineWords,
+    codes: &LineCodes,
+    plane: Plane,
+    inverse: bool,
+    unit: f64,
+    moves: &mut [Move],
+) -> Result<(), Diagnostic> {
+    if st.comp.is_some() {
+        let g = |codes: &[u32]| {
+            lw.words
+                .iter()
+                .find(|w| w.letter == 'G' && gcode(w).is_some_and(|c| codes.contains(&c)))
+                .map_or(lw.first_col(), |w| w.col)
+        };
+        // (The units may change: LinuxCNC 2.9 scales the radius; ours is in mm.)
+        comp::units(st);
+        if st.plane != plane {
+            return Err(lw.err(
+                "G41/G42",
+                g(&[170, 180, 190]),
+                "cannot change planes with cutter radius compensation on: turn it off with G40 first",
+            ));
+        }
+        if st.inverse_time && !inverse {
+            return Err(lw.err(
+                "G41/G42",
+                g(&[930]),
+                "inverse time (G93) with cutter radius compensation on: a compensated move is not the programmed length, so 1/F minutes would time another path",
+            ));
+        }
+    }
+    match codes.comp {
+        Some((_, 400)) => {
+            st.cutter_comp = false;
+            comp::turn_off(st, lw, moves)?;
+        }
+        Some((w, code)) => {
+            // Remembered, even if refused, so that a G06.2 can name Fanuc's PS1006.
+            st.cutter_comp = true;
+            comp::turn_on(st, lw, w, code, unit)?;
+        }
+        None => {
+            if let Some(d) = lw.get('D') {
+                return Err(lw.err(
+                    "word",
+                    d.col,
+                    "D word with no G41, G41.1, G42 or G42.1 to use it",
+                ));
+            }
+        }
     }
     Ok(())
 }

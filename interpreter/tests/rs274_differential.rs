@@ -8,11 +8,15 @@
 //! an arc end off its circle or beyond its radius's reach, a `G93` move without `F`):
 //! we must refuse the program at the same line.
 //!
+//! A second test does the same for cutter radius compensation (`G41`/`G42` with a tool
+//! table, `G41.1`/`G42.1`, `G40`) on random contours of lines and arcs in the XY plane.
+//!
 //! Ignored by default: `rs274` is not installed by the project (it is a 200 MB package
-//! with a real-time stack). Run it where it is installed:
+//! with a real-time stack). Run them where it is installed, one at a time (two `rs274`
+//! at once share the files it writes where it runs, and refuse programs at line 0):
 //!
 //! ```sh
-//! cargo test --release -p interpreter --test rs274_differential -- --ignored --nocapture
+//! cargo test --release -p interpreter --test rs274_differential -- --ignored --nocapture --test-threads 1
 //! RS274_PROGRAMS=2000 RS274_SEED=7 cargo test ...   # more programs, another seed
 //! ```
 //!
@@ -21,7 +25,8 @@
 //! may be off by what ours may move to put both programmed end points on its circle
 //! (the radius tolerance).
 
-use interpreter::program::{interpret, Move, PathControl, Plane, SpindleDir};
+use interpreter::program::tools::{Tool, ToolTable};
+use interpreter::program::{interpret_with, Move, Options, PathControl, Plane, SpindleDir};
 use std::fmt::Write as _;
 use std::process::Command;
 
@@ -68,6 +73,21 @@ struct Writer {
 }
 
 impl Writer {
+    /// An empty program in absolute mode and the XY plane, at the origin.
+    fn new(inch: bool) -> Self {
+        Writer {
+            text: String::new(),
+            n: 0,
+            inch,
+            incremental: false,
+            arc_absolute: false,
+            plane: Plane::XY,
+            pos: [0.0; 3],
+            inverse: false,
+            need_feed: false,
+        }
+    }
+
     fn scale(&self) -> f64 {
         if self.inch {
             MM_PER_INCH
@@ -131,17 +151,7 @@ const OFFSET: [char; 3] = ['I', 'J', 'K'];
 
 /// One random program of `lines` moves and mode changes.
 fn program(rng: &mut Rng, lines: usize) -> String {
-    let mut w = Writer {
-        text: String::new(),
-        n: 0,
-        inch: false,
-        incremental: false,
-        arc_absolute: false,
-        plane: Plane::XY,
-        pos: [0.0; 3],
-        inverse: false,
-        need_feed: false,
-    };
+    let mut w = Writer::new(false);
     // One program in four gets one line LinuxCNC refuses, somewhere: both must refuse
     // the program at that line.
     let mut bad_line = rng.chance(0.25).then(|| rng.below(lines as u64) as usize);
@@ -372,11 +382,13 @@ enum Motion {
 /// The motions `rs274 -g` prints for `file`, or the line (its `N` number) it refuses
 /// and why.
 fn rs274(file: &std::path::Path) -> Result<Vec<Motion>, (u32, String)> {
-    let out = Command::new("rs274")
-        .arg("-g")
-        .arg(file)
-        .output()
-        .expect("rs274 runs");
+    let mut cmd = Command::new("rs274");
+    // A tool table beside the program, for `G41`/`G42` (see `TOOLS`).
+    let table = file.with_extension("tbl");
+    if table.exists() {
+        cmd.arg("-t").arg(&table);
+    }
+    let out = cmd.arg("-g").arg(file).output().expect("rs274 runs");
     let text = String::from_utf8_lossy(&out.stdout);
     let errors = String::from_utf8_lossy(&out.stderr);
     if !out.status.success() {
@@ -496,9 +508,26 @@ fn rs274(file: &std::path::Path) -> Result<Vec<Motion>, (u32, String)> {
     Ok(motions)
 }
 
+/// The tool table of the compensated programs: tool number and diameter (mm).
+const TOOLS: [(u32, f64); 3] = [(1, 1.0), (2, 4.0), (3, -2.0)];
+
 /// Our motions for the same program, or the first line we refuse and why.
 fn ours(text: &str) -> Result<Vec<Motion>, (u32, String)> {
-    let prog = interpret(text).map_err(|d| {
+    let tools = ToolTable {
+        file: "tools".into(),
+        tools: TOOLS
+            .iter()
+            .map(|&(number, diameter_mm)| Tool {
+                number,
+                diameter_mm,
+            })
+            .collect(),
+    };
+    let opts = Options {
+        tools: Some(tools),
+        ..Options::default()
+    };
+    let prog = interpret_with(text, &opts).map_err(|d| {
         let first = d.iter().min_by_key(|d| d.line).expect("a refusal says why");
         (first.line, first.to_string())
     })?;
@@ -658,21 +687,27 @@ fn env_or(name: &str, default: u64) -> u64 {
         .unwrap_or(default)
 }
 
-#[test]
-#[ignore = "needs LinuxCNC's rs274 (Debian's linuxcnc-uspace), which the project does not install"]
-fn random_programs_move_as_linuxcnc_moves_them() {
-    let programs = env_or("RS274_PROGRAMS", 300);
+/// Reads `RS274_PROGRAMS` programs of `make`'s (default `default`) with us and with
+/// `rs274`, and fails on the first ten that differ (kept in a temporary directory).
+fn compare(name: &str, default: u64, make: impl Fn(&mut Rng) -> String) {
+    let programs = env_or("RS274_PROGRAMS", default);
     let seed = env_or("RS274_SEED", 1);
-    let dir = std::env::temp_dir().join(format!("rs274-diff-{}", std::process::id()));
+    let dir = std::env::temp_dir().join(format!("rs274-{name}-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
     let mut failures = Vec::new();
     let mut motions = 0;
     let mut refused = 0;
     for k in 0..programs {
         let mut rng = Rng(0x9e37_79b9_7f4a_7c15 ^ (seed << 32) ^ (k + 1));
-        let text = program(&mut rng, 40);
+        let text = make(&mut rng);
         let file = dir.join(format!("p{k}.ngc"));
         std::fs::write(&file, &text).unwrap();
+        // Standalone rs274 reads a tool table's diameters in inches.
+        let table: String = TOOLS
+            .iter()
+            .map(|(t, d)| format!("T{t} P{t} D{:.9}\n", d / MM_PER_INCH))
+            .collect();
+        std::fs::write(file.with_extension("tbl"), table).unwrap();
         let verdict = match (ours(&text), rs274(&file)) {
             (Ok(o), Ok(t)) => {
                 motions += t.len();
@@ -692,7 +727,10 @@ fn random_programs_move_as_linuxcnc_moves_them() {
         };
         match verdict {
             Some(why) => failures.push(format!("{}: {why}", file.display())),
-            None => std::fs::remove_file(&file).unwrap(),
+            None => {
+                std::fs::remove_file(&file).unwrap();
+                std::fs::remove_file(file.with_extension("tbl")).unwrap();
+            }
         }
     }
     eprintln!(
@@ -707,4 +745,138 @@ fn random_programs_move_as_linuxcnc_moves_them() {
         failures[..failures.len().min(10)].join("\n")
     );
     std::fs::remove_dir_all(&dir).ok();
+}
+
+#[test]
+#[ignore = "needs LinuxCNC's rs274 (Debian's linuxcnc-uspace), which the project does not install"]
+fn random_programs_move_as_linuxcnc_moves_them() {
+    compare("diff", 300, |rng| program(rng, 40));
+}
+
+/// One random program with cutter radius compensation: contours of straight moves and
+/// arcs (both forms, both ways round, some along Z or helical, some rapid) in the XY
+/// plane, each entered with `G41.1`/`G42.1 D…` (a diameter, now and then negative: the
+/// other side) and left with `G40`, in millimetres or inches. The tool is small next to
+/// the moves, but corners are random: many programs have a concave corner the tool
+/// cannot reach, or an arc it does not fit in, which both must refuse at the same line.
+fn comp_program(rng: &mut Rng, contours: usize) -> String {
+    let mut w = Writer::new(rng.chance(0.3));
+    // (The units on a line of their own: rs274 prints a line's feed before its units.)
+    w.line(if w.inch { "G20" } else { "G21" });
+    w.line(if w.inch {
+        "G17 G90 G91.1 G94 F20"
+    } else {
+        "G17 G90 G91.1 G94 F600"
+    });
+    w.line("G0 X0 Y0 Z0");
+    for _ in 0..contours {
+        let dia = rng.range(0.2, 6.0) * if rng.chance(0.1) { -1.0 } else { 1.0 };
+        let side = if rng.chance(0.5) { "G41" } else { "G42" };
+        // The diameter on the line (`G41.1 D…`) or a tool of the table (`G41 D…`).
+        let code = if rng.chance(0.7) {
+            format!("{side}.1 D{}", w.length(dia).0)
+        } else {
+            format!("{side} D{}", TOOLS[rng.below(3) as usize].0)
+        };
+        // The entry move on the line of its G41.1, or on the next.
+        let mut on_line = if rng.chance(0.5) {
+            Some(code)
+        } else {
+            w.line(&code);
+            None
+        };
+        let moves = 2 + rng.below(10);
+        for k in 0..moves {
+            let prefix = on_line.take().map(|s| s + " ").unwrap_or_default();
+            match rng.below(10) {
+                0..=4 => {
+                    let rapid = rng.below(10) == 0;
+                    let len = rng.range(3.0, 40.0);
+                    let dir = rng.range(0.0, std::f64::consts::TAU);
+                    let mut target = w.pos;
+                    target[0] += len * dir.cos();
+                    target[1] += len * dir.sin();
+                    let mut which = [true, true, false];
+                    if rng.chance(0.2) {
+                        target[2] = rng.range(-10.0, 10.0);
+                        which[2] = true;
+                    }
+                    let words = w.axes(target, which);
+                    let g = if rapid { "G0" } else { "G1" };
+                    w.line(&format!("{prefix}{g}{words}"));
+                }
+                5 if k > 0 => {
+                    // Along Z only, by a millimetre at least (rs274 prints four
+                    // decimals: a smaller step may print as no move).
+                    let dz = rng.range(1.0, 10.0) * if rng.chance(0.5) { -1.0 } else { 1.0 };
+                    let z = w.pos[2] + dz;
+                    let words = w.axes([0.0, 0.0, z], [false, false, true]);
+                    w.line(&format!("{prefix}G1{words}"));
+                }
+                5 | 6 => {
+                    // Radius form, the short way (at most a half circle).
+                    let chord = rng.range(2.0, 40.0);
+                    let dir = rng.range(0.0, std::f64::consts::TAU);
+                    let mut target = w.pos;
+                    target[0] += chord * dir.cos();
+                    target[1] += chord * dir.sin();
+                    let from = w.pos;
+                    let words = w.axes(target, [true, true, false]);
+                    let written = (w.pos[0] - from[0]).hypot(w.pos[1] - from[1]);
+                    let r = written / 2.0 * rng.range(1.01, 3.0);
+                    let (r, _) = w.length(r);
+                    let g = if rng.chance(0.5) { "G3" } else { "G2" };
+                    w.line(&format!("{prefix}{g}{words} R{r}"));
+                }
+                7 => {
+                    w.line(&format!("{prefix}G4 P{:.3}", rng.range(0.0, 1.0)));
+                }
+                _ => {
+                    // Centre form, less than 300 degrees round.
+                    let ccw = rng.chance(0.5);
+                    let r = rng.range(2.0, 30.0);
+                    let start = rng.range(0.0, std::f64::consts::TAU);
+                    let (ca, cb) = (w.pos[0] - r * start.cos(), w.pos[1] - r * start.sin());
+                    let turn = rng.range(0.2, 5.2) * if ccw { 1.0 } else { -1.0 };
+                    let mut target = w.pos;
+                    target[0] = ca + r * (start + turn).cos();
+                    target[1] = cb + r * (start + turn).sin();
+                    let mut which = [true, true, false];
+                    if rng.chance(0.2) {
+                        target[2] = w.pos[2] + rng.range(-5.0, 5.0);
+                        which[2] = true;
+                    }
+                    let from = w.pos;
+                    let words = w.axes(target, which);
+                    let (ia, _) = w.length(ca - from[0]);
+                    let (ib, _) = w.length(cb - from[1]);
+                    let g = if ccw { "G3" } else { "G2" };
+                    w.line(&format!("{prefix}{g}{words} I{ia} J{ib}"));
+                }
+            }
+        }
+        // The exit: `G40` and a straight move back onto the path, on one line or two.
+        let len = rng.range(3.0, 30.0);
+        let dir = rng.range(0.0, std::f64::consts::TAU);
+        let target = [
+            w.pos[0] + len * dir.cos(),
+            w.pos[1] + len * dir.sin(),
+            w.pos[2],
+        ];
+        let words = w.axes(target, [true, true, false]);
+        if rng.chance(0.5) {
+            w.line(&format!("G40 G1{words}"));
+        } else {
+            w.line("G40");
+            w.line(&format!("G1{words}"));
+        }
+    }
+    w.line("M2");
+    w.text
+}
+
+#[test]
+#[ignore = "needs LinuxCNC's rs274 (Debian's linuxcnc-uspace), which the project does not install"]
+fn compensated_programs_move_as_linuxcnc_moves_them() {
+    compare("comp", 300, |rng| comp_program(rng, 3));
 }

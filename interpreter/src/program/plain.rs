@@ -31,8 +31,15 @@ struct Words {
 pub(super) fn run(st: &mut State, bytes: &[u8], line: u32, moves: &mut Vec<Move>) -> Option<usize> {
     // Only a state in which such a line is a plain straight move: no curve open (its
     // lines are control points), no inverse time (its F is a time, needed on every
-    // move), no Fanuc curve after which axis words open another.
-    if st.fanuc.is_some() || st.g62.is_some() || st.nurbs.is_some() || st.inverse_time {
+    // move), no Fanuc curve after which axis words open another, no cutter compensation
+    // (on, or just turned off: its move starts off the programmed path).
+    if st.fanuc.is_some()
+        || st.g62.is_some()
+        || st.nurbs.is_some()
+        || st.inverse_time
+        || st.comp.is_some()
+        || st.exit_from.is_some()
+    {
         return None;
     }
     let (words, len) = words(bytes)?;

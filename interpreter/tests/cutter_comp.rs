@@ -1,0 +1,342 @@
+//! Cutter radius compensation (`G41.1`/`G42.1`, `G40`): the path against LinuxCNC's
+//! `rs274` on the example, against closed forms on random convex polygons, and every
+//! refusal at its line. (The random differential test against `rs274` itself is
+//! `rs274_differential.rs`'s `compensated_programs_move_as_linuxcnc_moves_them`,
+//! ignored where `rs274` is not installed.)
+
+use interpreter::program::{interpret, Move};
+
+/// A move as compared: `'L'` a feed line, `'R'` a rapid, `'A'` an arc; its end (mm); an
+/// arc's centre and whether it runs counter-clockwise.
+type Seen = (char, [f64; 3], Option<([f64; 2], bool)>);
+
+/// A move as `rs274` prints it: kind, end, an arc's centre.
+type Printed = (char, [f64; 3], Option<[f64; 2]>);
+
+/// The moves' end points (and arcs' centres and directions) in mm, as a list to compare.
+fn path(text: &str) -> Vec<Seen> {
+    let prog = interpret(text).unwrap_or_else(|e| panic!("refused: {:?}", e));
+    prog.moves
+        .iter()
+        .filter_map(|m| match m {
+            Move::Line { to, rapid, .. } => Some((if *rapid { 'R' } else { 'L' }, *to, None)),
+            Move::Arc {
+                to, center, ccw, ..
+            } => Some(('A', *to, Some(([center[0], center[1]], *ccw)))),
+            _ => None,
+        })
+        .collect()
+}
+
+/// The example's path as LinuxCNC 2.9's `rs274 -g examples/cutter-comp.ngc` prints it
+/// (four decimals): every straight move's and arc's end, and each arc's centre, all
+/// arcs clockwise (`-1`).
+#[test]
+fn the_example_cuts_linuxcnc_s_path() {
+    let text = include_str!("../../examples/cutter-comp.ngc");
+    let theirs: &[Printed] = &[
+        ('R', [-20.0, -20.0, 5.0], None),
+        ('L', [-20.0, -20.0, -2.0], None),
+        ('L', [-3.0, -8.1459, -2.0], None),
+        ('L', [-3.0, 40.0, -2.0], None),
+        ('A', [0.0, 43.0, -2.0], Some([0.0, 40.0])),
+        ('L', [20.0, 43.0, -2.0], None),
+        ('A', [23.0, 40.0, -2.0], Some([20.0, 40.0])),
+        ('L', [23.0, 33.0, -2.0], None),
+        ('L', [37.0, 33.0, -2.0], None),
+        ('L', [37.0, 40.0, -2.0], None),
+        ('A', [40.0, 43.0, -2.0], Some([40.0, 40.0])),
+        ('L', [60.0, 43.0, -2.0], None),
+        ('A', [63.0, 40.0, -2.0], Some([60.0, 40.0])),
+        ('L', [63.0, 10.0, -2.0], None),
+        ('A', [50.0, -3.0, -2.0], Some([50.0, 10.0])),
+        ('L', [0.0, -3.0, -2.0], None),
+        ('A', [-3.0, 0.0, -2.0], Some([0.0, 0.0])),
+        ('L', [-3.0, 5.0, -2.0], None),
+        ('L', [-20.0, -20.0, -2.0], None),
+        ('R', [-20.0, -20.0, 5.0], None),
+    ];
+    let ours = path(text);
+    assert_eq!(ours.len(), theirs.len(), "{ours:?}");
+    // Half a unit in rs274's last printed decimal.
+    const TOL: f64 = 0.5e-4;
+    for (i, ((k0, to0, arc0), (k1, to1, c1))) in ours.iter().zip(theirs).enumerate() {
+        assert_eq!(k0, k1, "move {i}");
+        for a in 0..3 {
+            assert!(
+                (to0[a] - to1[a]).abs() <= TOL,
+                "move {i}: {to0:?} against {to1:?}"
+            );
+        }
+        if let (Some((c0, ccw)), Some(c1)) = (arc0, c1) {
+            assert!(!ccw, "move {i}");
+            assert!(
+                (c0[0] - c1[0]).abs() <= TOL && (c0[1] - c1[1]).abs() <= TOL,
+                "move {i}"
+            );
+        }
+    }
+}
+
+/// xorshift64*.
+struct Rng(u64);
+
+impl Rng {
+    fn unit(&mut self) -> f64 {
+        self.0 ^= self.0 >> 12;
+        self.0 ^= self.0 << 25;
+        self.0 ^= self.0 >> 27;
+        (self.0.wrapping_mul(0x2545_f491_4f6c_dd1d) >> 11) as f64 / (1u64 << 53) as f64
+    }
+}
+
+/// Distance from `p` to the segment `a`–`b`.
+fn to_segment(p: [f64; 2], a: [f64; 2], b: [f64; 2]) -> f64 {
+    let d = [b[0] - a[0], b[1] - a[1]];
+    let t = (((p[0] - a[0]) * d[0] + (p[1] - a[1]) * d[1]) / (d[0] * d[0] + d[1] * d[1]))
+        .clamp(0.0, 1.0);
+    (p[0] - a[0] - t * d[0]).hypot(p[1] - a[1] - t * d[1])
+}
+
+/// Outside a convex polygon, every point of the compensated path is exactly the tool's
+/// radius from the polygon (the offset of a convex polygon is its edges moved out and
+/// arcs round its corners), and the path closes on itself: checked at 50 points of
+/// every move on 200 random polygons, both directions round (`G41.1` clockwise, `G42.1`
+/// anticlockwise keep the tool outside), to 1e-9 mm.
+#[test]
+fn outside_a_convex_polygon_the_tool_keeps_its_radius_from_every_edge() {
+    let mut rng = Rng(0x1234_5678_9abc_def1);
+    for case in 0..200 {
+        let n = 3 + (rng.unit() * 8.0) as usize;
+        // Corners at increasing angles on an ellipse-ish curve: convex.
+        let mut angles: Vec<f64> = (0..n).map(|_| rng.unit() * std::f64::consts::TAU).collect();
+        angles.sort_by(f64::total_cmp);
+        angles.dedup_by(|a, b| (*a - *b).abs() < 0.2);
+        if angles.len() < 3 || angles[0] + std::f64::consts::TAU - angles[angles.len() - 1] < 0.2 {
+            continue;
+        }
+        let (ax, by) = (20.0 + 30.0 * rng.unit(), 20.0 + 30.0 * rng.unit());
+        let mut corners: Vec<[f64; 2]> = angles
+            .iter()
+            .map(|t| [ax * t.cos(), by * t.sin()])
+            .collect();
+        let left = case % 2 == 0;
+        if left {
+            corners.reverse(); // clockwise, the tool on the left: outside
+        }
+        let radius = 0.5 + 4.0 * rng.unit();
+        let g = if left { "G41.1" } else { "G42.1" };
+        // Enter along the first edge's line, from far before it, to its middle: the
+        // entry ends on the offset of that edge (a straight move's entry ends square
+        // to the entry move), so the moves after it all run on the offset path. Then
+        // round once, along the first edge again to its middle, and leave.
+        let (a, b) = (corners[0], corners[1]);
+        let mid = [(a[0] + b[0]) / 2.0, (a[1] + b[1]) / 2.0];
+        let mut text = String::from("G21 G17 G90 G94 F1000\n");
+        let len = (b[0] - a[0]).hypot(b[1] - a[1]);
+        let far = [
+            mid[0] - 60.0 * (b[0] - a[0]) / len,
+            mid[1] - 60.0 * (b[1] - a[1]) / len,
+        ];
+        text += &format!(
+            "G0 X{:.9} Y{:.9}\n{g} D{:.9}\n",
+            far[0],
+            far[1],
+            2.0 * radius
+        );
+        text += &format!("G1 X{:.9} Y{:.9}\n", mid[0], mid[1]);
+        for c in corners.iter().skip(1).chain(std::iter::once(&corners[0])) {
+            text += &format!("G1 X{:.9} Y{:.9}\n", c[0], c[1]);
+        }
+        text += &format!(
+            "G1 X{:.9} Y{:.9}\nG40 G1 X{:.9} Y{:.9}\nM2\n",
+            mid[0], mid[1], far[0], far[1]
+        );
+        let prog = interpret(&text).unwrap_or_else(|e| panic!("case {case}: {e:?}\n{text}"));
+        // The programmed polygon as the program has it (nine decimals).
+        let poly: Vec<[f64; 2]> = corners
+            .iter()
+            .map(|c| {
+                [
+                    format!("{:.9}", c[0]).parse().unwrap(),
+                    format!("{:.9}", c[1]).parse().unwrap(),
+                ]
+            })
+            .collect();
+        let dist = |p: [f64; 2]| {
+            (0..poly.len())
+                .map(|i| to_segment(p, poly[i], poly[(i + 1) % poly.len()]))
+                .fold(f64::INFINITY, f64::min)
+        };
+        let moves: Vec<&Move> = prog
+            .moves
+            .iter()
+            .filter(|m| matches!(m, Move::Line { .. } | Move::Arc { .. }))
+            .collect();
+        // The rapid to the start, the entry, ..., the exit: the moves in between run on
+        // the offset path.
+        let mut last_end: Option<[f64; 3]> = None;
+        for (i, m) in moves.iter().enumerate() {
+            let (from, to) = match m {
+                Move::Line { from, to, .. } | Move::Arc { from, to, .. } => (*from, *to),
+                _ => unreachable!(),
+            };
+            if let Some(e) = last_end {
+                assert_eq!(e, from, "case {case}: move {i} starts where the last ended");
+            }
+            last_end = Some(to);
+            if i < 2 || i + 1 == moves.len() {
+                continue;
+            }
+            for k in 0..=50 {
+                let t = k as f64 / 50.0;
+                let p = match m {
+                    Move::Line { from, to, .. } => [
+                        from[0] + t * (to[0] - from[0]),
+                        from[1] + t * (to[1] - from[1]),
+                    ],
+                    Move::Arc {
+                        from,
+                        to,
+                        center,
+                        ccw,
+                        ..
+                    } => {
+                        let a0 = (from[1] - center[1]).atan2(from[0] - center[0]);
+                        let mut a1 = (to[1] - center[1]).atan2(to[0] - center[0]);
+                        if *ccw && a1 < a0 {
+                            a1 += std::f64::consts::TAU;
+                        }
+                        if !*ccw && a1 > a0 {
+                            a1 -= std::f64::consts::TAU;
+                        }
+                        let r = (from[0] - center[0]).hypot(from[1] - center[1]);
+                        let a = a0 + t * (a1 - a0);
+                        [center[0] + r * a.cos(), center[1] + r * a.sin()]
+                    }
+                    _ => unreachable!(),
+                };
+                let d = dist(p);
+                assert!(
+                    (d - radius).abs() < 1e-9,
+                    "case {case}: move {i} at {t}: {d} mm from the polygon, radius {radius}\n{text}"
+                );
+            }
+        }
+    }
+}
+
+/// The first error's line and message for `text`.
+fn refused(text: &str) -> (u32, String) {
+    let e = interpret(text).expect_err("refused");
+    let d = e.iter().min_by_key(|d| d.line).unwrap();
+    (d.line, d.message.clone())
+}
+
+/// Each program a machinist could get wrong is refused at the line that goes wrong,
+/// with LinuxCNC's reason (the lines and reasons `rs274 -g` gives, but for the two
+/// cases the comments name; messages checked by a word or two).
+#[test]
+fn what_the_tool_cannot_cut_is_refused_at_its_line() {
+    let head = "G21 G17 G90 G94 F500\nG0 X0 Y0\n";
+    for (body, line, says) in [
+        // The entry move no longer than the radius.
+        ("G41.1 D10\nG1 X4 Y0\n", 4, "entry move"),
+        // A slot narrower than the tool: the offset of its 2 mm wide end runs back past
+        // its start.
+        (
+            "G42.1 D6\nG1 X20 Y0\nG1 X20 Y20\nG1 X22 Y20\nG1 X22 Y0\nG1 X40 Y0\nM2\n",
+            7,
+            "gouging",
+        ),
+        // An arc with the tool inside it, smaller than the tool.
+        ("G41.1 D10\nG1 X20 Y0\nG3 X20 Y8 R4\n", 5, "arc radius"),
+        // The plane changed while it is on.
+        ("G41.1 D2\nG1 X20 Y0\nG18\n", 5, "planes"),
+        // A curve while it is on (LinuxCNC refuses G5 too; under G5.2 it loses a move,
+        // see `program::comp`), and an arc just after G40.
+        (
+            "G41.1 D2\nG1 X20 Y0\nG5 X30 Y0 I5 J5 P5 Q-5\n",
+            5,
+            "G41/G42",
+        ),
+        ("G41.1 D2\nG1 X20 Y0\nG5.2 X20 Y0 P1 L3\n", 5, "G41/G42"),
+        ("G41.1 D2\nG1 X20 Y0\nG40\nG2 X30 Y0 R5\n", 6, "straight"),
+        // G41.1 without its diameter, a D word with nothing to use it, G41 on again,
+        // outside the XY plane (LinuxCNC compensates in XZ for lathes; not here).
+        ("G41.1\n", 3, "D word"),
+        ("G1 X10 D3\n", 3, "D word"),
+        ("G41.1 D2\nG1 X20 Y0\nG42.1 D2\n", 5, "already on"),
+        ("G18\nG41.1 D2\n", 4, "XY plane"),
+        // G41 takes its radius from a tool table, which this program was not given.
+        ("G41 D1\n", 3, "tool table"),
+    ] {
+        let text = format!("{head}{body}");
+        let (l, msg) = refused(&text);
+        assert_eq!(l, line, "{body}: {msg}");
+        assert!(msg.contains(says), "{body}: {msg}");
+    }
+}
+
+/// A negative diameter (a tool smaller than the one the path was drawn for) offsets to
+/// the other side; a zero diameter changes nothing; `G40` brings the tool back onto the
+/// programmed point, from where it is.
+#[test]
+fn a_negative_diameter_offsets_the_other_way_and_g40_comes_back() {
+    let left =
+        path("G21 G17 G90 F500\nG0 X0 Y-10\nG41.1 D-4\nG1 X0 Y0\nG1 X20 Y0\nG40 G1 X20 Y-10\nM2\n");
+    // Along +Y then +X with the tool on the right: the entry ends where the offsets of
+    // the two edges meet (a concave corner), x = 2 and y = -2.
+    let e = left[1].1;
+    assert!(
+        (e[0] - 2.0).abs() < 1e-12 && (e[1] + 2.0).abs() < 1e-12 && e[2] == 0.0,
+        "{e:?}"
+    );
+    let after: Vec<_> = left.iter().map(|m| m.1).collect();
+    assert_eq!(*after.last().unwrap(), [20.0, -10.0, 0.0]);
+    let plain = path("G21 G17 G90 F500\nG0 X0 Y-10\nG41.1 D0\nG1 X0 Y0\nG1 X20 Y0\nG40\nM2\n");
+    assert_eq!(
+        plain.iter().map(|m| m.1).collect::<Vec<_>>(),
+        vec![[0.0, -10.0, 0.0], [0.0, 0.0, 0.0], [20.0, 0.0, 0.0]]
+    );
+}
+
+/// `G41`/`G42` take the diameter from the tool table: `D<n>`'s tool, or the tool in the
+/// spindle (`T<n> M6`); the same path as `G41.1 D<its diameter>`. A tool not in the
+/// table, no tool in the spindle, no table at all: refused at the line.
+#[test]
+fn g41_takes_the_radius_from_the_tool_table() {
+    use interpreter::program::interpret_with;
+    use interpreter::program::tools::ToolTable;
+    use interpreter::program::Options;
+    let table = ToolTable::parse("tool.tbl", "T1 P1 D6 ;6 mm\nT2 P2 D3.0 Z12\n").unwrap();
+    let opts = Options {
+        tools: Some(table),
+        ..Options::default()
+    };
+    let contour =
+        "G1 X0 Y-10 F800\nG1 X0 Y40\nG1 X20 Y40\nG1 X20 Y0\nG1 X0 Y0\nG40 G1 X-20 Y-20\nM2\n";
+    let head = "G21 G17 G90\nG0 X-20 Y-20\n";
+    let moves = |code: &str| {
+        let text = format!("{head}{code}\n{contour}");
+        interpret_with(&text, &opts)
+            .unwrap_or_else(|e| panic!("{code}: {e:?}"))
+            .moves
+    };
+    assert_eq!(moves("G41 D2"), moves("G41.1 D3"));
+    assert_eq!(moves("T1 M6\nG42"), moves("T1 M6\nG42.1 D6"));
+    assert_ne!(moves("G41 D2"), moves("G41.1 D6"));
+    for (code, line, says) in [
+        ("G41 D7", 3, "not in the tool table"),
+        ("G41 D1.5", 3, "whole number"),
+        ("G41", 3, "no tool in the spindle"),
+    ] {
+        let text = format!("{head}{code}\n{contour}");
+        let e = interpret_with(&text, &opts).unwrap_err();
+        assert_eq!(e[0].line, line, "{code}: {e:?}");
+        assert!(e[0].message.contains(says), "{code}: {e:?}");
+    }
+    let (line, msg) = refused(&format!("{head}G41 D1\n{contour}"));
+    assert_eq!(line, 3);
+    assert!(msg.contains("--tool-table"), "{msg}");
+}
