@@ -79,6 +79,9 @@ pub enum Command {
     Log(LogCommand),
     /// Print the built-in machine file (TOML), a starting point for your own.
     Machine,
+    /// Write NURBS part programs from geometry (CAM).
+    #[command(subcommand)]
+    Cam(CamCommand),
     /// Measure this machine's wake-up jitter with the interpolator's own sleep and
     /// scheduling but no work (like LinuxCNC's latency-test); runs compare their lateness
     /// with the result (runs/latency-test.json).
@@ -86,6 +89,56 @@ pub enum Command {
     /// Internal: run one process of the stack (started by `cnc run`).
     #[command(hide = true, subcommand)]
     Role(Role),
+}
+
+#[derive(Subcommand)]
+pub enum CamCommand {
+    /// An ellipse as an exact NURBS (a rational quadratic: no fitting error), or its offset
+    /// (the path of a cutter of radius D outside it, or inside it with a negative D)
+    /// fitted with the fewest cubic control points that keep within --tolerance of the
+    /// true offset. Writes the program (LinuxCNC `G6.2`/`G5.2`, or Fanuc `G06.2`) to
+    /// --out or standard output, and what was fitted to standard error.
+    Ellipse {
+        /// Semi-axis along X, mm.
+        #[arg(long)]
+        a: f64,
+        /// Semi-axis along Y, mm.
+        #[arg(long)]
+        b: f64,
+        /// Centre, mm.
+        #[arg(long, value_name = "X,Y", value_parser = parse_xy, default_value = "0,0")]
+        centre: [f64; 2],
+        /// The offset, mm: outward if positive, inward if negative.
+        #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
+        offset: f64,
+        /// Most distance of the fitted offset from the true one, mm.
+        #[arg(long, default_value_t = 1e-4)]
+        tolerance: f64,
+        /// Feed, mm/min.
+        #[arg(long, default_value_t = 1000.0)]
+        feed: f64,
+        /// Z of the cut, mm (the tool comes down from 5 mm above it).
+        #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
+        depth: f64,
+        /// The program's dialect: `linuxcnc` (G6.2 and G5.2) or `fanuc` (G06.2).
+        #[arg(long, default_value = "linuxcnc")]
+        dialect: crate::program::Dialect,
+        /// Where to write the program [default: standard output].
+        #[arg(long)]
+        out: Option<PathBuf>,
+    },
+}
+
+/// `X,Y` as two numbers.
+fn parse_xy(s: &str) -> Result<[f64; 2], String> {
+    let v: Vec<f64> = s
+        .split(',')
+        .map(|x| x.trim().parse::<f64>().map_err(|e| format!("{x}: {e}")))
+        .collect::<Result<_, _>>()?;
+    match v[..] {
+        [x, y] if x.is_finite() && y.is_finite() => Ok([x, y]),
+        _ => Err(format!("{s}: give two numbers, X,Y")),
+    }
 }
 
 #[derive(Subcommand)]
@@ -385,6 +438,43 @@ pub fn main() -> ExitCode {
         Command::Machine => {
             print!("{}", shared::Machine::default_toml());
             ExitCode::SUCCESS
+        }
+        Command::Cam(CamCommand::Ellipse {
+            a,
+            b,
+            centre,
+            offset,
+            tolerance,
+            feed,
+            depth,
+            dialect,
+            out,
+        }) => {
+            let job = crate::cam::EllipseJob {
+                a,
+                b,
+                centre,
+                offset,
+                tolerance,
+                feed,
+                depth,
+                fanuc: dialect == crate::program::Dialect::Fanuc,
+            };
+            match crate::cam::ellipse_program(&job) {
+                Ok((text, summary)) => {
+                    if let Some(path) = out {
+                        if let Err(e) = std::fs::write(&path, &text) {
+                            return fail(format!("{}: {e}", path.display()));
+                        }
+                        eprintln!("{}: {summary}", path.display());
+                    } else {
+                        print!("{text}");
+                        eprintln!("{summary}");
+                    }
+                    ExitCode::SUCCESS
+                }
+                Err(e) => fail(e),
+            }
         }
         Command::LatencyTest(args) => match interpolator::cli::latency_test(&args) {
             Ok(()) => ExitCode::SUCCESS,

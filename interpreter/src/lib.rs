@@ -19,6 +19,7 @@
 
 pub mod blocks;
 mod brent;
+pub mod cam;
 pub mod cli;
 pub mod contour;
 pub mod estimate;
