@@ -19,7 +19,10 @@
 //!   found by Newton's method from its own parameter, the worst sample refined by
 //!   golden-section search between its neighbours.
 //!
-//! Not in the real-time path; the fit's least squares are nalgebra's SVD.
+//! Not in the real-time path; the fit's least squares are nalgebra's (normal equations
+//! by Cholesky). The count of control points is searched by doubling from 8, then
+//! bisecting between the last count that failed and the first that met the tolerance
+//! (the error falls as the count grows).
 
 use nalgebra::{DMatrix, DVector};
 use std::f64::consts::{FRAC_1_SQRT_2, TAU};
@@ -166,7 +169,10 @@ fn fit(a: f64, b: f64, d: f64, n: usize) -> Option<Curve> {
             }
         }
     }
-    let sol = m.svd(true, true).solve(&rhs, 1e-14).ok()?;
+    // The normal equations, by Cholesky: B-spline bases are well conditioned (each
+    // column overlaps only its neighbours'), and this is far cheaper than an SVD.
+    let mt = m.transpose();
+    let sol = (&mt * &m).cholesky()?.solve(&(&mt * &rhs));
     let mut ctrl = vec![[p0[0], p0[1], 1.0]; n];
     ctrl[1] = [p0[0] + sol[0] * tan[0], p0[1] + sol[0] * tan[1], 1.0];
     ctrl[n - 2] = [p0[0] - sol[1] * tan[0], p0[1] - sol[1] * tan[1], 1.0];
@@ -261,22 +267,41 @@ pub fn offset_curve(
             b.min(a) * b.min(a) / b.max(a)
         ));
     }
-    for n in 8..=MAX_CTRL {
-        let Some(mut c) = fit(a, b, d, n) else {
-            continue;
-        };
+    let meets = |n: usize| -> Option<(Curve, f64)> {
+        let c = fit(a, b, d, n)?;
         let e = fit_error(&c, a, b, d);
-        if e <= tol {
-            for p in &mut c.ctrl {
-                p[0] += centre[0];
-                p[1] += centre[1];
+        (e <= tol).then_some((c, e))
+    };
+    // Doubling to a count that meets the tolerance, then bisection below it.
+    let (mut lo, mut hi) = (7, 8);
+    let mut best = loop {
+        if let Some(found) = meets(hi) {
+            break found;
+        }
+        if hi == MAX_CTRL {
+            return Err(format!(
+                "no fit with up to {MAX_CTRL} control points comes within {tol} mm of the offset: raise --tolerance"
+            ));
+        }
+        lo = hi;
+        hi = (2 * hi).min(MAX_CTRL);
+    };
+    while hi - lo > 1 {
+        let mid = (lo + hi) / 2;
+        match meets(mid) {
+            Some(found) => {
+                best = found;
+                hi = mid;
             }
-            return Ok((c, e));
+            None => lo = mid,
         }
     }
-    Err(format!(
-        "no fit with up to {MAX_CTRL} control points comes within {tol} mm of the offset: raise --tolerance"
-    ))
+    let (mut c, e) = best;
+    for p in &mut c.ctrl {
+        p[0] += centre[0];
+        p[1] += centre[1];
+    }
+    Ok((c, e))
 }
 
 /// A number as it reads back to the same double, in the plain decimals a G-code word
@@ -373,8 +398,13 @@ pub fn program(job: &EllipseJob, c: &Curve, what: &str) -> String {
 
 /// The program for `job`, and a line for the user on what was fitted.
 pub fn ellipse_program(job: &EllipseJob) -> Result<(String, String), String> {
-    if !(job.a > 0.0 && job.b > 0.0 && job.a.is_finite() && job.b.is_finite()) {
-        return Err("--a and --b (the semi-axes) must be positive".into());
+    let axes = 1e-3..=crate::program::MAX_POSITION_MM;
+    if !(axes.contains(&job.a) && axes.contains(&job.b)) {
+        return Err(format!(
+            "--a and --b (the semi-axes) must be from {} to {} mm",
+            axes.start(),
+            axes.end()
+        ));
     }
     if job.tolerance.is_nan() || job.tolerance <= 0.0 {
         return Err("--tolerance must be positive".into());

@@ -779,11 +779,6 @@ fn execute(st: &mut State, lw: &LineWords, moves: &mut Vec<Move>) -> Result<(), 
             f.value * unit
         };
     }
-    if let Some(t) = lw.get('T') {
-        if t.value >= 0.0 && t.value.fract() == 0.0 && t.value <= u32::MAX as f64 {
-            st.selected_tool = Some(t.value as u32);
-        }
-    }
     let mut end = false;
     let mut stop = None;
     let mut spindle = st.spindle;
@@ -795,31 +790,15 @@ fn execute(st: &mut State, lw: &LineWords, moves: &mut Vec<Move>) -> Result<(), 
     }
     for w in lw.words.iter().filter(|w| w.letter == 'M') {
         match gcode(w) {
-            Some(20) | Some(300) => {
-                end = true;
-                comp::settle(st, lw, moves)?;
-                st.comp = None;
-                st.cutter_comp = false;
-            }
-            Some(0) => {
-                stop = Some(StopKind::Pause);
-                comp::settle(st, lw, moves)?;
-            }
-            Some(10) => {
-                stop = Some(StopKind::OptionalPause);
-                comp::settle(st, lw, moves)?;
-            }
+            Some(20) | Some(300) => end = true,
+            Some(0) => stop = Some(StopKind::Pause),
+            Some(10) => stop = Some(StopKind::OptionalPause),
             Some(30) => spindle.0 = SpindleDir::Clockwise,
             Some(40) => spindle.0 = SpindleDir::CounterClockwise,
             Some(50) => spindle.0 = SpindleDir::Off,
-            // The tool change (`G41`/`G42` take its radius); coolant: accepted, nothing
-            // of ours depends on it.
-            Some(60) => {
-                if let Some(t) = st.selected_tool {
-                    st.spindle_tool = t;
-                }
-            }
-            Some(70 | 80 | 90) => {}
+            // The tool change (read before the compensation codes, see `comp_codes`);
+            // coolant: accepted, nothing of ours depends on it.
+            Some(60 | 70 | 80 | 90) => {}
             _ => return Err(lw.err("modal", w.col, format!("M{} is not supported", w.value))),
         }
     }
@@ -849,6 +828,15 @@ fn execute(st: &mut State, lw: &LineWords, moves: &mut Vec<Move>) -> Result<(), 
         fanuc::precision_mode(st, lw, w)?;
     }
     motion(st, lw, &codes, unit, moves, end)?;
+    // A stop or the end, after the line's motion (as LinuxCNC): the open moves end
+    // where they are; at the end compensation is off.
+    if stop.is_some() || end {
+        comp::settle(st, lw, moves)?;
+    }
+    if end {
+        st.comp = None;
+        st.cutter_comp = false;
+    }
     if let Some(kind) = stop {
         moves.push(Move::Stop {
             line: lw.line,
@@ -1226,6 +1214,37 @@ fn comp_codes(
     unit: f64,
     moves: &mut [Move],
 ) -> Result<(), Diagnostic> {
+    // The tool (`T`, `M6`) first, as LinuxCNC changes it before compensation starts:
+    // `T2 M6 G41` offsets by tool 2.
+    if let Some(t) = lw.get('T') {
+        if t.value >= 0.0 && t.value.fract() == 0.0 && t.value <= u32::MAX as f64 {
+            st.selected_tool = Some(t.value as u32);
+        }
+    }
+    if let Some(m6) = lw
+        .words
+        .iter()
+        .find(|w| w.letter == 'M' && gcode(w) == Some(60))
+    {
+        if st.comp.is_some() {
+            return Err(lw.err(
+                "G41/G42",
+                m6.col,
+                "cannot change tools with cutter radius compensation on: turn it off with G40 first",
+            ));
+        }
+        if let Some(t) = st.selected_tool {
+            st.spindle_tool = t;
+        }
+    }
+    if codes.comp.is_some() && (st.g62.is_some() || st.nurbs.is_some() || st.fanuc.is_some()) {
+        let w = codes.comp.map_or(lw.first_col(), |(w, _)| w.col);
+        return Err(lw.err(
+            "G41/G42",
+            w,
+            "cutter radius compensation turned on or off inside an open NURBS: close the curve first",
+        ));
+    }
     if st.comp.is_some() {
         let g = |codes: &[u32]| {
             lw.words
@@ -1242,6 +1261,26 @@ fn comp_codes(
                 "cannot change planes with cutter radius compensation on: turn it off with G40 first",
             ));
         }
+        // LinuxCNC refuses these too while it is on (the path mode would apply to the
+        // open move, which is still to be cut short).
+        if let Some((w, _)) = codes.path {
+            return Err(lw.err(
+                "G41/G42",
+                w.col,
+                "cannot change the path control mode (G61, G61.1, G64) with cutter radius compensation on: turn it off with G40 first",
+            ));
+        }
+        if lw
+            .words
+            .iter()
+            .any(|w| w.letter == 'G' && matches!(gcode(w), Some(540..=590)))
+        {
+            return Err(lw.err(
+                "G41/G42",
+                g(&[540, 550, 560, 570, 580, 590]),
+                "cannot change coordinate systems with cutter radius compensation on: turn it off with G40 first",
+            ));
+        }
         if st.inverse_time && !inverse {
             return Err(lw.err(
                 "G41/G42",
@@ -1251,6 +1290,14 @@ fn comp_codes(
         }
     }
     match codes.comp {
+        Some((_, 400)) if lw.get('D').is_some() => {
+            let d = lw.get('D').map_or(lw.first_col(), |d| d.col);
+            return Err(lw.err(
+                "word",
+                d,
+                "D word with no G41, G41.1, G42 or G42.1 to use it",
+            ));
+        }
         Some((_, 400)) => {
             st.cutter_comp = false;
             comp::turn_off(st, lw, moves)?;

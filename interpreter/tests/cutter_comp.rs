@@ -13,9 +13,24 @@ type Seen = (char, [f64; 3], Option<([f64; 2], bool)>);
 /// A move as `rs274` prints it: kind, end, an arc's centre.
 type Printed = (char, [f64; 3], Option<[f64; 2]>);
 
-/// The moves' end points (and arcs' centres and directions) in mm, as a list to compare.
+/// Each move starts where the one before it ended (the path never jumps).
+fn continuous(moves: &[Move]) {
+    let mut last: Option<[f64; 3]> = None;
+    for m in moves {
+        if let Move::Line { from, to, .. } | Move::Arc { from, to, .. } = m {
+            if let Some(e) = last {
+                assert_eq!(e, *from, "{m:?} does not start where the move before ended");
+            }
+            last = Some(*to);
+        }
+    }
+}
+
+/// The moves' end points (and arcs' centres and directions) in mm, as a list to compare;
+/// the path checked for jumps.
 fn path(text: &str) -> Vec<Seen> {
     let prog = interpret(text).unwrap_or_else(|e| panic!("refused: {:?}", e));
+    continuous(&prog.moves);
     prog.moves
         .iter()
         .filter_map(|m| match m {
@@ -270,6 +285,24 @@ fn what_the_tool_cannot_cut_is_refused_at_its_line() {
         ("G18\nG41.1 D2\n", 4, "XY plane"),
         // G41 takes its radius from a tool table, which this program was not given.
         ("G41 D1\n", 3, "tool table"),
+        // A concave corner right after a stop: the move before has ended.
+        (
+            "G41.1 D10\nG1 X0 Y10\nG1 X20 Y10\nM0\nG1 X20 Y30\n",
+            7,
+            "after a stop",
+        ),
+        // Turned on inside an open curve.
+        (
+            "G5.2 L3 X10 Y10 P1\nG41.1 D2\nX20 Y0 P1\nG5.3\n",
+            4,
+            "open NURBS",
+        ),
+        // What LinuxCNC refuses while it is on: a tool change, a path mode, a
+        // coordinate system, and a D word on G40.
+        ("G41.1 D2\nG1 X20 Y0\nT1 M6\n", 5, "change tools"),
+        ("G41.1 D2\nG1 X20 Y0\nG64 P0.1\n", 5, "path control"),
+        ("G41.1 D2\nG1 X20 Y0\nG54\n", 5, "coordinate systems"),
+        ("G41.1 D2\nG1 X20 Y0\nG40 D1\n", 5, "D word"),
     ] {
         let text = format!("{head}{body}");
         let (l, msg) = refused(&text);
@@ -339,4 +372,107 @@ fn g41_takes_the_radius_from_the_tool_table() {
     let (line, msg) = refused(&format!("{head}G41 D1\n{contour}"));
     assert_eq!(line, 3);
     assert!(msg.contains("--tool-table"), "{msg}");
+}
+
+/// A full circle under compensation stays a full circle, whether the offset arc's end
+/// comes out a rounding ahead of its start or behind it, and so does one entered
+/// within the corner tolerance of tangent (its end then a little ahead): the cut goes
+/// all the way round, its length `2π·(R ± r)` and more, never a sliver.
+#[test]
+fn a_full_circle_stays_a_full_circle() {
+    use std::f64::consts::PI;
+    // Tangent entries along -Y at X = 10 into a circle of radius 10 about the origin,
+    // the tool inside (G41, anticlockwise) and outside (G42); then one entered 0.02 rad
+    // off tangent.
+    for (code, r_tool, lead) in [
+        ("G41.1 D2", -1.0, "G1 X10 Y-10 F500\nG1 X10 Y0\n"),
+        ("G42.1 D2", 1.0, "G1 X10 Y-10 F500\nG1 X10 Y0\n"),
+        ("G41.1 D2", -1.0, "G1 X10.4 Y-20 F500\nG1 X10 Y0\n"),
+    ] {
+        let text = format!(
+            "G21 G17 G90\nG0 X10 Y-30\n{code}\n{lead}G3 I-10 J0\nG1 X10 Y5\nG40 G1 X20 Y5\nM2\n"
+        );
+        let prog = interpret(&text).unwrap_or_else(|e| panic!("{code}: {e:?}"));
+        let arcs: f64 = prog
+            .moves
+            .iter()
+            .filter_map(|m| match m {
+                Move::Arc {
+                    from,
+                    to,
+                    center,
+                    ccw,
+                    turns,
+                    ..
+                } => {
+                    // The angle round from `from` to `to` in the arc's direction, in
+                    // (0, 2π], and a whole turn for each further one.
+                    let a0 = (from[1] - center[1]).atan2(from[0] - center[0]);
+                    let a1 = (to[1] - center[1]).atan2(to[0] - center[0]);
+                    let mut d = if *ccw { a1 - a0 } else { a0 - a1 };
+                    while d <= 0.0 {
+                        d += 2.0 * PI;
+                    }
+                    let sweep = d + 2.0 * PI * (*turns as f64 - 1.0);
+                    let r = (from[0] - center[0]).hypot(from[1] - center[1]);
+                    Some(r * sweep)
+                }
+                _ => None,
+            })
+            .sum();
+        let circle = 2.0 * PI * (10.0 + r_tool);
+        assert!(
+            arcs >= circle - 1e-6,
+            "{code}, {lead}: arcs {arcs} mm against a circle of {circle}"
+        );
+    }
+}
+
+/// Found in review, each a path that jumped or a wrong radius before its fix: a stop
+/// or the end on the line of a compensated move comes after the move (LinuxCNC's
+/// order), so the move is compensated and the path continuous; `T2 M6` on the line of
+/// `G41` changes the tool first; `G41 D0` is the tool in the spindle (LinuxCNC's index
+/// 0); a full circle given its extra turn does not make the next corner a gouge.
+#[test]
+fn stops_tool_changes_and_full_circles_on_the_line_of_a_compensated_move() {
+    use interpreter::program::interpret_with;
+    use interpreter::program::tools::ToolTable;
+    use interpreter::program::Options;
+    for end in ["M2", "M0", "M1", "M30"] {
+        let text =
+            format!("G21 G17 G90 F100\nG0 X-20 Y0\nG41.1 D10\nG1 X0 Y0\nG1 X20 Y0 {end}\nM2\n");
+        let p = path(&text);
+        // The move along Y = 0 runs at Y = 5 (the tool on the left), its start too.
+        let last = p.iter().rev().find(|m| m.0 == 'L').unwrap();
+        assert!(
+            (last.1[0] - 20.0).abs() < 1e-9 && (last.1[1] - 5.0).abs() < 1e-9,
+            "{end}: {p:?}"
+        );
+    }
+    let table = ToolTable::parse("tool.tbl", "T1 D2\nT2 D6\n").unwrap();
+    let opts = Options {
+        tools: Some(table),
+        ..Options::default()
+    };
+    // The path's end points (the source lines differ with the lines the codes take).
+    let ends = |code: &str| -> Vec<[f64; 3]> {
+        let text = format!(
+            "G21 G17 G90 F100\nG0 X-20 Y0\n{code}\nG1 X0 Y0\nG1 X20 Y0\nG40 G1 X30 Y-20\nM2\n"
+        );
+        let prog = interpret_with(&text, &opts).unwrap_or_else(|e| panic!("{code}: {e:?}"));
+        continuous(&prog.moves);
+        prog.moves
+            .iter()
+            .filter_map(|m| match m {
+                Move::Line { to, .. } | Move::Arc { to, .. } => Some(*to),
+                _ => None,
+            })
+            .collect()
+    };
+    assert_eq!(ends("T2 M6 G41"), ends("G41.1 D6"));
+    assert_eq!(ends("T1 M6\nG41 D0"), ends("G41.1 D2"));
+    // The review's circle: entered a little off tangent, given its extra turn, then
+    // left at a concave corner that LinuxCNC accepts (its sweep 6.176 rad).
+    let p = path("G21 G17 G90 F100\nG0 X21 Y-30\nG41.1 D4\nG1 X20 Y0\nG3 I-20 J0\nG1 X0 Y0\nG40 G1 X-10 Y-10\nM2\n");
+    assert!(p.iter().any(|m| m.0 == 'A'), "{p:?}");
 }

@@ -28,7 +28,9 @@
 //! of tangent, a spiral of at most `r·(1 − cos 0.05)`), ours is the exact circle through
 //! both ends, its centre moved onto their bisector; and where those ends are too close
 //! for a bisector to be a guide (a full circle), a move of that size onto the circle
-//! comes first. Every move of ours lies on the path it names.
+//! comes first. Every move of ours lies on the path it names. And a programmed full
+//! circle stays a full circle where its offset's end comes out a little ahead of its
+//! start (LinuxCNC then makes an arc of that little angle).
 //!
 //! Not here: the XZ and YZ planes (LinuxCNC compensates in XZ for lathes; this control
 //! drives a mill), NURBS and spline moves under compensation (refused; LinuxCNC refuses
@@ -157,8 +159,9 @@ pub(super) fn turn_on(
                     ),
                 ));
             };
-            let n = match lw.get('D') {
-                Some(d) if d.value >= 0.0 && d.value.fract() == 0.0 && d.value <= u32::MAX as f64 => {
+            // `D0`, as no `D`: the tool in the spindle (LinuxCNC's index 0).
+            let n = match lw.get('D').filter(|d| d.value != 0.0) {
+                Some(d) if d.value > 0.0 && d.value.fract() == 0.0 && d.value <= u32::MAX as f64 => {
                     d.value as u32
                 }
                 Some(d) => {
@@ -172,15 +175,13 @@ pub(super) fn turn_on(
                     return Err(lw.err(
                         "G41/G42",
                         w.col,
-                        format!("G{name} with no D word and no tool in the spindle (T… M6): name the tool with D"),
+                        format!("G{name} with no tool in the spindle (T… M6) to take the radius of: name the tool with D"),
                     ))
                 }
                 None => st.spindle_tool,
             };
             match table.get(n) {
                 Some(t) => t.diameter_mm,
-                // (`D0`: no tool, no offset, as in LinuxCNC.)
-                None if n == 0 => 0.0,
                 None => {
                     return Err(lw.err(
                         "G41/G42",
@@ -599,6 +600,15 @@ pub(super) fn straight(
         c.endpoint = Some(mid);
         start = with_z(mid, cur[2]);
     } else if concave {
+        if c.queued.is_empty() {
+            // (After `M0`/`M1` the move before is finished: it cannot be cut short.
+            // LinuxCNC reads an empty queue here, undefined; the tool would gouge.)
+            return Err(lw.err(
+                "G41/G42",
+                lw.first_col(),
+                "concave corner right after a stop (M0, M1): the move before it has ended where it was, and the tool cannot be brought into the corner without gouging; put the stop elsewhere",
+            ));
+        }
         let mid = match open_arc {
             None => {
                 // Line to line: back along the offset path to where the two meet.
@@ -777,6 +787,15 @@ pub(super) fn arc(
         || ((beta - PI).abs() < CORNER_TOL && !tool_in);
     let start;
     if concave {
+        if c.queued.is_empty() {
+            // (After `M0`/`M1` the move before is finished: it cannot be cut short.
+            // LinuxCNC reads an empty queue here, undefined; the tool would gouge.)
+            return Err(lw.err(
+                "G41/G42",
+                lw.first_col(),
+                "concave corner right after a stop (M0, M1): the move before it has ended where it was, and the tool cannot be brought into the corner without gouging; put the stop elsewhere",
+            ));
+        }
         let mid = match c.open_arc(moves) {
             None => {
                 // Line to arc: where the line's offset meets the arc's.
@@ -849,6 +868,20 @@ pub(super) fn arc(
         c.close();
         c.endpoint = Some(xy(cur));
         start = cur;
+    }
+    // A full circle (its programmed end is its start) stays a full circle: where the
+    // offset arc's end comes out a little ahead of its start (a rounding, or a corner
+    // within `CORNER_TOL` of tangent), it goes once more round rather than that little
+    // way. (LinuxCNC makes the little arc.)
+    let mut turn = turn;
+    let mut programmed_sweep = programmed_sweep;
+    if xy(op) == xy(end) {
+        let full = 2.0 * PI * turn.unsigned_abs() as f64;
+        if sweep(xy(start), centre, turn, xy(new_end)).abs() < full - PI {
+            turn += turn.signum();
+            // (The gouge test at the next corner measures against the turn made.)
+            programmed_sweep += turn.signum() as f64 * 2.0 * PI;
+        }
     }
     let i = push_arc(moves, line, feed, start, new_end, centre, turn);
     c.queued.push(Queued {
