@@ -93,6 +93,32 @@ pub enum Command {
 
 #[derive(Subcommand)]
 pub enum CamCommand {
+    /// The curves of a CAD STEP file (AP203/AP214/AP242 geometry: B-splines, rational
+    /// or not, circles, ellipses, trimmed and composite curves, polylines), each cut as
+    /// the exact NURBS it is: `G5.2` where its knots are clamped uniform, `G6.2` with its
+    /// knots otherwise, or Fanuc's `G06.2`; polylines and trimmed lines as `G1`. The
+    /// curves must lie in one plane parallel to XY (or give --project); they are cut at
+    /// --depth, in the order of the file's curve sets, then by instance number. Writes
+    /// the program to --out or standard output, and what was written to standard error.
+    Curves {
+        /// The STEP file (ISO 10303-21).
+        step: PathBuf,
+        /// Feed, mm/min.
+        #[arg(long, default_value_t = 1000.0)]
+        feed: f64,
+        /// Z of the cut, mm (the tool comes down from 5 mm above it).
+        #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
+        depth: f64,
+        /// Cut curves out of the XY plane as their projection onto it.
+        #[arg(long)]
+        project: bool,
+        /// The program's dialect: `linuxcnc` (G5.2 and G6.2) or `fanuc` (G06.2).
+        #[arg(long, default_value = "linuxcnc")]
+        dialect: crate::program::Dialect,
+        /// Where to write the program [default: standard output].
+        #[arg(long)]
+        out: Option<PathBuf>,
+    },
     /// An ellipse as an exact NURBS (a rational quadratic: no fitting error), or its offset
     /// (the path of a cutter of radius D outside it, or inside it with a negative D)
     /// fitted with the fewest cubic control points that keep within --tolerance of the
@@ -127,6 +153,25 @@ pub enum CamCommand {
         #[arg(long)]
         out: Option<PathBuf>,
     },
+}
+
+/// A `cnc cam` program to `out` (or standard output), with what was written on standard
+/// error.
+fn cam_output(made: Result<(String, String), String>, out: Option<PathBuf>) -> ExitCode {
+    let (text, summary) = match made {
+        Ok(m) => m,
+        Err(e) => return fail(e),
+    };
+    if let Some(path) = out {
+        if let Err(e) = std::fs::write(&path, &text) {
+            return fail(format!("{}: {e}", path.display()));
+        }
+        eprintln!("{}: {summary}", path.display());
+    } else {
+        print!("{text}");
+        eprintln!("{summary}");
+    }
+    ExitCode::SUCCESS
 }
 
 /// `X,Y` as two numbers.
@@ -460,20 +505,36 @@ pub fn main() -> ExitCode {
                 depth,
                 fanuc: dialect == crate::program::Dialect::Fanuc,
             };
-            match crate::cam::ellipse_program(&job) {
-                Ok((text, summary)) => {
-                    if let Some(path) = out {
-                        if let Err(e) = std::fs::write(&path, &text) {
-                            return fail(format!("{}: {e}", path.display()));
-                        }
-                        eprintln!("{}: {summary}", path.display());
-                    } else {
-                        print!("{text}");
-                        eprintln!("{summary}");
-                    }
-                    ExitCode::SUCCESS
+            cam_output(crate::cam::ellipse_program(&job), out)
+        }
+        Command::Cam(CamCommand::Curves {
+            step,
+            feed,
+            depth,
+            project,
+            dialect,
+            out,
+        }) => {
+            let text = match std::fs::read_to_string(&step) {
+                Ok(t) => t,
+                Err(e) => return fail(format!("{}: {e}", step.display())),
+            };
+            let job = crate::cam::curves::CurvesJob {
+                cut: crate::cam::Job {
+                    feed,
+                    depth,
+                    fanuc: dialect == crate::program::Dialect::Fanuc,
+                },
+                project,
+            };
+            let name = step.display().to_string();
+            match crate::cam::curves::curves_program(&text, &name, &job) {
+                // The errors are whole lines already (`file:line: #id: rule: message`).
+                Err(e) => {
+                    eprint!("{e}");
+                    ExitCode::FAILURE
                 }
-                Err(e) => fail(e),
+                ok => cam_output(ok, out),
             }
         }
         Command::LatencyTest(args) => match interpolator::cli::latency_test(&args) {

@@ -13,6 +13,8 @@
 //!   and [`surface_path`] (iso-parametric passes, `UV_STRATEGY`) or [`surface_plane`]
 //!   (passes in parallel planes, `PLANE_CC_STRATEGY`) plans the ball-nose passes over
 //!   their surfaces, which [`surface_blocks`] turns into surface blocks;
+//! * [`cam`] writes part programs of exact NURBS moves from geometry (`cnc cam`): an
+//!   ellipse or its fitted offset, and the curves of a CAD STEP file ([`step::curves`]);
 //! * [`process`] is the interpreter process; [`launch`] starts all three processes for
 //!   `cnc run` and folds their summaries into the run's [`report`]; [`replay`] runs a
 //!   command log again (`cnc replay`) and prints one (`cnc log show`).

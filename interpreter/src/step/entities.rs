@@ -14,14 +14,24 @@ use shared::nurbs::surface::Passes;
 /// and the block splitter allocate per control point).
 pub const MAX_READ_CTRL: usize = 1024;
 
-struct Ctx<'a> {
-    ex: &'a Exchange,
-    errs: Vec<StepError>,
+pub(super) struct Ctx<'a> {
+    pub(super) ex: &'a Exchange,
+    pub(super) errs: Vec<StepError>,
 }
 
-type R<T> = Result<T, StepError>;
+pub(super) type R<T> = Result<T, StepError>;
 
-fn err(inst: &Instance, rule: &'static str, message: impl Into<String>) -> StepError {
+/// What the knot attributes of a B-spline are called in its messages.
+pub(super) struct KnotNames<'n> {
+    pub multiplicities: &'n str,
+    pub knots: &'n str,
+    /// Put before `knot`: `"u "` for a surface's u knots, empty for a curve's.
+    pub label: &'n str,
+    /// `surface` or `curve`.
+    pub shape: &'n str,
+}
+
+pub(super) fn err(inst: &Instance, rule: &'static str, message: impl Into<String>) -> StepError {
     StepError {
         line: inst.line,
         id: Some(inst.id),
@@ -31,14 +41,14 @@ fn err(inst: &Instance, rule: &'static str, message: impl Into<String>) -> StepE
 }
 
 /// Strips `NAME(…)` typing from a parameter.
-fn untyped(p: &Param) -> &Param {
+pub(super) fn untyped(p: &Param) -> &Param {
     match p {
         Param::Typed(_, inner) => untyped(inner),
         other => other,
     }
 }
 
-fn num(p: &Param) -> Option<f64> {
+pub(super) fn num(p: &Param) -> Option<f64> {
     match untyped(p) {
         Param::Real(x) if x.is_finite() => Some(*x),
         Param::Int(n) => Some(*n as f64),
@@ -47,7 +57,13 @@ fn num(p: &Param) -> Option<f64> {
 }
 
 impl<'a> Ctx<'a> {
-    fn attr<'r>(&self, inst: &Instance, rec: &'r Record, i: usize, what: &str) -> R<&'r Param> {
+    pub(super) fn attr<'r>(
+        &self,
+        inst: &Instance,
+        rec: &'r Record,
+        i: usize,
+        what: &str,
+    ) -> R<&'r Param> {
         rec.params.get(i).map(untyped).ok_or_else(|| {
             err(
                 inst,
@@ -62,26 +78,32 @@ impl<'a> Ctx<'a> {
         })
     }
 
-    fn real(&self, inst: &Instance, rec: &Record, i: usize, what: &str) -> R<f64> {
+    pub(super) fn real(&self, inst: &Instance, rec: &Record, i: usize, what: &str) -> R<f64> {
         let p = self.attr(inst, rec, i, what)?;
         num(p).ok_or_else(|| err(inst, "type", format!("{what} must be a finite number")))
     }
 
-    fn opt_real(&self, inst: &Instance, rec: &Record, i: usize, what: &str) -> R<Option<f64>> {
+    pub(super) fn opt_real(
+        &self,
+        inst: &Instance,
+        rec: &Record,
+        i: usize,
+        what: &str,
+    ) -> R<Option<f64>> {
         match rec.params.get(i).map(untyped) {
             None | Some(Param::Unset) => Ok(None),
             Some(_) => self.real(inst, rec, i, what).map(Some),
         }
     }
 
-    fn int(&self, inst: &Instance, rec: &Record, i: usize, what: &str) -> R<i64> {
+    pub(super) fn int(&self, inst: &Instance, rec: &Record, i: usize, what: &str) -> R<i64> {
         match self.attr(inst, rec, i, what)? {
             Param::Int(n) => Ok(*n),
             _ => Err(err(inst, "type", format!("{what} must be an integer"))),
         }
     }
 
-    fn enumv(&self, inst: &Instance, rec: &Record, i: usize, what: &str) -> R<String> {
+    pub(super) fn enumv(&self, inst: &Instance, rec: &Record, i: usize, what: &str) -> R<String> {
         match self.attr(inst, rec, i, what)? {
             Param::Enum(e) => Ok(e.clone()),
             _ => Err(err(
@@ -92,14 +114,20 @@ impl<'a> Ctx<'a> {
         }
     }
 
-    fn text(&self, rec: &Record, i: usize) -> String {
+    pub(super) fn text(&self, rec: &Record, i: usize) -> String {
         match rec.params.get(i).map(untyped) {
             Some(Param::Str(s)) => s.clone(),
             _ => String::new(),
         }
     }
 
-    fn list<'r>(&self, inst: &Instance, rec: &'r Record, i: usize, what: &str) -> R<&'r [Param]> {
+    pub(super) fn list<'r>(
+        &self,
+        inst: &Instance,
+        rec: &'r Record,
+        i: usize,
+        what: &str,
+    ) -> R<&'r [Param]> {
         match self.attr(inst, rec, i, what)? {
             Param::List(l) => Ok(l),
             _ => Err(err(inst, "type", format!("{what} must be a list `( … )`"))),
@@ -108,7 +136,13 @@ impl<'a> Ctx<'a> {
 
     /// The instance `p` refers to, which must have one of the entity names `want`
     /// (simple) or contain a partial entity of that name (complex).
-    fn deref(&self, from: &Instance, p: &Param, what: &str, want: &[&str]) -> R<&'a Instance> {
+    pub(super) fn deref(
+        &self,
+        from: &Instance,
+        p: &Param,
+        what: &str,
+        want: &[&str],
+    ) -> R<&'a Instance> {
         let id = match untyped(p) {
             Param::Ref(id) => *id,
             Param::Unset => {
@@ -144,14 +178,14 @@ impl<'a> Ctx<'a> {
         }
     }
 
-    fn first_record<'r>(&self, inst: &'r Instance, names: &[&str]) -> &'r Record {
+    pub(super) fn first_record<'r>(&self, inst: &'r Instance, names: &[&str]) -> &'r Record {
         inst.records
             .iter()
             .find(|r| names.contains(&r.name.as_str()))
             .unwrap_or(&inst.records[0])
     }
 
-    fn point(&self, inst: &Instance) -> R<[f64; 3]> {
+    pub(super) fn point(&self, inst: &Instance) -> R<[f64; 3]> {
         let rec = self.first_record(inst, &["CARTESIAN_POINT"]);
         let l = self.list(inst, rec, 1, "coordinates")?;
         if !(1..=3).contains(&l.len()) {
@@ -164,7 +198,7 @@ impl<'a> Ctx<'a> {
         Ok(out)
     }
 
-    fn direction(&self, inst: &Instance) -> R<Vec<f64>> {
+    pub(super) fn direction(&self, inst: &Instance) -> R<Vec<f64>> {
         let rec = self.first_record(inst, &["DIRECTION"]);
         let l = self.list(inst, rec, 1, "direction ratios")?;
         let v: Option<Vec<f64>> = l.iter().map(num).collect();
@@ -179,7 +213,102 @@ impl<'a> Ctx<'a> {
         Ok(v)
     }
 
-    fn placement(&self, from: &Instance, p: &Param, what: &str) -> R<Placement> {
+    /// The knots of a B-spline, expanded from its multiplicities and values (attributes
+    /// `at.0` and `at.1` of `kn`), checked: increasing, multiplicities within the degree
+    /// inside and the order at the ends, as many as `n` control points of degree `deg`
+    /// take.
+    pub(super) fn knot_vector(
+        &self,
+        inst: &Instance,
+        kn: &Record,
+        at: (usize, usize),
+        names: &KnotNames,
+        n: usize,
+        deg: usize,
+    ) -> R<Vec<f64>> {
+        let mult = self.list(inst, kn, at.0, names.multiplicities)?;
+        let vals = self.list(inst, kn, at.1, names.knots)?;
+        if mult.len() != vals.len() {
+            return Err(err(
+                inst,
+                "knots",
+                format!(
+                    "{} {} for {} {}",
+                    mult.len(),
+                    names.multiplicities,
+                    vals.len(),
+                    names.knots
+                ),
+            ));
+        }
+        let mut out = Vec::new();
+        let last = mult.len().saturating_sub(1);
+        for (i, (m, k)) in mult.iter().zip(vals).enumerate() {
+            let m = match untyped(m) {
+                Param::Int(m) if (1..=64).contains(m) => *m as usize,
+                _ => {
+                    return Err(err(
+                        inst,
+                        "knots",
+                        format!("{} must be integers in 1..=64", names.multiplicities),
+                    ))
+                }
+            };
+            let k = num(k).ok_or_else(|| {
+                err(
+                    inst,
+                    "knots",
+                    format!("{} must be finite numbers", names.knots),
+                )
+            })?;
+            // A knot as often as the order inside cuts the shape in two along it
+            // (the tool would jump); more at an edge leaves control points out.
+            let inside = i > 0 && i < last;
+            if (inside && m > deg) || m > deg + 1 {
+                return Err(err(
+                    inst,
+                    "knots",
+                    format!(
+                        "{}knot {k} has multiplicity {m}; at most {deg} (the degree) \
+                         inside the {}, where {} would cut it in two, and {} at its \
+                         edges",
+                        names.label,
+                        names.shape,
+                        deg + 1,
+                        deg + 1
+                    ),
+                ));
+            }
+            if out.last().is_some_and(|&before| k <= before) {
+                return Err(err(
+                    inst,
+                    "knots",
+                    format!(
+                        "{} must increase, and {k} follows {}",
+                        names.knots,
+                        out[out.len() - 1]
+                    ),
+                ));
+            }
+            out.extend(std::iter::repeat_n(k, m));
+        }
+        if out.len() != n + deg + 1 {
+            return Err(err(
+                inst,
+                "knot count",
+                format!(
+                    "{} {}knots (sum of multiplicities) for {n} control points of degree \
+                     {deg}, expected {}",
+                    out.len(),
+                    names.label,
+                    n + deg + 1
+                ),
+            ));
+        }
+        Ok(out)
+    }
+
+    pub(super) fn placement(&self, from: &Instance, p: &Param, what: &str) -> R<Placement> {
         let inst = self.deref(from, p, what, &["AXIS2_PLACEMENT_3D"])?;
         let rec = self.first_record(inst, &["AXIS2_PLACEMENT_3D"]);
         let loc_p = self.attr(inst, rec, 1, "location")?;
@@ -292,76 +421,13 @@ impl<'a> Ctx<'a> {
             ));
         }
         let knots = |mi: usize, ki: usize, dir: &str, n: usize, deg: usize| -> R<Vec<f64>> {
-            let mult = self.list(inst, kn, kn0 + mi, &format!("{dir}_multiplicities"))?;
-            let vals = self.list(inst, kn, kn0 + ki, &format!("{dir}_knots"))?;
-            if mult.len() != vals.len() {
-                return Err(err(
-                    inst,
-                    "knots",
-                    format!(
-                        "{} {dir}_multiplicities for {} {dir}_knots",
-                        mult.len(),
-                        vals.len()
-                    ),
-                ));
-            }
-            let mut out = Vec::new();
-            let last = mult.len().saturating_sub(1);
-            for (i, (m, k)) in mult.iter().zip(vals).enumerate() {
-                let m = match untyped(m) {
-                    Param::Int(m) if (1..=64).contains(m) => *m as usize,
-                    _ => {
-                        return Err(err(
-                            inst,
-                            "knots",
-                            format!("{dir}_multiplicities must be integers in 1..=64"),
-                        ))
-                    }
-                };
-                let k = num(k).ok_or_else(|| {
-                    err(inst, "knots", format!("{dir}_knots must be finite numbers"))
-                })?;
-                // A knot as often as the order inside cuts the surface in two along it
-                // (passes across would jump); more at an edge leaves control points out.
-                let inside = i > 0 && i < last;
-                if (inside && m > deg) || m > deg + 1 {
-                    return Err(err(
-                        inst,
-                        "knots",
-                        format!(
-                            "{dir} knot {k} has multiplicity {m}; at most {deg} (the degree) \
-                             inside the surface, where {} would cut it in two, and {} at its \
-                             edges",
-                            deg + 1,
-                            deg + 1
-                        ),
-                    ));
-                }
-                if out.last().is_some_and(|&before| k <= before) {
-                    return Err(err(
-                        inst,
-                        "knots",
-                        format!(
-                            "{dir}_knots must increase, and {k} follows {}",
-                            out[out.len() - 1]
-                        ),
-                    ));
-                }
-                out.extend(std::iter::repeat_n(k, m));
-            }
-            if out.len() != n + deg + 1 {
-                return Err(err(
-                    inst,
-                    "knot count",
-                    format!(
-                        "{} {dir} knots (sum of multiplicities) for {n} control points of degree \
-                         {deg}, expected {}",
-                        out.len(),
-                        n + deg + 1
-                    ),
-                ));
-            }
-            Ok(out)
+            let names = KnotNames {
+                multiplicities: &format!("{dir}_multiplicities"),
+                knots: &format!("{dir}_knots"),
+                label: &format!("{dir} "),
+                shape: "surface",
+            };
+            self.knot_vector(inst, kn, (kn0 + mi, kn0 + ki), &names, n, deg)
         };
         let knots_u = knots(0, 2, "u", n_u, p)?;
         let knots_v = knots(1, 3, "v", n_v, q)?;
@@ -752,7 +818,7 @@ pub fn read(ex: &Exchange) -> Result<Vec<FreeformStep>, Vec<StepError>> {
             line: ex.instances.values().next().map_or(1, |i| i.line),
             id: None,
             rule: "workplan",
-            message: "the file has no WORKPLAN".into(),
+            message: "the file has no WORKPLAN, so it is no STEP-NC part; a CAD file's curves are made into a program by `cnc cam curves FILE`".into(),
         });
     }
     for plan in plans {

@@ -2,7 +2,8 @@
 //! free-form finishing job needs (seed 000: the surface itself goes to the control).
 //!
 //! [`p21`] reads the exchange structure (instances with their lines); [`entities`] gives
-//! the subset its meaning; [`read_part`] does both and hands back every free-form
+//! the subset its meaning ([`curves`] reads a CAD file's curves instead, for
+//! `cnc cam curves`); [`read_part`] does both and hands back every free-form
 //! workingstep with its surface already placed in machine coordinates, or every error of
 //! the file as `FILE:LINE: #ID: rule: message` ([`format_errors`]).
 //!
@@ -52,6 +53,7 @@
 //!   length unit); reported in mm/min and rpm.
 
 pub mod check;
+pub mod curves;
 pub mod entities;
 pub mod p21;
 
@@ -301,7 +303,12 @@ pub struct FreeformStep {
 
 /// Reads a STEP-NC file: its free-form workingsteps, or every error.
 pub fn read_part(text: &str) -> Result<Vec<FreeformStep>, Vec<StepError>> {
-    let ex = p21::parse(text).map_err(|errs| {
+    entities::read(&parse(text)?)
+}
+
+/// The exchange structure of `text`, its syntax errors as [`StepError`]s.
+pub fn parse(text: &str) -> Result<p21::Exchange, Vec<StepError>> {
+    p21::parse(text).map_err(|errs| {
         errs.into_iter()
             .map(|e| StepError {
                 line: e.line,
@@ -309,9 +316,8 @@ pub fn read_part(text: &str) -> Result<Vec<FreeformStep>, Vec<StepError>> {
                 rule: "syntax",
                 message: e.message,
             })
-            .collect::<Vec<_>>()
-    })?;
-    entities::read(&ex)
+            .collect()
+    })
 }
 
 pub use p21::looks_like_part21;

@@ -24,9 +24,9 @@
 //! bisecting between the last count that failed and the first that met the tolerance
 //! (the error falls as the count grows).
 
+use super::{conic_arc, point, program, uniform_knots, Curve, Cut, Job};
 use nalgebra::{DMatrix, DVector};
-use std::f64::consts::{FRAC_1_SQRT_2, TAU};
-use std::fmt::Write as _;
+use std::f64::consts::TAU;
 
 /// What `cnc cam ellipse` is asked for (mm, mm/min).
 #[derive(Debug, Clone, PartialEq)]
@@ -45,36 +45,19 @@ pub struct EllipseJob {
     pub fanuc: bool,
 }
 
-/// A NURBS in the XY plane: degree, knots, control points `[x, y, w]`.
-#[derive(Debug, Clone, PartialEq)]
-pub struct Curve {
-    pub degree: usize,
-    pub knots: Vec<f64>,
-    pub ctrl: Vec<[f64; 3]>,
+impl EllipseJob {
+    fn cut(&self) -> Job {
+        Job {
+            feed: self.feed,
+            depth: self.depth,
+            fanuc: self.fanuc,
+        }
+    }
 }
 
 /// The exact ellipse, anticlockwise from `(cx + a, cy)`.
 pub fn ellipse(a: f64, b: f64, centre: [f64; 2]) -> Curve {
-    let w = FRAC_1_SQRT_2;
-    let corners = [
-        (1.0, 0.0, 1.0),
-        (1.0, 1.0, w),
-        (0.0, 1.0, 1.0),
-        (-1.0, 1.0, w),
-        (-1.0, 0.0, 1.0),
-        (-1.0, -1.0, w),
-        (0.0, -1.0, 1.0),
-        (1.0, -1.0, w),
-        (1.0, 0.0, 1.0),
-    ];
-    Curve {
-        degree: 2,
-        knots: vec![0.0, 0.0, 0.0, 1.0, 1.0, 2.0, 2.0, 3.0, 3.0, 4.0, 4.0, 4.0],
-        ctrl: corners
-            .iter()
-            .map(|&(x, y, w)| [centre[0] + a * x, centre[1] + b * y, w])
-            .collect(),
-    }
+    conic_arc(centre, [a, 0.0], [0.0, b], 0.0, TAU)
 }
 
 /// The point of the offset at distance `d` from the ellipse (semi-axes `a`, `b`, centred
@@ -128,15 +111,6 @@ fn basis(degree: usize, knots: &[f64], n: usize, u: f64) -> Vec<f64> {
     nk
 }
 
-/// Clamped uniform knots for `n` control points of `degree` on `[0, 1, …]` (LinuxCNC's
-/// `G5.2` knots).
-fn uniform_knots(degree: usize, n: usize) -> Vec<f64> {
-    let spans = n - degree;
-    (0..n + degree + 1)
-        .map(|i| (i as f64 - degree as f64).clamp(0.0, spans as f64))
-        .collect()
-}
-
 /// Least-squares cubic fit of the offset with `n` control points (its ends on the
 /// offset, its end tangents along the offset's), in the ellipse's own frame.
 fn fit(a: f64, b: f64, d: f64, n: usize) -> Option<Curve> {
@@ -184,13 +158,6 @@ fn fit(a: f64, b: f64, d: f64, n: usize) -> Option<Curve> {
         knots,
         ctrl,
     })
-}
-
-/// The curve's point at `u`.
-fn point(c: &Curve, u: f64) -> [f64; 2] {
-    let ctrl: Vec<[f64; 4]> = c.ctrl.iter().map(|p| [p[0], p[1], 0.0, p[2]]).collect();
-    let e = shared::nurbs::eval(c.degree, &c.knots, &ctrl, u);
-    [e.p[0], e.p[1]]
 }
 
 /// The distance from `p` to the offset curve (semi-axes `a`, `b`, distance `d`), its
@@ -304,98 +271,6 @@ pub fn offset_curve(
     Ok((c, e))
 }
 
-/// A number as it reads back to the same double, in the plain decimals a G-code word
-/// takes (no exponent).
-fn num(v: f64) -> String {
-    let v = if v == 0.0 { 0.0 } else { v };
-    let s = format!("{v:?}");
-    if !s.contains('e') {
-        return s;
-    }
-    let s = format!("{v:.30}");
-    s.trim_end_matches('0').trim_end_matches('.').to_string()
-}
-
-/// The part program cutting `c` at `job`'s depth and feed, with a header saying what it
-/// is (`what`).
-pub fn program(job: &EllipseJob, c: &Curve, what: &str) -> String {
-    let mut s = String::new();
-    let start = c.ctrl[0];
-    let safe = job.depth + 5.0;
-    for line in what.lines() {
-        writeln!(s, "({line})").unwrap();
-    }
-    if job.fanuc {
-        writeln!(s, "G21 G17 G90 G94").unwrap();
-    } else {
-        writeln!(s, "G21 G17 G90 G94 G40").unwrap();
-    }
-    writeln!(s, "G0 Z{}", num(safe)).unwrap();
-    writeln!(s, "G0 X{} Y{}", num(start[0]), num(start[1])).unwrap();
-    writeln!(s, "G1 Z{} F{}", num(job.depth), num(job.feed)).unwrap();
-    let order = c.degree + 1;
-    let uniform =
-        c.ctrl.iter().all(|p| p[2] == 1.0) && c.knots == uniform_knots(c.degree, c.ctrl.len());
-    if job.fanuc {
-        for (i, p) in c.ctrl.iter().enumerate() {
-            let head = if i == 0 {
-                format!("G06.2 P{order} ")
-            } else {
-                String::new()
-            };
-            writeln!(
-                s,
-                "{head}K{} X{} Y{} R{}",
-                num(c.knots[i]),
-                num(p[0]),
-                num(p[1]),
-                num(p[2])
-            )
-            .unwrap();
-        }
-        for k in &c.knots[c.ctrl.len()..] {
-            writeln!(s, "K{}", num(*k)).unwrap();
-        }
-        writeln!(s, "G00 Z{}", num(safe)).unwrap();
-    } else if uniform {
-        // LinuxCNC's G5.2: the current position is the first control point.
-        for (i, p) in c.ctrl.iter().enumerate().skip(1) {
-            let head = if i == 1 {
-                format!("G5.2 L{order} ")
-            } else {
-                String::new()
-            };
-            writeln!(s, "{head}X{} Y{} P1", num(p[0]), num(p[1])).unwrap();
-        }
-        writeln!(s, "G5.3").unwrap();
-        writeln!(s, "G0 Z{}", num(safe)).unwrap();
-    } else {
-        for (i, p) in c.ctrl.iter().enumerate() {
-            let head = if i == 0 { "G6.2 " } else { "" };
-            let tail = if i == 0 {
-                format!(" P{order} Q1")
-            } else {
-                String::new()
-            };
-            writeln!(
-                s,
-                "{head}X{} Y{} R{} K{}{tail}",
-                num(p[0]),
-                num(p[1]),
-                num(p[2]),
-                num(c.knots[i])
-            )
-            .unwrap();
-        }
-        for k in &c.knots[c.ctrl.len()..] {
-            writeln!(s, "G6.2 K{}", num(*k)).unwrap();
-        }
-        writeln!(s, "G0 Z{}", num(safe)).unwrap();
-    }
-    writeln!(s, "M2").unwrap();
-    s
-}
-
 /// The program for `job`, and a line for the user on what was fitted.
 pub fn ellipse_program(job: &EllipseJob) -> Result<(String, String), String> {
     let axes = 1e-3..=crate::program::MAX_POSITION_MM;
@@ -434,7 +309,7 @@ pub fn ellipse_program(job: &EllipseJob) -> Result<(String, String), String> {
             "exact ellipse: {} control points of degree 2, no fitting error",
             c.ctrl.len()
         );
-        return Ok((program(job, &c, &what), summary));
+        return Ok((program(&job.cut(), &what, &[Cut::whole(c)]), summary));
     }
     let (c, e) = offset_curve(job.a, job.b, job.offset, job.tolerance, job.centre)?;
     let what = format!(
@@ -448,7 +323,7 @@ pub fn ellipse_program(job: &EllipseJob) -> Result<(String, String), String> {
         e,
         job.tolerance
     );
-    Ok((program(job, &c, &what), summary))
+    Ok((program(&job.cut(), &what, &[Cut::whole(c)]), summary))
 }
 
 #[cfg(test)]
