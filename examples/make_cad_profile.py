@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""Writes cad-profile.stp, the CAD example of `cnc cam curves` (run from anywhere).
+"""Writes cad-profile.step, the CAD example of `cnc cam curves` (run from anywhere).
 
 A plate profile drawn in a CAD system's sketch, exported as AP214 wireframe: one
 GEOMETRIC_CURVE_SET of a COMPOSITE_CURVE (the outline) and a CIRCLE (a bore), in mm and
@@ -107,13 +107,13 @@ def main():
         "ISO-10303-21;",
         "HEADER;",
         "FILE_DESCRIPTION(('plate profile: wireframe curves for cnc cam curves'),'2;1');",
-        "FILE_NAME('cad-profile.stp','2026-11-27T00:00:00',('cnc'),(''),'make_cad_profile.py','','');",
+        "FILE_NAME('cad-profile.step','2026-11-27T00:00:00',('cnc'),(''),'make_cad_profile.py','','');",
         "FILE_SCHEMA(('AUTOMOTIVE_DESIGN { 1 0 10303 214 1 1 1 1 }'));",
         "ENDSEC;",
         "DATA;",
     ]
     text = "\n".join(head + w.lines + ["ENDSEC;", "END-ISO-10303-21;", ""])
-    with open(os.path.join(HERE, "cad-profile.stp"), "w") as f:
+    with open(os.path.join(HERE, "cad-profile.step"), "w") as f:
         f.write(text)
 
 

@@ -362,6 +362,7 @@ fn run_inner(args: &RunArgs) -> Result<bool, String> {
         dialect: args.dialect,
         subroutine_dirs: subroutine_dirs.clone(),
         tools,
+        offset_tolerance_mm: None,
     };
     let blocks = match process::compile_source(&src.name, &src.text, &opts, &machine, period_ns) {
         Ok(c) => c.blocks,

@@ -93,7 +93,14 @@ pub fn check_with(
     machine: &Machine,
     period_ns: u64,
 ) -> Result<(program::Program, Vec<Block>), Vec<Diagnostic>> {
-    let prog = program::interpret_with(text, opts)?;
+    // NURBS offsets under G41/G42 are fitted within the machine's chord tolerance.
+    let opts = program::Options {
+        offset_tolerance_mm: opts
+            .offset_tolerance_mm
+            .or(Some(machine.chord_tolerance_mm)),
+        ..opts.clone()
+    };
+    let prog = program::interpret_with(text, &opts)?;
     let mut blocks = blocks::build(&prog.moves, machine);
     // Nothing leaves this process unless a receiver would accept it: every block is
     // validated, and kept within the machine's travel, as soon as the plan is done with
@@ -325,6 +332,7 @@ pub fn run_streaming<S: Service>(
                     .as_deref()
                     .map(program::tools::ToolTable::load)
                     .transpose()?,
+                offset_tolerance_mm: None,
             };
             let c = compile_source(&name, &src.text, &opts, &cfg.machine, cfg.period_ns)?;
             dialect = c.dialect.map(|d| d.name().to_string());

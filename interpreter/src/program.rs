@@ -28,6 +28,7 @@ mod fanuc;
 mod feed;
 mod flow;
 mod linuxcnc;
+mod offset;
 mod plain;
 mod subfile;
 pub mod tools;
@@ -189,7 +190,15 @@ pub struct Options {
     pub subroutine_dirs: Vec<std::path::PathBuf>,
     /// The tool table `G41`/`G42` take the radius from (`--tool-table`, see [`tools`]).
     pub tools: Option<tools::ToolTable>,
+    /// How far (mm) the fitted offset of a NURBS move under `G41`/`G42` may stray from
+    /// the true one: the machine's chord tolerance, [`DEFAULT_OFFSET_TOL_MM`] when not
+    /// given.
+    pub offset_tolerance_mm: Option<f64>,
 }
+
+/// The offset tolerance of a program read without a machine: the built-in machine's
+/// chord tolerance.
+pub const DEFAULT_OFFSET_TOL_MM: f64 = 0.001;
 
 #[derive(Debug, Clone, Copy, PartialEq)]
 enum Motion {
@@ -226,6 +235,8 @@ struct State {
     cutter_comp: bool,
     /// Cutter radius compensation while it is on (see [`comp`]).
     comp: Option<comp::Comp>,
+    /// [`Options::offset_tolerance_mm`], mm.
+    offset_tol: f64,
     /// After `G40`: where the tool is, off the programmed point by the radius, for the
     /// move that takes it back to the programmed path.
     exit_from: Option<[f64; 3]>,
@@ -384,6 +395,7 @@ fn interpret_lines(text: &str, opts: &Options, way: Way) -> Result<Program, Vec<
         inverse_time: false,
         cutter_comp: false,
         comp: None,
+        offset_tol: opts.offset_tolerance_mm.unwrap_or(DEFAULT_OFFSET_TOL_MM),
         exit_from: None,
         comp_used: false,
         tools: opts.tools.clone(),
@@ -984,6 +996,27 @@ fn path_control(lw: &LineWords, w: &Word, code: u32, unit: f64) -> Result<PathCo
     })
 }
 
+/// A NURBS move this line closed (the moves from `before` on) made into its offset, when
+/// cutter radius compensation is on.
+fn compensate_curve(
+    st: &mut State,
+    lw: &LineWords,
+    moves: &mut Vec<Move>,
+    before: usize,
+) -> Result<(), Diagnostic> {
+    if !comp::active(st) || moves.len() == before {
+        return Ok(());
+    }
+    if !matches!(moves.last(), Some(Move::Nurbs { .. })) {
+        return Ok(());
+    }
+    let m = moves.pop().unwrap_or_else(|| unreachable!());
+    let tol = st.offset_tol;
+    comp::nurbs(st, lw, m, tol, moves)?;
+    st.comp_used = true;
+    Ok(())
+}
+
 /// The motion of a line: curves opened or continued, dwell, straight and arc moves.
 fn motion(
     st: &mut State,
@@ -998,9 +1031,22 @@ fn motion(
         Some((w, Motion::Cubic | Motion::Quadratic)) => Some(w),
         _ => None,
     });
-    if let Some(w) = curve.filter(|_| st.comp.is_some() || st.exit_from.is_some()) {
+    // NURBS moves are compensated (`comp::nurbs`); the Bézier splines are not, as in
+    // LinuxCNC.
+    let spline_only = match codes.motion {
+        Some((w, Motion::Cubic | Motion::Quadratic)) => Some(w),
+        _ => None,
+    };
+    let refused = if st.exit_from.is_some() {
+        curve
+    } else if st.comp.is_some() {
+        spline_only
+    } else {
+        None
+    };
+    if let Some(w) = refused {
         let why = if st.comp.is_some() {
-            "cutter radius compensation is on (G41/G42): it works on straight moves and arcs only; turn it off with G40 first"
+            "cutter radius compensation is on (G41/G42): it works on straight moves, arcs and NURBS (G5.2, G6.2); turn it off with G40 first"
         } else {
             "the move just after G40 must be straight (G0 or G1): it takes the tool from its offset path back to the programmed one"
         };
@@ -1033,7 +1079,9 @@ fn motion(
             st.dialect
                 .claim(Dialect::LinuxCnc, lw.line, g.col, "G6.2 with Q")?;
         }
-        return linuxcnc::g62_line(st, lw, codes.g62, motion_word, unit, moves, end);
+        let before = moves.len();
+        linuxcnc::g62_line(st, lw, codes.g62, motion_word, unit, moves, end)?;
+        return compensate_curve(st, lw, moves, before);
     }
     // Inside an open G5.2 block every line is a control point (or the G5.3 that closes it).
     if st.nurbs.is_some() || codes.nurbs_open.is_some() {
@@ -1041,7 +1089,8 @@ fn motion(
             st.dialect
                 .claim(Dialect::LinuxCnc, lw.line, g.col, "G5.2")?;
         }
-        return linuxcnc::nurbs_line(
+        let before = moves.len();
+        linuxcnc::nurbs_line(
             st,
             lw,
             codes.nurbs_open,
@@ -1050,7 +1099,8 @@ fn motion(
             unit,
             moves,
             end,
-        );
+        )?;
+        return compensate_curve(st, lw, moves, before);
     }
     if let Some(w) = codes.nurbs_close {
         return Err(lw.err("G5.3", w.col, "no G5.2 NURBS is open for it to close"));

@@ -389,11 +389,11 @@ fn example_truths() -> Vec<Truth> {
 /// every set-point lies on the curves to 1e-9 mm.
 #[test]
 fn the_example_cad_profile_is_cut_on_its_curves() {
-    let path = concat!(env!("CARGO_MANIFEST_DIR"), "/../examples/cad-profile.stp");
+    let path = concat!(env!("CARGO_MANIFEST_DIR"), "/../examples/cad-profile.step");
     let text = std::fs::read_to_string(path).unwrap();
     for fanuc in [false, true] {
         let job = curves_job(fanuc);
-        let (program, summary) = curves_program(&text, "cad-profile.stp", &job).unwrap();
+        let (program, summary) = curves_program(&text, "cad-profile.step", &job).unwrap();
         assert!(summary.starts_with("8 curves"), "{summary}");
         let worst = on_the_curves(&set_points(&program), -1.0, &example_truths(), 0.06);
         println!("fanuc {fanuc}: worst set-point {worst:.3e} mm from the CAD curves");
@@ -680,4 +680,106 @@ fn closed_curves_across_their_seam_in_inches_and_degrees() {
         assert!(summary.starts_with("2 curves"), "{summary}");
         on_the_curves(&set_points(&program), -1.0, &truths, 0.06);
     }
+}
+
+/// A small file of `body` (instances from line 5 on), in mm and radians.
+fn part(body: &str) -> String {
+    format!("ISO-10303-21;\nHEADER;\nENDSEC;\nDATA;\n{body}\nENDSEC;\nEND-ISO-10303-21;\n")
+}
+
+/// The review's cases, each of which went wrong before it was mended: a reversed
+/// composite segment over a trimmed arc (cut the other 270°), a trim parameter of 1e20
+/// (never ended), a B-spline with an empty domain and trims a rounding either side of a
+/// knot (panicked), a parameter and a point that disagree (the point was ignored),
+/// weights a million apart (written out of the interpreter's range), a file name with
+/// a parenthesis (broke the header comment).
+#[test]
+fn cad_curves_the_review_found_wrong() {
+    let job = curves_job(false);
+    let circle = "#1=CARTESIAN_POINT('',(10.,0.,0.));\n#2=AXIS2_PLACEMENT_3D('',#1,$,$);\n\
+                  #3=CIRCLE('',#2,5.);\n";
+    // The quarter from 0 to 90°, run backwards inside the composite: (10, 5) to (15, 0).
+    let text = part(&format!(
+        "{circle}#4=TRIMMED_CURVE('',#3,(PARAMETER_VALUE(0.)),(PARAMETER_VALUE(1.5707963267948966)),.T.,.PARAMETER.);\n\
+         #5=COMPOSITE_CURVE_SEGMENT(.CONTINUOUS.,.F.,#4);\n#6=COMPOSITE_CURVE('',(#5),.F.);"
+    ));
+    let (program, _) = curves_program(&text, "part (2).stp", &job).unwrap();
+    let quarter = Truth::Conic {
+        c: [10.0, 0.0],
+        x: [5.0, 0.0],
+        y: [0.0, 5.0],
+        t0: 0.0,
+        t1: std::f64::consts::FRAC_PI_2,
+    };
+    on_the_curves(&set_points(&program), -1.0, &[quarter], 0.06);
+    assert!(program.starts_with("(1 curves of part 2.stp:"), "{program}");
+    let e = curves_program(
+        &part(&format!(
+            "{circle}#4=TRIMMED_CURVE('',#3,(PARAMETER_VALUE(1.E20)),(PARAMETER_VALUE(0.)),.T.,.PARAMETER.);"
+        )),
+        "part.stp",
+        &job,
+    )
+    .unwrap_err();
+    assert!(
+        e.contains("part.stp:8: #4: trim: trim_1's parameter is beyond 1e9"),
+        "{e}"
+    );
+    let pts = "#1=CARTESIAN_POINT('',(0.,0.,0.));\n#2=CARTESIAN_POINT('',(1.,1.,0.));\n\
+               #3=CARTESIAN_POINT('',(2.,0.,0.));\n";
+    let e = curves_program(
+        &part(&format!(
+            "{pts}#4=B_SPLINE_CURVE_WITH_KNOTS('',2,(#1,#2,#3),.UNSPECIFIED.,.F.,.F.,(1,1,2,1,1),(0.,1.,2.,3.,4.),.UNSPECIFIED.);"
+        )),
+        "part.stp",
+        &job,
+    )
+    .unwrap_err();
+    assert!(
+        e.contains("#4: knots: the curve's domain, from knot 2 to knot 2, is empty"),
+        "{e}"
+    );
+    // Trims a rounding either side of the inner knot 1: an empty piece, refused.
+    let e = curves_program(
+        &part(&format!(
+            "{pts}#4=B_SPLINE_CURVE_WITH_KNOTS('',1,(#1,#2,#3),.UNSPECIFIED.,.F.,.F.,(2,1,2),(0.,1.,2.),.UNSPECIFIED.);\n\
+             #5=TRIMMED_CURVE('',#4,(PARAMETER_VALUE(0.9999999999999999)),(PARAMETER_VALUE(1.0000000000000002)),.T.,.PARAMETER.);"
+        )),
+        "part.stp",
+        &job,
+    )
+    .unwrap_err();
+    assert!(e.contains("#5: trim:"), "{e}");
+    // A degree file would say 90; this one says radians and means degrees.
+    let e = curves_program(
+        &part(&format!(
+            "{circle}#4=CARTESIAN_POINT('',(10.,5.,0.));\n\
+             #5=TRIMMED_CURVE('',#3,(PARAMETER_VALUE(0.)),(#4,PARAMETER_VALUE(90.)),.T.,.PARAMETER.);"
+        )),
+        "part.stp",
+        &job,
+    )
+    .unwrap_err();
+    assert!(
+        e.contains("#5: trim: trim_2's parameter 90 and its point (10, 5, 0) are"),
+        "{e}"
+    );
+    let weights = |w: &str| {
+        curves_program(
+            &part(&format!(
+                "{pts}#4=(BOUNDED_CURVE() B_SPLINE_CURVE(2,(#1,#2,#3),.UNSPECIFIED.,.F.,.F.) \
+                 B_SPLINE_CURVE_WITH_KNOTS((3,3),(0.,1.),.UNSPECIFIED.) CURVE() \
+                 GEOMETRIC_REPRESENTATION_ITEM() RATIONAL_B_SPLINE_CURVE(({w})) REPRESENTATION_ITEM(''));"
+            )),
+            "part.stp",
+            &job,
+        )
+    };
+    let e = weights("0.3,300000.,0.3").unwrap_err();
+    assert!(
+        e.contains("#4: weights: its weights run from 0.3 to 300000"),
+        "{e}"
+    );
+    let (program, _) = weights("0.3,149000.,0.3").unwrap();
+    assert!(set_points(&program).len() > 10);
 }

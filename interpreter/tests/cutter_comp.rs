@@ -268,14 +268,18 @@ fn what_the_tool_cannot_cut_is_refused_at_its_line() {
         ("G41.1 D10\nG1 X20 Y0\nG3 X20 Y8 R4\n", 5, "arc radius"),
         // The plane changed while it is on.
         ("G41.1 D2\nG1 X20 Y0\nG18\n", 5, "planes"),
-        // A curve while it is on (LinuxCNC refuses G5 too; under G5.2 it loses a move,
-        // see `program::comp`), and an arc just after G40.
+        // A Bézier spline while it is on (LinuxCNC refuses G5 too), a NURBS as the
+        // entry move, and an arc just after G40.
         (
             "G41.1 D2\nG1 X20 Y0\nG5 X30 Y0 I5 J5 P5 Q-5\n",
             5,
             "G41/G42",
         ),
-        ("G41.1 D2\nG1 X20 Y0\nG5.2 X20 Y0 P1 L3\n", 5, "G41/G42"),
+        (
+            "G41.1 D2\nG5.2 L3 X20 Y5 P1\nX30 Y0 P1\nG5.3\n",
+            4,
+            "entry move",
+        ),
         ("G41.1 D2\nG1 X20 Y0\nG40\nG2 X30 Y0 R5\n", 6, "straight"),
         // G41.1 without its diameter, a D word with nothing to use it, G41 on again,
         // outside the XY plane (LinuxCNC compensates in XZ for lathes; not here).
@@ -475,4 +479,200 @@ fn stops_tool_changes_and_full_circles_on_the_line_of_a_compensated_move() {
     // left at a concave corner that LinuxCNC accepts (its sweep 6.176 rad).
     let p = path("G21 G17 G90 F100\nG0 X21 Y-30\nG41.1 D4\nG1 X20 Y0\nG3 I-20 J0\nG1 X0 Y0\nG40 G1 X-10 Y-10\nM2\n");
     assert!(p.iter().any(|m| m.0 == 'A'), "{p:?}");
+}
+
+/// The programmed NURBS (`ctrl` `[x, y, z, w]`) by the conventional Cox–de Boor
+/// evaluator (`shared::nurbs::reference`, not the one the interpreter uses), with 4 000
+/// samples for the nearest-point scan.
+struct Programmed<'a> {
+    degree: usize,
+    knots: &'a [f64],
+    ctrl: &'a [[f64; 4]],
+    samples: Vec<(f64, [f64; 2])>,
+}
+
+impl<'a> Programmed<'a> {
+    fn new(degree: usize, knots: &'a [f64], ctrl: &'a [[f64; 4]]) -> Self {
+        let (lo, hi) = (knots[degree], knots[ctrl.len()]);
+        let mut p = Programmed {
+            degree,
+            knots,
+            ctrl,
+            samples: Vec::new(),
+        };
+        p.samples = (0..=4000)
+            .map(|k| {
+                let u = lo + (hi - lo) * k as f64 / 4000.0;
+                (u, p.at(u))
+            })
+            .collect();
+        p
+    }
+
+    fn at(&self, u: f64) -> [f64; 2] {
+        let p =
+            shared::nurbs::reference::conventional_curve(self.degree, self.knots, self.ctrl, u).p;
+        [p[0], p[1]]
+    }
+
+    /// The distance from `q`: the nearest sample refined by golden-section search.
+    fn distance(&self, q: [f64; 2]) -> f64 {
+        let d = |p: [f64; 2]| (p[0] - q[0]).hypot(p[1] - q[1]);
+        let k = (0..self.samples.len())
+            .min_by(|&i, &j| d(self.samples[i].1).total_cmp(&d(self.samples[j].1)))
+            .unwrap();
+        let last = self.samples.len() - 1;
+        let (mut a, mut b) = (
+            self.samples[k.saturating_sub(1)].0,
+            self.samples[(k + 1).min(last)].0,
+        );
+        let g = (5f64.sqrt() - 1.0) / 2.0;
+        for _ in 0..80 {
+            let (x1, x2) = (b - g * (b - a), a + g * (b - a));
+            if d(self.at(x1)) < d(self.at(x2)) {
+                b = x2;
+            } else {
+                a = x1;
+            }
+        }
+        d(self.at((a + b) / 2.0)).min(d(self.samples[k].1))
+    }
+}
+
+/// The compensated NURBS moves of `text`, each sampled 500 times.
+fn offset_points(text: &str) -> Vec<[f64; 2]> {
+    let prog = interpret(text).unwrap_or_else(|e| panic!("refused: {e:?}"));
+    let mut last: Option<[f64; 3]> = None;
+    let mut out = Vec::new();
+    for m in &prog.moves {
+        let (from, to) = match m {
+            Move::Line { from, to, .. } | Move::Arc { from, to, .. } => (*from, *to),
+            Move::Nurbs {
+                degree,
+                knots,
+                ctrl,
+                ..
+            } => {
+                let (lo, hi) = (knots[*degree], knots[ctrl.len()]);
+                for k in 0..=500 {
+                    let u = lo + (hi - lo) * k as f64 / 500.0;
+                    let p = shared::nurbs::eval(*degree, knots, ctrl, u).p;
+                    out.push([p[0], p[1]]);
+                }
+                let (a, b) = (ctrl[0], ctrl[ctrl.len() - 1]);
+                ([a[0], a[1], a[2]], [b[0], b[1], b[2]])
+            }
+            _ => continue,
+        };
+        if let Some(e) = last {
+            assert_eq!(e, from, "{m:?} does not start where the move before ended");
+        }
+        last = Some(to);
+    }
+    assert!(!out.is_empty(), "no NURBS move in\n{text}");
+    out
+}
+
+/// A NURBS move under `G41.1`/`G42.1`: the tool's path is continuous (the corner arcs
+/// and lines meet the fitted offset exactly) and every point of the fitted offset is
+/// the tool's radius from the programmed curve, within the chord tolerance (1 µm, the
+/// program read without a machine), on either side, for a polynomial `G5.2` and a
+/// rational `G6.2`.
+#[test]
+fn nurbs_moves_are_offset_within_the_chord_tolerance() {
+    let bump: Vec<[f64; 4]> = [
+        [20.0, 0.0],
+        [30.0, 0.0],
+        [35.0, 10.0],
+        [45.0, 10.0],
+        [50.0, 0.0],
+        [60.0, 0.0],
+    ]
+    .iter()
+    .map(|p| [p[0], p[1], -1.0, 1.0])
+    .collect();
+    let bump_knots = [0.0, 0.0, 0.0, 0.0, 1.0, 2.0, 3.0, 3.0, 3.0, 3.0];
+    // A rational quadratic: a quarter of the circle of radius 15 round (20, 15), then a
+    // freer end (weights pull the curve about).
+    let (h, w) = (std::f64::consts::FRAC_1_SQRT_2, [1.0, 1.5, 0.7]);
+    let arc: Vec<[f64; 4]> = vec![
+        [20.0, 0.0, -1.0, 1.0],
+        [35.0, 0.0, -1.0, h],
+        [35.0, 15.0, -1.0, 1.0],
+        [35.0, 25.0, -1.0, w[1]],
+        [45.0, 30.0, -1.0, w[2]],
+        [55.0, 30.0, -1.0, 1.0],
+    ];
+    let arc_knots = [0.0, 0.0, 0.0, 1.0, 1.0, 2.0, 3.0, 3.0, 3.0];
+    let g5_2 = "G5.2 L4 X30 Y0 P1\nX35 Y10 P1\nX45 Y10 P1\nX50 Y0 P1\nX60 Y0 P1\nG5.3\nG1 X80 Y0\n";
+    let g6_2 = format!(
+        "G6.2 X20 Y0 R1 K0 P3 Q1\nX35 Y0 R{h} K0\nX35 Y15 R1 K0\nX35 Y25 R{} K1\nX45 Y30 R{} K1\nX55 Y30 R1 K2\nG6.2 K3\nG6.2 K3\nG6.2 K3\nG1 X80 Y30\n",
+        w[1], w[2]
+    );
+    let tol = interpreter::program::DEFAULT_OFFSET_TOL_MM;
+    for (curve, knots, ctrl, degree) in [
+        (g5_2.to_string(), &bump_knots[..], &bump, 3),
+        (g6_2, &arc_knots[..], &arc, 2),
+    ] {
+        for (code, d) in [("G41.1", 6.0), ("G42.1", 6.0), ("G41.1", 2.0)] {
+            let text = format!(
+                "G21 G17 G90 G94\nG0 X-10 Y-10 Z5\nG1 Z-1 F600\n{code} D{d}\nG1 X0 Y0\nG1 X20 Y0\n{curve}G40\nG1 X90 Y-10\nM2\n"
+            );
+            let r = d / 2.0;
+            let programmed = Programmed::new(degree, knots, ctrl);
+            let mut worst = 0.0f64;
+            for q in offset_points(&text) {
+                worst = worst.max((programmed.distance(q) - r).abs());
+            }
+            assert!(worst <= tol, "{code} D{d}: {worst} mm\n{text}");
+            println!("{code} D{d}, degree {degree}: worst {worst:.3e} mm from the radius");
+        }
+    }
+}
+
+/// What a NURBS offset cannot be: a bend tighter than the tool on its side (with the
+/// parameter where), an offset that crosses itself, a corner inside the curve, a
+/// concave corner into or out of the curve. (`G06.2` under compensation in a Fanuc
+/// program stays Fanuc's alarm PS1006: `dialects.rs`.)
+#[test]
+fn nurbs_offsets_the_tool_cannot_cut_are_refused_at_their_line() {
+    let head = "G21 G17 G90 G94 F500\nG0 X0 Y-10\nG41.1 D6\nG1 X0 Y0\nG1 X20 Y0\n";
+    for (body, line, says) in [
+        // A corner inside the curve (a knot twice in a quadratic).
+        (
+            "G6.2 X20 Y0 R1 K0 P3 Q1\nX30 Y0 R1 K0\nX40 Y0 R1 K0\nX40 Y10 R1 K1\nX40 Y20 R1 K1\nG6.2 K2\nG6.2 K2\nG6.2 K2\n",
+            6,
+            "corner of",
+        ),
+        // Into the curve at a concave corner (the tool on the left, the curve turning
+        // up-left from a move that went right).
+        ("G5.2 L3 X15 Y10 P1\nX10 Y20 P1\nG5.3\n", 6, "concave corner into"),
+        // Out of it at a concave corner.
+        (
+            "G5.2 L3 X30 Y0 P1\nX40 Y0 P1\nG5.3\nG1 X30 Y10\n",
+            9,
+            "after the NURBS move of line 6",
+        ),
+        // A loop whose offset crosses itself where its ends pass close by.
+        (
+            "G5.2 L4 X60 Y0 P1\nX60 Y40 P1\nX30 Y40 P1\nX30 Y2 P1\nX30 Y-20 P1\nG5.3\n",
+            6,
+            "crosses itself",
+        ),
+    ] {
+        let text = format!("{head}{body}");
+        let (l, msg) = refused(&text);
+        assert_eq!(l, line, "{body}: {msg}");
+        assert!(msg.contains(says), "{body}: {msg}");
+    }
+    // The bump's feet bend round radius 14 mm: too tight for a 30 mm tool inside.
+    let gouge = "G21 G17 G90 G94 F500\nG0 X-30 Y-30\nG41.1 D30\nG1 X0 Y0\nG1 X20 Y0\n\
+                 G5.2 L4 X30 Y0 P1\nX35 Y10 P1\nX45 Y10 P1\nX50 Y0 P1\nX60 Y0 P1\nG5.3\n";
+    let (l, msg) = refused(gouge);
+    assert_eq!(l, 6, "{msg}");
+    assert!(
+        msg.contains("bends tighter than the tool at its parameter u = 0.41")
+            && msg.contains("radius of curvature 14.02"),
+        "{msg}"
+    );
 }

@@ -82,22 +82,29 @@ impl Spline {
     }
 
     /// A knot within a rounding of `u`, or `u`.
+    /// The nearest knot of the domain within a rounding of `u`, or `u`.
     fn snap(&self, u: f64) -> f64 {
         let (lo, hi) = self.domain();
         let tiny = 1e-12 * (hi - lo);
         self.knots
             .iter()
             .copied()
-            .find(|k| (k - u).abs() <= tiny)
+            .filter(|k| (lo..=hi).contains(k) && (k - u).abs() <= tiny)
+            .min_by(|x, y| (x - u).abs().total_cmp(&(y - u).abs()))
             .unwrap_or(u)
     }
 
-    /// The curve from `a` to `b` (`a < b`, both in the domain) as a clamped NURBS of its
-    /// own, by inserting each end until it is `degree` times a knot.
-    fn piece(&self, a: f64, b: f64) -> Spline {
+    /// The curve from `a` to `b` (both in the domain) as a clamped NURBS of its own, by
+    /// inserting each end until it is `degree` times a knot; `None` where that leaves
+    /// nothing (`a` not before `b` once each is put on a knot it rounds to).
+    fn piece(&self, a: f64, b: f64) -> Option<Spline> {
         let p = self.degree;
         let mut s = self.clone();
-        let (a, b) = (s.snap(a), s.snap(b));
+        let (lo, hi) = self.domain();
+        let (a, b) = (s.snap(a.clamp(lo, hi)), s.snap(b.clamp(lo, hi)));
+        if a.is_nan() || b.is_nan() || a >= b {
+            return None;
+        }
         for u in [a, b] {
             while s.knots.iter().filter(|&&k| k == u).count() < p {
                 s.insert(u);
@@ -110,15 +117,18 @@ impl Spline {
             .iter()
             .position(|&k| k == b)
             .unwrap_or(s.knots.len());
-        let first = ia + sa - p - 1;
+        let first = (ia + sa).checked_sub(p + 1)?;
+        if ia + sa > ib || ib > s.ctrl.len() {
+            return None;
+        }
         let mut knots = vec![a; p + 1];
         knots.extend_from_slice(&s.knots[ia + sa..ib]);
         knots.extend(std::iter::repeat_n(b, p + 1));
-        Spline {
+        Some(Spline {
             degree: p,
             knots,
             ctrl: s.ctrl[first..ib].to_vec(),
-        }
+        })
     }
 
     fn reversed(&self) -> Spline {
@@ -184,21 +194,46 @@ fn fail(c: &CadCurve, rule: &'static str, message: String) -> StepError {
     }
 }
 
+/// How a trim's point is found on its curve: the parameter of the nearest point and its
+/// distance; and the point at a parameter.
+struct OnCurve<'f> {
+    locate: &'f dyn Fn([f64; 3]) -> (f64, f64),
+    at: &'f dyn Fn(f64) -> [f64; 3],
+}
+
 /// The parameter a trim gives: its parameter, or its point's on the curve (nearest
-/// within [`super::JOIN_MM`]) where only a point is given or the points rule.
+/// within [`super::JOIN_MM`]) where only a point is given or the points rule. Where
+/// both are given they must agree (a file whose angles are in another unit than it
+/// says would trim elsewhere than its points).
 fn trim_param(
     c: &CadCurve,
     b: &Bound,
     by_point: bool,
     what: &str,
-    locate: &dyn Fn([f64; 3]) -> (f64, f64),
+    on: &OnCurve,
 ) -> Result<f64, StepError> {
+    if b.param.is_some_and(|u| u.is_nan() || u.abs() > 1e9) {
+        return Err(fail(c, "trim", format!("{what}'s parameter is beyond 1e9")));
+    }
+    if let (Some(u), Some(q)) = (b.param, b.point) {
+        let d = dist((on.at)(u), q);
+        if d.is_nan() || d > super::JOIN_MM {
+            return Err(fail(
+                c,
+                "trim",
+                format!(
+                    "{what}'s parameter {u} and its point ({}, {}, {}) are {d:.6} mm apart; they must name one point (are the file's angle or length units the ones its trims are in?)",
+                    q[0], q[1], q[2]
+                ),
+            ));
+        }
+    }
     match (b.param, b.point) {
         (Some(u), None) => Ok(u),
         (Some(u), Some(_)) if !by_point => Ok(u),
         (_, Some(q)) => {
-            let (u, d) = locate(q);
-            if d > super::JOIN_MM {
+            let (u, d) = (on.locate)(q);
+            if d.is_nan() || d > super::JOIN_MM {
                 return Err(fail(
                     c,
                     "trim",
@@ -245,14 +280,15 @@ fn ranges(
         return Ok(vec![(from, to, !forward)]);
     }
     if !closed {
-        return Err(fail(
-            c,
-            "trim",
+        let why = if (t1 - t0).abs() <= tiny {
+            "trim_1 and trim_2 are the same point of an open curve: the piece is empty".to_string()
+        } else {
             format!(
                 "trim_1 {t0} to trim_2 {t1} runs {} the curve's direction off its end: the curve is not closed",
                 if forward { "along" } else { "against" }
-            ),
-        ));
+            )
+        };
+        return Err(fail(c, "trim", why));
     }
     // Through the seam: from `from` to the end, then from the start to `to`.
     let mut out = Vec::new();
@@ -293,7 +329,8 @@ fn pieces(c: &CadCurve) -> Result<Vec<Spatial>, StepError> {
             degree,
             knots,
             ctrl,
-            closed,
+            // Not trusted: through the seam only where the ends meet.
+            closed: _,
         } => {
             let whole = Spline {
                 degree: *degree,
@@ -301,15 +338,19 @@ fn pieces(c: &CadCurve) -> Result<Vec<Spatial>, StepError> {
                 ctrl: ctrl.clone(),
             };
             let (lo, hi) = whole.domain();
-            let clamped = whole.piece(lo, hi);
-            let closed = *closed || dist(clamped.at(lo), clamped.at(hi)) <= 1e-9;
+            let empty = || fail(c, "trim", "the piece is empty".into());
+            let clamped = whole.piece(lo, hi).ok_or_else(empty)?;
+            let closed = dist(clamped.at(lo), clamped.at(hi)) <= super::JOIN_MM;
             let (t0, t1) = match trim {
                 None => (lo, hi),
                 Some(t) => {
-                    let locate = |q| clamped.nearest(q);
+                    let on = OnCurve {
+                        locate: &|q| clamped.nearest(q),
+                        at: &|u: f64| clamped.at(u.clamp(lo, hi)),
+                    };
                     (
-                        trim_param(c, &t.start, t.by_point, "trim_1", &locate)?,
-                        trim_param(c, &t.end, t.by_point, "trim_2", &locate)?,
+                        trim_param(c, &t.start, t.by_point, "trim_1", &on)?,
+                        trim_param(c, &t.end, t.by_point, "trim_2", &on)?,
                     )
                 }
             };
@@ -318,13 +359,12 @@ fn pieces(c: &CadCurve) -> Result<Vec<Spatial>, StepError> {
             } else {
                 ranges(c, (lo, hi), (t0, t1), c.forward, closed)?
             };
-            Ok(rs
-                .into_iter()
+            rs.into_iter()
                 .map(|(a, b, rev)| {
-                    let s = clamped.piece(a, b);
-                    Spatial::Nurbs(if rev { s.reversed() } else { s })
+                    let s = clamped.piece(a, b).ok_or_else(empty)?;
+                    Ok(Spatial::Nurbs(if rev { s.reversed() } else { s }))
                 })
-                .collect())
+                .collect()
         }
         Shape::Conic { place, a, b } => {
             let col = |j: usize, s: f64| [0, 1, 2].map(|r| place.rot[r][j] * s);
@@ -343,25 +383,21 @@ fn pieces(c: &CadCurve) -> Result<Vec<Spatial>, StepError> {
                         let u = (dot(y) / (b * b)).atan2(dot(x) / (a * a));
                         (u, dist(at(u), q))
                     };
-                    let t0 = trim_param(c, &t.start, t.by_point, "trim_1", &locate)?;
-                    let mut t1 = trim_param(c, &t.end, t.by_point, "trim_2", &locate)?;
-                    let tiny = 1e-12;
-                    if c.forward {
-                        while t1 <= t0 + tiny {
-                            t1 += TAU;
-                        }
-                        while t1 - t0 > TAU + tiny {
-                            t1 -= TAU;
-                        }
-                    } else {
-                        while t1 >= t0 - tiny {
-                            t1 -= TAU;
-                        }
-                        while t0 - t1 > TAU + tiny {
-                            t1 += TAU;
-                        }
+                    let on = OnCurve {
+                        locate: &locate,
+                        at: &at,
+                    };
+                    let t0 = trim_param(c, &t.start, t.by_point, "trim_1", &on)?;
+                    let t1 = trim_param(c, &t.end, t.by_point, "trim_2", &on)?;
+                    // The way round from t0 to t1 in the direction of travel, more than
+                    // nothing and at most a whole turn (equal trims: a whole turn).
+                    let tiny = 1e-12 * t0.abs().max(1.0);
+                    let way = if c.forward { t1 - t0 } else { t0 - t1 };
+                    let mut way = way.rem_euclid(TAU);
+                    if way <= tiny || TAU - way <= tiny {
+                        way = TAU;
                     }
-                    (t0, t1)
+                    (t0, if c.forward { t0 + way } else { t0 - way })
                 }
             };
             let (t0, t1) = if trim.is_none() && !c.forward {
@@ -391,9 +427,13 @@ fn pieces(c: &CadCurve) -> Result<Vec<Spatial>, StepError> {
                     / l2;
                 (u, dist(at(u), q))
             };
-            let u0 = trim_param(c, &t.start, t.by_point, "trim_1", &locate)?;
-            let u1 = trim_param(c, &t.end, t.by_point, "trim_2", &locate)?;
-            if dist(at(u0), at(u1)) == 0.0 {
+            let on = OnCurve {
+                locate: &locate,
+                at: &at,
+            };
+            let u0 = trim_param(c, &t.start, t.by_point, "trim_1", &on)?;
+            let u1 = trim_param(c, &t.end, t.by_point, "trim_2", &on)?;
+            if dist(at(u0), at(u1)).is_nan() || dist(at(u0), at(u1)) == 0.0 {
                 return Err(fail(
                     c,
                     "trim",
@@ -450,7 +490,9 @@ fn flat(c: &CadCurve, s: Spatial) -> Result<Piece, StepError> {
             let (lo, hi) = n.ctrl.iter().fold((f64::INFINITY, 0.0f64), |(l, h), p| {
                 (l.min(p[3]), h.max(p[3]))
             });
-            if hi > 1e6 * lo {
+            // (A hair inside the interpreter's 1e6, so that the scaled weights' roundings
+            // stay within its 1e-3 to 1e3.)
+            if hi.is_nan() || hi > 0.999e6 * lo {
                 return Err(fail(
                     c,
                     "weights",
@@ -574,6 +616,7 @@ pub fn curves_program(text: &str, file: &str, job: &CurvesJob) -> Result<(String
         "{} curves of {file}: {nurbs}, {lines} as straight moves{edges}",
         curves.curves.len()
     );
-    let what = format!("{summary}\nwritten by cnc cam curves");
+    // (A parenthesis in the file's name would close the comment it is written in.)
+    let what = format!("{summary}\nwritten by cnc cam curves").replace(['(', ')'], "");
     Ok((program(&job.cut, &what, &cuts), summary))
 }

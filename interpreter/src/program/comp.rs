@@ -1,5 +1,6 @@
 //! Cutter radius compensation, `G41`/`G42` (and LinuxCNC's `G41.1`/`G42.1`), on straight
-//! moves and arcs in the XY plane, the way LinuxCNC 2.9's interpreter makes it.
+//! moves and arcs in the XY plane, the way LinuxCNC 2.9's interpreter makes it, and on
+//! NURBS moves, which LinuxCNC does not compensate.
 //!
 //! The tool's centre runs at the radius `r` to the left (`G41`) or right (`G42`) of the
 //! programmed path, seen along the direction of travel:
@@ -32,12 +33,22 @@
 //! circle stays a full circle where its offset's end comes out a little ahead of its
 //! start (LinuxCNC then makes an arc of that little angle).
 //!
+//! **NURBS moves** (`G5.2`, `G6.2`; beyond LinuxCNC, which under `G5.2` loses the open
+//! move before the curve and runs the curve uncompensated: `rs274 -g` prints no move
+//! for it) are offset by [`nurbs`]: the corner into the curve is judged as into a
+//! straight move along its first tangent (an arc round a convex one, on within
+//! [`CORNER_TOL`] of tangent), and the curve's offset is fitted within the machine's
+//! chord tolerance ([`super::offset`], which refuses a bend tighter than the tool on its
+//! side, an offset that crosses itself and a corner inside the curve, naming the curve
+//! parameter). Not yet: a concave corner into or out of a curve (the offset would have
+//! to be cut short where it meets the next move's; refused), and a curve as the entry
+//! move.
+//!
 //! Not here: the XZ and YZ planes (LinuxCNC compensates in XZ for lathes; this control
-//! drives a mill), NURBS and spline moves under compensation (refused; LinuxCNC refuses
-//! `G5`/`G5.1`, and under `G5.2` it loses the open move before the curve and runs the
-//! curve uncompensated: `rs274 -g` prints no move for it), and `G93` inverse time with
-//! it (a compensated move's length is not the programmed one, so `1/F` minutes would
-//! time a different path).
+//! drives a mill), the `G5`/`G5.1` splines under compensation (refused, as LinuxCNC
+//! does), Fanuc's `G06.2` (alarm PS1006, as a Fanuc control gives), and `G93` inverse
+//! time with it (a compensated move's length is not the programmed one, so `1/F`
+//! minutes would time a different path).
 //!
 //! The radius: `G41.1`/`G42.1 D` give the diameter in the program's units; `G41`/`G42`
 //! take it from the tool table ([`super::tools`]): `D<n>`'s tool, or without `D` the
@@ -101,6 +112,9 @@ pub(super) struct Comp {
     endpoint: Option<[f64; 2]>,
     /// [`ARC_GROWTH_TOL`] in the program's units.
     growth_tol: f64,
+    /// The last move was a NURBS (its line): it has ended where it is, so a concave
+    /// corner after it is refused.
+    after_nurbs: Option<u32>,
 }
 
 /// The compensation codes: `G41` 410, `G41.1` 411, `G42` 420, `G42.1` 421.
@@ -219,7 +233,126 @@ pub(super) fn turn_on(
         } else {
             ARC_GROWTH_TOL.0
         },
+        after_nurbs: None,
     });
+    Ok(())
+}
+
+/// A concave corner after a move that has ended where it was: a stop (`M0`, `M1`), or a
+/// NURBS move (its offset is fitted whole and is not cut short).
+fn ended_before_concave(c: &Comp, lw: &LineWords) -> Diagnostic {
+    match c.after_nurbs {
+        Some(l) => lw.err(
+            "G41/G42",
+            lw.first_col(),
+            format!("concave corner after the NURBS move of line {l} under cutter compensation: the tool would have to stop short of the curve's end, which is not done yet; join the move to the curve tangentially or on the outside"),
+        ),
+        // (After `M0`/`M1` the move before is finished: it cannot be cut short.
+        // LinuxCNC reads an empty queue here, undefined; the tool would gouge.)
+        None => lw.err(
+            "G41/G42",
+            lw.first_col(),
+            "concave corner right after a stop (M0, M1): the move before it has ended where it was, and the tool cannot be brought into the corner without gouging; put the stop elsewhere",
+        ),
+    }
+}
+
+/// A NURBS move (`m`, as the program made it: its first control point where the
+/// programmed path is) under compensation: the corner into it as into a straight move
+/// along its first tangent (an arc round a convex one; within [`CORNER_TOL`] of
+/// tangent, on; a concave one refused), then its offset fitted within `tol`
+/// ([`super::offset`]). It ends where its offset ends.
+pub(super) fn nurbs(
+    st: &mut State,
+    lw: &LineWords,
+    m: Move,
+    tol: f64,
+    moves: &mut Vec<Move>,
+) -> Result<(), Diagnostic> {
+    let Move::Nurbs {
+        line,
+        degree,
+        knots,
+        ctrl,
+        feed,
+    } = m
+    else {
+        unreachable!("nurbs() takes NURBS moves");
+    };
+    let c = st.comp.as_mut().expect("compensation is on");
+    let (r, side) = (c.radius, c.side);
+    let cur = c.tool;
+    // Refusals name the line that opened the curve.
+    let refuse = |message: String| Diagnostic {
+        file: None,
+        line,
+        col: 1,
+        rule: "G41/G42",
+        message,
+    };
+    if c.first {
+        return Err(refuse("the entry move of cutter radius compensation must be a straight move or an arc (G0, G1, G2, G3), which brings the tool to the offset; it is a NURBS here".into()));
+    }
+    let d = if side == Side::Left { r } else { -r };
+    let fitted =
+        super::offset::offset(degree, &knots, &ctrl, d, tol).map_err(|e| refuse(e.message(tol)))?;
+    debug_assert!(fitted.error <= tol);
+    let first = shared::nurbs::eval(degree, &knots, &ctrl, knots[degree]);
+    let op = [first.p[0], first.p[1]];
+    let z = first.p[2];
+    let alpha = first.d1[1].atan2(first.d1[0]);
+    let mut theta = angle(op, xy(cur));
+    let mut alpha_s = alpha;
+    let (beta, gamma) = match side {
+        Side::Left => {
+            if theta < alpha_s {
+                theta += 2.0 * PI;
+            }
+            (theta - alpha_s - FRAC_PI_2, FRAC_PI_2)
+        }
+        Side::Right => {
+            if alpha_s < theta {
+                alpha_s += 2.0 * PI;
+            }
+            (alpha_s - theta - FRAC_PI_2, -FRAC_PI_2)
+        }
+    };
+    let mid = at(op, r, alpha + gamma);
+    let concave = !(-CORNER_TOL..=PI + CORNER_TOL).contains(&beta);
+    if concave {
+        return Err(refuse("concave corner into a NURBS move under cutter compensation: the tool would have to start the curve's offset part way along, which is not done yet; join the curve to the move before tangentially or on the outside".into()));
+    }
+    c.end_open_at(moves, lw, xy(cur))?;
+    c.close();
+    if beta > CORNER_TOL {
+        // Convex: round the programmed corner.
+        let turn = if side == Side::Left { -1 } else { 1 };
+        push_arc(moves, line, feed, cur, with_z(mid, cur[2]), op, turn);
+    } else if dist(mid, xy(cur)) > 0.0 {
+        // Straight on (within the tolerance): across the little gap.
+        moves.push(Move::Line {
+            line,
+            from: cur,
+            to: with_z(mid, cur[2]),
+            rapid: false,
+            feed,
+        });
+    }
+    let n = fitted.ctrl.len();
+    let mut pts: Vec<[f64; 4]> = fitted.ctrl.iter().map(|p| [p[0], p[1], z, 1.0]).collect();
+    // The fit's ends are the offset's ends: the corner's end, to the bit.
+    pts[0] = [mid[0], mid[1], z, 1.0];
+    let end = [pts[n - 1][0], pts[n - 1][1], z];
+    moves.push(Move::Nurbs {
+        line,
+        degree: 3,
+        knots: fitted.knots,
+        ctrl: pts,
+        feed,
+    });
+    c.endpoint = Some(xy(end));
+    c.after_nurbs = Some(line);
+    c.tool = end;
     Ok(())
 }
 
@@ -422,6 +555,7 @@ impl Comp {
 
     /// A straight move pushed to `moves` as an open one, made in the direction `dir`.
     fn open_line(&mut self, moves: &mut Vec<Move>, m: Move, dir: [f64; 2]) {
+        self.after_nurbs = None;
         moves.push(m);
         self.queued.push(Queued {
             index: moves.len() - 1,
@@ -601,13 +735,7 @@ pub(super) fn straight(
         start = with_z(mid, cur[2]);
     } else if concave {
         if c.queued.is_empty() {
-            // (After `M0`/`M1` the move before is finished: it cannot be cut short.
-            // LinuxCNC reads an empty queue here, undefined; the tool would gouge.)
-            return Err(lw.err(
-                "G41/G42",
-                lw.first_col(),
-                "concave corner right after a stop (M0, M1): the move before it has ended where it was, and the tool cannot be brought into the corner without gouging; put the stop elsewhere",
-            ));
+            return Err(ended_before_concave(c, lw));
         }
         let mid = match open_arc {
             None => {
@@ -788,13 +916,7 @@ pub(super) fn arc(
     let start;
     if concave {
         if c.queued.is_empty() {
-            // (After `M0`/`M1` the move before is finished: it cannot be cut short.
-            // LinuxCNC reads an empty queue here, undefined; the tool would gouge.)
-            return Err(lw.err(
-                "G41/G42",
-                lw.first_col(),
-                "concave corner right after a stop (M0, M1): the move before it has ended where it was, and the tool cannot be brought into the corner without gouging; put the stop elsewhere",
-            ));
+            return Err(ended_before_concave(c, lw));
         }
         let mid = match c.open_arc(moves) {
             None => {
@@ -884,6 +1006,7 @@ pub(super) fn arc(
         }
     }
     let i = push_arc(moves, line, feed, start, new_end, centre, turn);
+    c.after_nurbs = None;
     c.queued.push(Queued {
         index: i,
         dir: [0.0; 2],

@@ -30,11 +30,17 @@
 //!   `CARTESIAN_POINT` and/or a `PARAMETER_VALUE`; `master_representation` says which
 //!   rules when both are given (`.CARTESIAN.`, else the parameter). With
 //!   `sense_agreement` false the piece runs from `trim_1` to `trim_2` against the basis
-//!   curve's direction; on a closed curve (circle, ellipse, closed B-spline) it runs
-//!   through the seam when it must.
+//!   curve's direction; on a closed curve (circle, ellipse, a B-spline whose ends meet:
+//!   its `closed_curve` flag is not trusted) it runs through the seam when it must. A
+//!   trim giving both a parameter and a point must name one point.
 //! * `COMPOSITE_CURVE(name, segments, self_intersect)` of
 //!   `COMPOSITE_CURVE_SEGMENT(transition, same_sense, parent_curve)`: its segments in
-//!   order, each reversed when `same_sense` is false.
+//!   order, each reversed when `same_sense` is false (a trimmed one then runs from its
+//!   `trim_2` to its `trim_1`).
+//!
+//! Curve sets an annotation draws (AP242 graphical PMI: `ANNOTATION_CURVE_OCCURRENCE`,
+//! `DRAUGHTING_MODEL`, …) are not cut, and a file placing geometry by a transform
+//! (`MAPPED_ITEM`, …) is refused, since the transform is not applied.
 //!
 //! # Units
 //! Lengths are converted to mm and plane angles to radians from the file's
@@ -161,6 +167,9 @@ const BUILT_ON: &[&str] = &[
     "BOUNDARY_CURVE",
     "OUTER_BOUNDARY_CURVE",
     "COMPOSITE_CURVE_ON_SURFACE",
+    "SWEPT_DISK_SOLID",
+    "FIXED_REFERENCE_SWEPT_SURFACE",
+    "SURFACE_CURVE_SWEPT_AREA_SOLID",
 ];
 
 /// What a message calls a curve instance: its entity name, a complex B-spline by its
@@ -180,6 +189,26 @@ fn curve_name(inst: &Instance) -> String {
         leaf.to_string()
     }
 }
+
+/// What draws a drawing's annotation (AP242 graphical PMI: dimension text, leaders) or
+/// places geometry elsewhere: the curve sets under them are no part's outline.
+const ANNOTATION: &[&str] = &[
+    "ANNOTATION_CURVE_OCCURRENCE",
+    "ANNOTATION_OCCURRENCE",
+    "DRAUGHTING_ANNOTATION_OCCURRENCE",
+    "ANNOTATION_PLACEHOLDER_OCCURRENCE",
+    "ANNOTATION_FILL_AREA_OCCURRENCE",
+    "DRAUGHTING_MODEL",
+    "DRAUGHTING_CALLOUT",
+];
+
+/// Entities that place a representation's geometry by a transform, which this reader
+/// does not apply.
+const TRANSFORMS: &[&str] = &[
+    "MAPPED_ITEM",
+    "REPRESENTATION_RELATIONSHIP_WITH_TRANSFORMATION",
+    "ITEM_DEFINED_TRANSFORMATION",
+];
 
 fn has(inst: &Instance, names: &[&str]) -> bool {
     inst.records
@@ -284,7 +313,15 @@ fn scale_of(cx: &Ctx, inst: &Instance, base: &str, base_scale: f64, depth: usize
             "unit_component",
             &[],
         )?;
-        return Ok(value * scale_of(cx, unit, base, base_scale, depth + 1)?);
+        let s = value * scale_of(cx, unit, base, base_scale, depth + 1)?;
+        if !(s > 0.0 && s.is_finite()) {
+            return Err(err(
+                measure,
+                "unit",
+                "a unit's conversion factor must be a positive number",
+            ));
+        }
+        return Ok(s);
     }
     Err(err(
         inst,
@@ -302,7 +339,16 @@ struct Reader<'a> {
 impl<'a> Reader<'a> {
     fn point(&self, from: &Instance, p: &Param, what: &str) -> R<[f64; 3]> {
         let inst = self.cx.deref(from, p, what, &["CARTESIAN_POINT"])?;
-        Ok(self.cx.point(inst)?.map(|x| x * self.mm))
+        let q = self.cx.point(inst)?.map(|x| x * self.mm);
+        let reach = crate::program::MAX_REACH_MM;
+        if q.iter().any(|x| x.is_nan() || x.abs() > reach) {
+            return Err(err(
+                inst,
+                "point",
+                format!("a coordinate is beyond {reach} mm"),
+            ));
+        }
+        Ok(q)
     }
 
     fn direction3(&self, from: &Instance, p: &Param, what: &str) -> R<[f64; 3]> {
@@ -478,6 +524,17 @@ impl<'a> Reader<'a> {
             shape: "curve",
         };
         let knots = cx.knot_vector(inst, kn, (kn0, kn0 + 1), &names, pts.len(), degree)?;
+        if knots[degree] >= knots[pts.len()] {
+            return Err(err(
+                inst,
+                "knots",
+                format!(
+                    "the curve's domain, from knot {} to knot {}, is empty",
+                    knots[degree],
+                    knots[pts.len()]
+                ),
+            ));
+        }
         let mut weights = vec![1.0; pts.len()];
         if let Some(rat) = inst.record("RATIONAL_B_SPLINE_CURVE") {
             let w = cx.list(inst, rat, 0, "weights_data")?;
@@ -604,7 +661,11 @@ impl<'a> Reader<'a> {
                         .cx
                         .deref(inst, s, "segments", &["COMPOSITE_CURVE_SEGMENT"])?;
                     let sr = &seg.records[0];
-                    let same = matches!(self.cx.attr(seg, sr, 1, "same_sense")?, Param::Enum(e) if e == "T");
+                    let same = match self.cx.attr(seg, sr, 1, "same_sense")? {
+                        Param::Enum(e) if e == "T" => true,
+                        Param::Enum(e) if e == "F" => false,
+                        _ => return Err(err(seg, "type", "same_sense must be .T. or .F.")),
+                    };
                     let parent = self.cx.deref(
                         seg,
                         self.cx.attr(seg, sr, 2, "parent_curve")?,
@@ -615,7 +676,11 @@ impl<'a> Reader<'a> {
                     if !same {
                         part.reverse();
                         for c in &mut part {
+                            // Against the segment: from its end to its start.
                             c.forward = !c.forward;
+                            if let Some(t) = &mut c.trim {
+                                std::mem::swap(&mut t.start, &mut t.end);
+                            }
                         }
                     }
                     let n = segs.len();
@@ -682,18 +747,39 @@ pub fn read(ex: &Exchange) -> Result<CadCurves, Vec<StepError>> {
         }
     }
     let is_curve = |i: &Instance| has(i, READ) || has(i, NOT_READ);
+    let used_by = |i: &Instance, names: &[&str]| {
+        users.get(&i.id).is_some_and(|us| {
+            us.iter()
+                .any(|u| ex.instances.get(u).is_some_and(|u| has(u, names)))
+        })
+    };
+    let sets = ["GEOMETRIC_CURVE_SET", "GEOMETRIC_SET"];
+    // A set an annotation draws.
+    let annotation = |set: &Instance| has(set, &sets) && used_by(set, ANNOTATION);
     let free = |i: &Instance| {
         is_curve(i)
             && !has(i, &["COMPOSITE_CURVE_SEGMENT"])
+            && !used_by(i, BUILT_ON)
+            && !used_by(i, ANNOTATION)
             && !users.get(&i.id).is_some_and(|us| {
                 us.iter()
-                    .any(|u| ex.instances.get(u).is_some_and(|u| has(u, BUILT_ON)))
+                    .any(|u| ex.instances.get(u).is_some_and(annotation))
             })
     };
+    if let Some(t) = ex.instances.values().find(|i| has(i, TRANSFORMS)) {
+        return Err(vec![err(
+            t,
+            "transform",
+            format!(
+                "{} places geometry by a transform, which cnc cam curves does not apply: export the part's curves on their own, in place",
+                t.type_name()
+            ),
+        )]);
+    }
     let mut order: Vec<&Instance> = Vec::new();
     let mut seen = BTreeSet::new();
     for set in ex.instances.values() {
-        if !has(set, &["GEOMETRIC_CURVE_SET", "GEOMETRIC_SET"]) || set.complex {
+        if !has(set, &sets) || set.complex || annotation(set) {
             continue;
         }
         let mut items = Vec::new();

@@ -327,7 +327,17 @@ impl<'a> Ctx<'a> {
             }
         };
         let z = dir3(2, "axis", [0.0, 0.0, 1.0])?;
-        let x = dir3(3, "ref_direction", [1.0, 0.0, 0.0])?;
+        // ISO 10303-42's default reference direction: x, or y where the axis is x.
+        let along_x = z[1] == 0.0 && z[2] == 0.0;
+        let x = dir3(
+            3,
+            "ref_direction",
+            if along_x {
+                [0.0, 1.0, 0.0]
+            } else {
+                [1.0, 0.0, 0.0]
+            },
+        )?;
         Placement::from_axes(loc, z, x)
             .ok_or_else(|| err(inst, "placement", "axis and ref_direction are parallel"))
     }
