@@ -422,6 +422,7 @@ pub fn main() -> ExitCode {
                 subroutine_dirs: beside.into_iter().chain(subroutine_path).collect(),
                 tools,
                 offset_tolerance_mm: None,
+                uncompensated: false,
             };
             match process::check_with(text, &opts, &machine, period_ns) {
                 Ok((prog, blocks)) if estimate => {

@@ -363,6 +363,7 @@ fn run_inner(args: &RunArgs) -> Result<bool, String> {
         subroutine_dirs: subroutine_dirs.clone(),
         tools,
         offset_tolerance_mm: None,
+        uncompensated: false,
     };
     let blocks = match process::compile_source(&src.name, &src.text, &opts, &machine, period_ns) {
         Ok(c) => c.blocks,

@@ -333,6 +333,7 @@ pub fn run_streaming<S: Service>(
                     .map(program::tools::ToolTable::load)
                     .transpose()?,
                 offset_tolerance_mm: None,
+                uncompensated: false,
             };
             let c = compile_source(&name, &src.text, &opts, &cfg.machine, cfg.period_ns)?;
             dialect = c.dialect.map(|d| d.name().to_string());

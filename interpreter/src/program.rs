@@ -177,6 +177,9 @@ pub struct Program {
     /// The dialect the program was read in: forced by the caller, else detected from
     /// the codes it uses, else LinuxCNC (plain RS274/NGC).
     pub dialect: Dialect,
+    /// The program turns cutter radius compensation on (`G41`, `G42`, `G41.1`,
+    /// `G42.1`; under [`Options::uncompensated`] too, though it was not applied).
+    pub compensated: bool,
 }
 
 /// How to read a program beyond its text.
@@ -194,6 +197,9 @@ pub struct Options {
     /// the true one: the machine's chord tolerance, [`DEFAULT_OFFSET_TOL_MM`] when not
     /// given.
     pub offset_tolerance_mm: Option<f64>,
+    /// Read `G41`/`G42` but leave the moves where the program puts them: the programmed
+    /// path of a compensated program, which the report draws beside the tool's.
+    pub uncompensated: bool,
 }
 
 /// The offset tolerance of a program read without a machine: the built-in machine's
@@ -237,6 +243,10 @@ struct State {
     comp: Option<comp::Comp>,
     /// [`Options::offset_tolerance_mm`], mm.
     offset_tol: f64,
+    /// [`Options::uncompensated`].
+    uncompensated: bool,
+    /// [`Program::compensated`].
+    compensated: bool,
     /// After `G40`: where the tool is, off the programmed point by the radius, for the
     /// move that takes it back to the programmed path.
     exit_from: Option<[f64; 3]>,
@@ -396,6 +406,8 @@ fn interpret_lines(text: &str, opts: &Options, way: Way) -> Result<Program, Vec<
         cutter_comp: false,
         comp: None,
         offset_tol: opts.offset_tolerance_mm.unwrap_or(DEFAULT_OFFSET_TOL_MM),
+        uncompensated: opts.uncompensated,
+        compensated: false,
         exit_from: None,
         comp_used: false,
         tools: opts.tools.clone(),
@@ -591,6 +603,7 @@ fn interpret_lines(text: &str, opts: &Options, way: Way) -> Result<Program, Vec<
         prog.moves.push(Move::End { line: last_line });
     }
     prog.dialect = st.dialect.resolved();
+    prog.compensated = st.compensated;
     if prog.dialect == Dialect::Fanuc {
         for &i in &st.dwells_in_doubt {
             if let Move::Dwell { seconds, .. } = &mut prog.moves[i] {
@@ -1355,7 +1368,10 @@ fn comp_codes(
         Some((w, code)) => {
             // Remembered, even if refused, so that a G06.2 can name Fanuc's PS1006.
             st.cutter_comp = true;
-            comp::turn_on(st, lw, w, code, unit)?;
+            st.compensated = true;
+            if !st.uncompensated {
+                comp::turn_on(st, lw, w, code, unit)?;
+            }
         }
         None => {
             if let Some(d) = lw.get('D') {

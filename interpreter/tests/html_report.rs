@@ -560,3 +560,30 @@ fn one_hour_run_stays_under_5_mb() {
     println!("one-hour run: {} bytes in {:.2?}", page.len(), t.elapsed());
     assert!(page.len() < 5_000_000);
 }
+
+/// A run under cutter radius compensation (`examples/nurbs-comp.ngc`: lines and a NURBS
+/// under `G42.1`) shows the path as programmed beside the tool's, named in the legend
+/// and the note; a run without compensation (the circle) shows no such line.
+#[test]
+fn a_compensated_run_shows_the_programmed_path_beside_the_tool_s() {
+    let d = scratch("comp");
+    let prog = Path::new(env!("CARGO_MANIFEST_DIR")).join("../examples/nurbs-comp.ngc");
+    let run = d.join("run");
+    run_sim(Some(&prog), &run);
+    let page = html::render(&run).unwrap();
+    check_summary(&page, &report(&run));
+    check_plots(&page);
+    assert!(
+        page.contains("<g class=\"programmed\">"),
+        "no programmed path"
+    );
+    assert!(page.contains("as programmed (before cutter compensation)"));
+    assert!(page.contains("the coloured path is the tool's centre"));
+    // One polyline for each programmed feed move (entry, six sides and the wave, exit).
+    let group = &page[page.find("<g class=\"programmed\">").unwrap()..];
+    let group = &group[..group.find("</g>").unwrap()];
+    assert!(group.matches("<polyline").count() >= 6, "{group}");
+    let circle = circle_run("comp-none");
+    let page = html::render(&circle).unwrap();
+    assert!(!page.contains("class=\"programmed\""));
+}

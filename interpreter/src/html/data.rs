@@ -120,6 +120,11 @@ pub struct Run {
     pub machine: Machine,
     /// `program.ngc` by line (index 0 is line 1).
     pub program: Vec<String>,
+    /// The path as programmed, where the program uses cutter radius compensation (the
+    /// blocks are the tool centre's): `program.ngc` read again with `G41`/`G42` left
+    /// unapplied. Empty otherwise, or where it cannot be read on its own (a subroutine
+    /// file it calls is not in the run directory).
+    pub programmed: Vec<CommandBlock>,
     /// The interpolation period in force, from the report or the CSV's `t_ns`.
     pub period_ns: u64,
     /// `deadline-misses.json`: histograms, every miss, runs, the latency floor (`None`
@@ -227,6 +232,7 @@ impl Run {
                 Vec::new()
             }
         };
+        let programmed = programmed_path(&program, &machine);
         let period_ns = report
             .as_ref()
             .and_then(|r| r.period_ns)
@@ -246,6 +252,7 @@ impl Run {
             blocks,
             machine,
             program,
+            programmed,
             period_ns,
             problems,
         }
@@ -274,6 +281,18 @@ impl Run {
 /// `deadline-misses.json`, if there is a usable one. Its absence is not a problem (older
 /// run directories, or an interpolator that died before the end): the timing section then
 /// draws what report.json has.
+/// The programmed path of a compensated program (see [`Run::programmed`]).
+fn programmed_path(lines: &[String], machine: &Machine) -> Vec<CommandBlock> {
+    let opts = crate::program::Options {
+        uncompensated: true,
+        ..Default::default()
+    };
+    match crate::program::interpret_with(&lines.join("\n"), &opts) {
+        Ok(p) if p.compensated => crate::blocks::commands(&crate::blocks::build(&p.moves, machine)),
+        _ => Vec::new(),
+    }
+}
+
 fn load_deadline(
     dir: &Path,
     problems: &mut Vec<String>,

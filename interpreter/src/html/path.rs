@@ -149,6 +149,15 @@ pub fn section(run: &Run, out: &mut String) {
     } else {
         draw_blocks(run, &c, &blocks, (a, b), scale, top, out);
     }
+    let programmed = Style {
+        color: "#000000",
+        width: 1.0,
+        dash: "2 3",
+    };
+    let compensated = !from_setpoints && !run.programmed.is_empty();
+    if compensated {
+        draw_programmed(run, &c, (a, b), scale, out);
+    }
     let mut marks = String::new();
     markers(run, &c, (a, b), &pts, &mut marks);
     let rapid = Style {
@@ -161,11 +170,11 @@ pub fn section(run: &Run, out: &mut String) {
         width: 2.0,
         dash: "",
     };
-    c.close_with(
-        out,
-        &[("feed move (colour = feed)", feed), ("rapid (G0)", rapid)],
-        &marks,
-    );
+    let mut legend = vec![("feed move (colour = feed)", feed), ("rapid (G0)", rapid)];
+    if compensated {
+        legend.push(("as programmed (before cutter compensation)", programmed));
+    }
+    c.close_with(out, &legend, &marks);
     colour_bar(top, out);
     out.push_str("</div><p class=\"note\">");
     if from_setpoints {
@@ -176,6 +185,9 @@ pub fn section(run: &Run, out: &mut String) {
             "{} motion blocks, each evaluated on its exact curve. Hover a block for its source line. ",
             blocks.len()
         );
+    }
+    if compensated {
+        out.push_str("The program uses cutter radius compensation (G41/G42): the coloured path is the tool's centre, offset from the path as programmed, which the dotted black line shows. ");
     }
     if projected {
         let _ = write!(
@@ -321,6 +333,29 @@ fn push_points(c: &Chart, xy: &[(f64, f64)], out: &mut String) {
     if out.ends_with(' ') {
         out.pop();
     }
+}
+
+/// The programmed path of a compensated program ([`Run::programmed`]): its feed moves,
+/// thin, black and dotted, over the tool's.
+fn draw_programmed(run: &Run, c: &Chart, (a, b): (usize, usize), scale: f64, out: &mut String) {
+    let total_px: f64 = run.programmed.iter().map(|b| b.length_mm * scale).sum();
+    let step_px = (total_px / POINT_BUDGET).max(3.0);
+    out.push_str(
+        "<g class=\"programmed\"><title>as programmed, before cutter radius compensation</title>",
+    );
+    for blk in run
+        .programmed
+        .iter()
+        .filter(|b| b.kind() == Some(shared::protocol::BlockKind::Motion) && !is_rapid(b))
+    {
+        let least = if blk.degree > 1 { 32 } else { 1 };
+        let n = ((blk.length_mm * scale / step_px).ceil() as usize).clamp(least, 600);
+        let xy: Vec<(f64, f64)> = sample(blk, n).iter().map(|p| (p[a], p[b])).collect();
+        out.push_str("<polyline fill=\"none\" stroke=\"#000\" stroke-width=\"1\" stroke-dasharray=\"2 3\" points=\"");
+        push_points(c, &xy, out);
+        out.push_str("\"/>");
+    }
+    out.push_str("</g>");
 }
 
 fn draw_setpoints(c: &Chart, pts: &[[f64; 3]], (a, b): (usize, usize), out: &mut String) {
