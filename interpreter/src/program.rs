@@ -1248,6 +1248,20 @@ fn motion(
                 }
             }
             Motion::Cubic | Motion::Quadratic => {
+                // (A modal G5/G5.1 under compensation, or right after G40: refused as
+                // on the line that names it, see `motion`.)
+                if st.comp.is_some() || st.exit_from.is_some() {
+                    let name = if st.motion == Motion::Cubic {
+                        "G5"
+                    } else {
+                        "G5.1"
+                    };
+                    return Err(lw.err(
+                        "G41/G42",
+                        col,
+                        format!("{name} spline (modal) while cutter radius compensation is on or just after G40: Bézier splines are not compensated, as in LinuxCNC; turn it off with G40 and move straight first"),
+                    ));
+                }
                 need_feed(st, lw, col)?;
                 let cubic = st.motion == Motion::Cubic;
                 moves.push(linuxcnc::bezier(st, lw, target, cubic, unit, col)?);

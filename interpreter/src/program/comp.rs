@@ -112,9 +112,19 @@ pub(super) struct Comp {
     endpoint: Option<[f64; 2]>,
     /// [`ARC_GROWTH_TOL`] in the program's units.
     growth_tol: f64,
-    /// The last move was a NURBS (its line): it has ended where it is, so a concave
-    /// corner after it is refused.
-    after_nurbs: Option<u32>,
+    /// The last move in XY has ended where it is (a stop, or a NURBS move): a concave
+    /// corner after it, which would have to cut it short, is refused.
+    ended: Option<Ended>,
+}
+
+/// How the last move in XY ended, where it cannot be cut short.
+#[derive(Clone, Copy, Debug)]
+enum Ended {
+    /// `M0`/`M1`: the open moves were closed where they were.
+    Stop,
+    /// The NURBS move of `line`; `kappa`: its signed curvature at its end (+ turning
+    /// left), for the corner after it.
+    Nurbs { line: u32, kappa: f64 },
 }
 
 /// The compensation codes: `G41` 410, `G41.1` 411, `G42` 420, `G42.1` 421.
@@ -233,7 +243,7 @@ pub(super) fn turn_on(
         } else {
             ARC_GROWTH_TOL.0
         },
-        after_nurbs: None,
+        ended: None,
     });
     Ok(())
 }
@@ -241,15 +251,15 @@ pub(super) fn turn_on(
 /// A concave corner after a move that has ended where it was: a stop (`M0`, `M1`), or a
 /// NURBS move (its offset is fitted whole and is not cut short).
 fn ended_before_concave(c: &Comp, lw: &LineWords) -> Diagnostic {
-    match c.after_nurbs {
-        Some(l) => lw.err(
+    match c.ended {
+        Some(Ended::Nurbs { line: l, .. }) => lw.err(
             "G41/G42",
             lw.first_col(),
             format!("concave corner after the NURBS move of line {l} under cutter compensation: the tool would have to stop short of the curve's end, which is not done yet; join the move to the curve tangentially or on the outside"),
         ),
         // (After `M0`/`M1` the move before is finished: it cannot be cut short.
         // LinuxCNC reads an empty queue here, undefined; the tool would gouge.)
-        None => lw.err(
+        _ => lw.err(
             "G41/G42",
             lw.first_col(),
             "concave corner right after a stop (M0, M1): the move before it has ended where it was, and the tool cannot be brought into the corner without gouging; put the stop elsewhere",
@@ -301,34 +311,28 @@ pub(super) fn nurbs(
     let op = [first.p[0], first.p[1]];
     let z = first.p[2];
     let alpha = first.d1[1].atan2(first.d1[0]);
-    let mut theta = angle(op, xy(cur));
-    let mut alpha_s = alpha;
-    let (beta, gamma) = match side {
-        Side::Left => {
-            if theta < alpha_s {
-                theta += 2.0 * PI;
-            }
-            (theta - alpha_s - FRAC_PI_2, FRAC_PI_2)
-        }
-        Side::Right => {
-            if alpha_s < theta {
-                alpha_s += 2.0 * PI;
-            }
-            (alpha_s - theta - FRAC_PI_2, -FRAC_PI_2)
-        }
-    };
+    let (_, beta, gamma) = corner(side, op, xy(cur), alpha);
     let mid = at(op, r, alpha + gamma);
-    let concave = !(-CORNER_TOL..=PI + CORNER_TOL).contains(&beta);
+    // As `straight()` judges a corner (the "h" after a bend turning away), and as
+    // `arc()` does where the direction turns back on itself with the tool outside the
+    // new bend.
+    let kappa0 = curvature(&first);
+    let concave = !(-CORNER_TOL..=PI + CORNER_TOL).contains(&beta)
+        || (beta > PI - CORNER_TOL && turns_away(c, side, c.open_arc(moves)))
+        || ((beta - PI).abs() < CORNER_TOL && d * kappa0 < 0.0);
     if concave {
         return Err(refuse("concave corner into a NURBS move under cutter compensation: the tool would have to start the curve's offset part way along, which is not done yet; join the curve to the move before tangentially or on the outside".into()));
     }
     c.end_open_at(moves, lw, xy(cur))?;
     c.close();
+    // Where the curve's offset starts: the corner's end, or (straight on, within a
+    // nanometre) where the tool is.
+    let mut start = mid;
     if beta > CORNER_TOL {
         // Convex: round the programmed corner.
         let turn = if side == Side::Left { -1 } else { 1 };
         push_arc(moves, line, feed, cur, with_z(mid, cur[2]), op, turn);
-    } else if dist(mid, xy(cur)) > 0.0 {
+    } else if dist(mid, xy(cur)) > 1e-9 {
         // Straight on (within the tolerance): across the little gap.
         moves.push(Move::Line {
             line,
@@ -337,11 +341,13 @@ pub(super) fn nurbs(
             rapid: false,
             feed,
         });
+    } else {
+        start = xy(cur);
     }
     let n = fitted.ctrl.len();
     let mut pts: Vec<[f64; 4]> = fitted.ctrl.iter().map(|p| [p[0], p[1], z, 1.0]).collect();
     // The fit's ends are the offset's ends: the corner's end, to the bit.
-    pts[0] = [mid[0], mid[1], z, 1.0];
+    pts[0] = [start[0], start[1], z, 1.0];
     let end = [pts[n - 1][0], pts[n - 1][1], z];
     moves.push(Move::Nurbs {
         line,
@@ -350,10 +356,56 @@ pub(super) fn nurbs(
         ctrl: pts,
         feed,
     });
+    let last = shared::nurbs::eval(degree, &knots, &ctrl, knots[ctrl.len()]);
     c.endpoint = Some(xy(end));
-    c.after_nurbs = Some(line);
+    c.ended = Some(Ended::Nurbs {
+        line,
+        kappa: curvature(&last),
+    });
     c.tool = end;
     Ok(())
+}
+
+/// LinuxCNC's angles at the corner `op` between the move the tool came along (it is at
+/// `cur`, offset from `op`) and a new move leaving in the direction `alpha`: `theta`,
+/// the direction from `op` to the tool; `beta`, how far the corner turns towards the
+/// tool's side (convex from 0 to a half turn); `gamma`, the quarter turn from a move's
+/// direction to the tool's side.
+fn corner(side: Side, op: [f64; 2], cur: [f64; 2], alpha: f64) -> (f64, f64, f64) {
+    let mut theta = angle(op, cur);
+    let mut alpha = alpha;
+    match side {
+        Side::Left => {
+            if theta < alpha {
+                theta += 2.0 * PI;
+            }
+            (theta, theta - alpha - FRAC_PI_2, FRAC_PI_2)
+        }
+        Side::Right => {
+            if alpha < theta {
+                alpha += 2.0 * PI;
+            }
+            (theta, alpha - theta - FRAC_PI_2, -FRAC_PI_2)
+        }
+    }
+}
+
+/// The signed curvature of a curve point in XY (+ turning left).
+fn curvature(e: &shared::nurbs::CurvePoint) -> f64 {
+    let (d1, d2) = (e.d1, e.d2);
+    (d1[0] * d2[1] - d1[1] * d2[0]) / d1[0].hypot(d1[1]).powi(3)
+}
+
+/// Whether the move before (an open arc, or a NURBS that has ended) bends away from the
+/// tool's side: then a corner turning back on it (within [`CORNER_TOL`] of a half turn)
+/// is concave, LinuxCNC's "h" case.
+fn turns_away(c: &Comp, side: Side, open_arc: Option<([f64; 2], f64, i64)>) -> bool {
+    let left = match (open_arc, c.ended) {
+        (Some((_, _, turn)), _) => turn > 0,
+        (None, Some(Ended::Nurbs { kappa, .. })) if kappa != 0.0 => kappa > 0.0,
+        _ => return false,
+    };
+    (side == Side::Right && left) || (side == Side::Left && !left)
 }
 
 /// `G40`: the open moves end where they are (refused if that reverses one, see
@@ -380,6 +432,9 @@ pub(super) fn settle(st: &mut State, lw: &LineWords, moves: &mut [Move]) -> Resu
         let at = xy(c.tool);
         c.end_open_at(moves, lw, at)?;
         c.close();
+        if !c.first {
+            c.ended = Some(Ended::Stop);
+        }
     }
     Ok(())
 }
@@ -555,7 +610,10 @@ impl Comp {
 
     /// A straight move pushed to `moves` as an open one, made in the direction `dir`.
     fn open_line(&mut self, moves: &mut Vec<Move>, m: Move, dir: [f64; 2]) {
-        self.after_nurbs = None;
+        // (A move along Z only leaves the move before as it ended.)
+        if dir != [0.0; 2] {
+            self.ended = None;
+        }
         moves.push(m);
         self.queued.push(Queued {
             index: moves.len() - 1,
@@ -688,31 +746,14 @@ pub(super) fn straight(
         c.tool = end;
         return Ok(());
     }
-    let mut theta = angle(xy(op), xy(cur));
-    let mut alpha = angle(xy(op), xy(p));
-    let (beta, gamma) = match side {
-        Side::Left => {
-            if theta < alpha {
-                theta += 2.0 * PI;
-            }
-            (theta - alpha - FRAC_PI_2, FRAC_PI_2)
-        }
-        Side::Right => {
-            if alpha < theta {
-                alpha += 2.0 * PI;
-            }
-            (alpha - theta - FRAC_PI_2, -FRAC_PI_2)
-        }
-    };
+    let alpha = angle(xy(op), xy(p));
+    let (theta, beta, gamma) = corner(side, xy(op), xy(cur), alpha);
     let end = with_z(at(xy(p), r, alpha + gamma), p[2]);
     let open_arc = c.open_arc(moves);
     let concave = !(-CORNER_TOL..=PI + CORNER_TOL).contains(&beta)
         // An "h": the tool on the right going back along a half circle round to the
         // left, or the mirror case: kept on the side it was on.
-        || (beta > PI - CORNER_TOL
-            && open_arc.is_some_and(|(_, _, turn)| {
-                (side == Side::Right && turn > 0) || (side == Side::Left && turn < 0)
-            }));
+        || (beta > PI - CORNER_TOL && turns_away(c, side, open_arc));
     let mut start = cur;
     if !concave && beta > CORNER_TOL {
         // Convex: round the programmed corner.
@@ -734,7 +775,7 @@ pub(super) fn straight(
         c.endpoint = Some(mid);
         start = with_z(mid, cur[2]);
     } else if concave {
-        if c.queued.is_empty() {
+        if c.queued.is_empty() || c.ended.is_some() {
             return Err(ended_before_concave(c, lw));
         }
         let mid = match open_arc {
@@ -915,7 +956,7 @@ pub(super) fn arc(
         || ((beta - PI).abs() < CORNER_TOL && !tool_in);
     let start;
     if concave {
-        if c.queued.is_empty() {
+        if c.queued.is_empty() || c.ended.is_some() {
             return Err(ended_before_concave(c, lw));
         }
         let mid = match c.open_arc(moves) {
@@ -1006,7 +1047,7 @@ pub(super) fn arc(
         }
     }
     let i = push_arc(moves, line, feed, start, new_end, centre, turn);
-    c.after_nurbs = None;
+    c.ended = None;
     c.queued.push(Queued {
         index: i,
         dir: [0.0; 2],

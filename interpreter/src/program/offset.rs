@@ -12,8 +12,9 @@
 //!   the curve being tangent-continuous, the direction. (One fit across a knot of the
 //!   curve would be held to second order there: the offset's second derivative jumps
 //!   with the curve's third, and its first with the curve's second where the knot is
-//!   repeated.) The least `s` that keeps every span's fit within the tolerance (the
-//!   machine's chord tolerance) is found by doubling, then bisection.
+//!   repeated.) The least `s` that keeps every span's fit within half the machine's
+//!   chord tolerance (the interpolation's chords may leave the fitted curve by the other
+//!   half) is found by doubling, then bisection.
 //! * **The error** is `|F(u) − O(u)|`, the distance to the offset point of the same
 //!   parameter: never less than the distance to the offset curve, so the bound is safe.
 //!   It is sampled 16 times a fitted span, the worst refined by golden-section search
@@ -22,12 +23,16 @@
 //!   it cannot compensate:
 //!   * a bend tighter than the tool on the tool's side (the radius of curvature not
 //!     above `|d|`: the offset would turn back on itself, a gouge), found at 64 points a
-//!     knot span with the tightest refined;
-//!   * an offset path that crosses itself (a neck narrower than the tool: the tool
-//!     would cut through the other side), found on the offset sampled 64 times a span;
+//!     knot span or more (a chord of the curve at most a quarter of `|d|`), every peak
+//!     of the bend refined;
+//!   * an offset path that crosses itself (a neck of the curve narrower than the tool:
+//!     the tool would cut through the other side), found on the offset sampled as
+//!     densely, its segments compared cell by cell of a grid. (The offset is not
+//!     compared with the moves before and after the curve, as LinuxCNC does not compare
+//!     lines and arcs with moves beyond their neighbours.)
 //!   * a corner inside the curve (a knot where its tangent turns at once) whose gap in
-//!     the offset exceeds half the tolerance, and a point where the curve stops (no
-//!     tangent there).
+//!     the offset exceeds a quarter of the tolerance, a point where the curve stops (no
+//!     tangent there), and more knot spans than a fit may take.
 
 use nalgebra::{DMatrix, DVector};
 use shared::nurbs::find_span;
@@ -37,8 +42,14 @@ use shared::nurbs::reference::ders_basis_funs;
 const MAX_FIT_CTRL: usize = 2000;
 
 /// Points of the programmed curve sampled per knot span for the gouge and crossing
-/// tests.
+/// tests, at least ([`samples_in`]).
 const PER_SPAN: usize = 64;
+
+/// Most samples a knot span gets for those tests.
+const MAX_SPAN_SAMPLES: usize = 4096;
+
+/// Most parts a programmed span's fit may be cut in.
+const MAX_PARTS: usize = 256;
 
 /// Why an offset cannot be made.
 #[derive(Debug, Clone, PartialEq)]
@@ -53,6 +64,8 @@ pub(super) enum Refusal {
     Stops { u: f64 },
     /// No fit within [`MAX_FIT_CTRL`] control points came within the tolerance.
     NoFit { best: f64 },
+    /// More knot spans than a fitted offset can take.
+    Spans { spans: usize },
 }
 
 impl Refusal {
@@ -72,7 +85,12 @@ impl Refusal {
                 "the NURBS has no direction at its parameter u = {u:.6} (its control points make it stop there), so the tool has no side to be on"
             ),
             Refusal::NoFit { best } => format!(
-                "no fit of the tool's offset path with up to {MAX_FIT_CTRL} control points comes within the chord tolerance {tol} mm (best {best:.3e} mm)"
+                "no fit of the tool's offset path with up to {MAX_FIT_CTRL} control points comes within half the chord tolerance, {} mm (best {best:.3e} mm)",
+                tol / 2.0
+            ),
+            Refusal::Spans { spans } => format!(
+                "the NURBS has {spans} knot spans, more than a fitted offset takes ({}): split it into several moves",
+                (MAX_FIT_CTRL - 1) / 3
             ),
         }
     }
@@ -144,6 +162,21 @@ fn golden(mut lo: f64, mut hi: f64, f: impl Fn(f64) -> f64) -> (f64, f64) {
     (u, f(u))
 }
 
+/// How many samples the span `[a, b]` gets for the gouge and crossing tests: at least
+/// [`PER_SPAN`], and enough that the offset's chords are at most a quarter of the
+/// offset apart (so a crossing is not stepped over), at most [`MAX_SPAN_SAMPLES`].
+fn samples_in(c: &Curve, a: f64, b: f64) -> usize {
+    let mut len = 0.0;
+    let mut last = c.at(a).p;
+    for i in 1..=PER_SPAN {
+        let p = c.at(a + (b - a) * i as f64 / PER_SPAN as f64).p;
+        len += (p[0] - last[0]).hypot(p[1] - last[1]);
+        last = p;
+    }
+    let step = (c.d.abs() / 4.0).max(1e-3);
+    ((len / step).ceil() as usize).clamp(PER_SPAN, MAX_SPAN_SAMPLES)
+}
+
 /// The gouge, corner and stop tests (module page).
 fn check(c: &Curve, tol: f64) -> Result<(), Refusal> {
     let breaks = c.breaks();
@@ -154,26 +187,34 @@ fn check(c: &Curve, tol: f64) -> Result<(), Refusal> {
         .flat_map(|p| [p[0].abs(), p[1].abs()])
         .fold(1.0f64, f64::max);
     for w in breaks.windows(2) {
-        let h = (w[1] - w[0]) / PER_SPAN as f64;
+        let count = samples_in(c, w[0], w[1]);
+        let h = (w[1] - w[0]) / count as f64;
         let bend = |u: f64| c.d * c.at(u).kappa;
-        let mut worst = (w[0], f64::NEG_INFINITY);
-        for i in 0..=PER_SPAN {
+        let mut bends = Vec::with_capacity(count + 1);
+        for i in 0..=count {
             let u = w[0] + h * i as f64;
             let a = c.at(u);
             if a.speed.is_nan() || a.speed <= 1e-12 * scale / (hi - lo) || !a.kappa.is_finite() {
                 return Err(Refusal::Stops { u });
             }
-            if bend(u) > worst.1 {
-                worst = (u, bend(u));
-            }
+            bends.push(bend(u));
         }
-        let (u, b) = golden((worst.0 - h).max(w[0]), (worst.0 + h).min(w[1]), bend);
-        let (u, b) = if b > worst.1 { (u, b) } else { worst };
-        if b >= 1.0 {
-            return Err(Refusal::Gouge {
-                u,
-                radius: 1.0 / c.at(u).kappa.abs(),
-            });
+        // Every peak of the bend refined (a sharp one may hide between samples).
+        for i in 0..=count {
+            let peak =
+                (i == 0 || bends[i] >= bends[i - 1]) && (i == count || bends[i] >= bends[i + 1]);
+            if !peak {
+                continue;
+            }
+            let u0 = w[0] + h * i as f64;
+            let (u, b) = golden((u0 - h).max(w[0]), (u0 + h).min(w[1]), bend);
+            let (u, b) = if b > bends[i] { (u, b) } else { (u0, bends[i]) };
+            if b >= 1.0 {
+                return Err(Refusal::Gouge {
+                    u,
+                    radius: 1.0 / c.at(u).kappa.abs(),
+                });
+            }
         }
     }
     // Corners at inner knots: the tangent just before against the one at the knot.
@@ -182,7 +223,7 @@ fn check(c: &Curve, tol: f64) -> Result<(), Refusal> {
         let after = c.unit_tangent(k);
         let turn = (before[0] * after[1] - before[1] * after[0])
             .atan2(before[0] * after[0] + before[1] * after[1]);
-        if c.d.abs() * turn.abs() > tol / 2.0 {
+        if c.d.abs() * turn.abs() > tol / 4.0 {
             return Err(Refusal::Corner {
                 u: k,
                 degrees: turn.to_degrees(),
@@ -202,14 +243,16 @@ fn cross(a0: [f64; 2], a1: [f64; 2], b0: [f64; 2], b1: [f64; 2]) -> bool {
     d1 * d2 < 0.0 && d3 * d4 < 0.0
 }
 
-/// The offset sampled 64 times a span, searched for two segments that cross (sorted by
-/// their least x, each compared with those whose x ranges overlap).
+/// The offset sampled as [`samples_in`] says, searched for two segments that cross: each
+/// segment filed in the cells of a grid (cells as wide as the longest segment) that its
+/// box touches, and compared with those filed in the same cells.
 fn crossing(c: &Curve) -> Result<(), Refusal> {
     let breaks = c.breaks();
     let mut pts: Vec<(f64, [f64; 2])> = Vec::new();
     for w in breaks.windows(2) {
-        for i in 0..PER_SPAN {
-            let u = w[0] + (w[1] - w[0]) * i as f64 / PER_SPAN as f64;
+        let count = samples_in(c, w[0], w[1]);
+        for i in 0..count {
+            let u = w[0] + (w[1] - w[0]) * i as f64 / count as f64;
             pts.push((u, c.offset(u)));
         }
     }
@@ -220,24 +263,33 @@ fn crossing(c: &Curve) -> Result<(), Refusal> {
         let (a, b) = (pts[0].1, pts[segs].1);
         (a[0] - b[0]).hypot(a[1] - b[1]) < 1e-9
     };
-    let mut order: Vec<usize> = (0..segs).collect();
-    let min_x = |i: usize| pts[i].1[0].min(pts[i + 1].1[0]);
-    let max_x = |i: usize| pts[i].1[0].max(pts[i + 1].1[0]);
-    order.sort_by(|&i, &j| min_x(i).total_cmp(&min_x(j)));
+    let cell = (0..segs)
+        .map(|i| (pts[i].1[0] - pts[i + 1].1[0]).hypot(pts[i].1[1] - pts[i + 1].1[1]))
+        .fold(1e-9f64, f64::max);
+    let key = |x: f64| (x / cell).floor() as i64;
+    let mut grid: std::collections::HashMap<(i64, i64), Vec<usize>> =
+        std::collections::HashMap::new();
+    for i in 0..segs {
+        let (p, q) = (pts[i].1, pts[i + 1].1);
+        for gx in key(p[0].min(q[0]))..=key(p[0].max(q[0])) {
+            for gy in key(p[1].min(q[1]))..=key(p[1].max(q[1])) {
+                grid.entry((gx, gy)).or_default().push(i);
+            }
+        }
+    }
     let mut found: Option<(f64, f64)> = None;
-    for (k, &i) in order.iter().enumerate() {
-        for &j in &order[k + 1..] {
-            if min_x(j) > max_x(i) {
-                break;
-            }
-            let (a, b) = (i.min(j), i.max(j));
-            if b - a <= 1 || (closed && a == 0 && b == segs - 1) {
-                continue;
-            }
-            if cross(pts[a].1, pts[a + 1].1, pts[b].1, pts[b + 1].1) {
-                let hit = (pts[a].0, pts[b].0);
-                if found.is_none_or(|f| hit.0 < f.0) {
-                    found = Some(hit);
+    for members in grid.values() {
+        for (k, &a) in members.iter().enumerate() {
+            for &b in &members[k + 1..] {
+                let (a, b) = (a.min(b), a.max(b));
+                if b - a <= 1 || (closed && a == 0 && b == segs - 1) {
+                    continue;
+                }
+                if cross(pts[a].1, pts[a + 1].1, pts[b].1, pts[b + 1].1) {
+                    let hit = (pts[a].0, pts[b].0);
+                    if found.is_none_or(|f| hit.0 < f.0) {
+                        found = Some(hit);
+                    }
                 }
             }
         }
@@ -299,6 +351,9 @@ fn fit_span(c: &Curve, s: usize, lo: f64, hi: f64) -> Option<(Vec<f64>, Vec<[f64
         }
     }
     let sol = ata.cholesky()?.solve(&atb);
+    if sol.iter().any(|x| !x.is_finite()) {
+        return None;
+    }
     let mut ctrl = vec![p0; n];
     ctrl[n - 1] = p1;
     ctrl[1] = [p0[0] + sol[0] * t0[0], p0[1] + sol[0] * t0[1]];
@@ -311,7 +366,13 @@ fn fit_span(c: &Curve, s: usize, lo: f64, hi: f64) -> Option<(Vec<f64>, Vec<[f64
     let err = |u: f64| {
         let f = shared::nurbs::eval(3, &knots, &h, u).p;
         let o = c.offset(u);
-        (f[0] - o[0]).hypot(f[1] - o[1])
+        let e = (f[0] - o[0]).hypot(f[1] - o[1]);
+        // (A NaN is no fit: read as the worst.)
+        if e.is_nan() {
+            f64::INFINITY
+        } else {
+            e
+        }
     };
     let step = (hi - lo) / (16 * s) as f64;
     let mut worst = (lo, 0.0f64);
@@ -367,9 +428,15 @@ pub(super) fn offset(
         ctrl,
         d,
     };
+    let spans = c.breaks().len() - 1;
+    if spans * 3 + 1 > MAX_FIT_CTRL {
+        return Err(Refusal::Spans { spans });
+    }
     check(&c, tol)?;
     crossing(&c)?;
-    let spans = c.breaks().len() - 1;
+    // Half the tolerance for the fit: the interpolation's chords may leave the fitted
+    // curve by the other half.
+    let tol = tol / 2.0;
     let mut best = f64::INFINITY;
     let mut meets = |s: usize| -> Option<Fitted> {
         let (knots, ctrl, error) = fit(&c, s)?;
@@ -379,7 +446,7 @@ pub(super) fn offset(
     // Doubling to a count that meets the tolerance, then bisection below it.
     let (mut lo, mut hi) = (0, 1);
     let mut found = loop {
-        if spans * (hi + 2) + 1 > MAX_FIT_CTRL {
+        if spans * (hi + 2) + 1 > MAX_FIT_CTRL || hi > MAX_PARTS {
             return Err(Refusal::NoFit { best });
         }
         if let Some(f) = meets(hi) {
