@@ -372,9 +372,15 @@ fn injected_preemptions_are_preempted_misses_not_long_computes() {
         preempted * 2 >= injected.len(),
         "{preempted} of {injected:?}"
     );
+    // A stray long compute elsewhere (an interrupt storm is charged to the thread as
+    // CPU time on these kernels) is counted, not forbidden: a timing test must not
+    // assert zero on a shared machine. It must stay under a quarter of the injected
+    // preemptions, as the stray long computes of the test above.
+    let long = list.iter().filter(|m| m["cause"] == "long_compute").count();
     assert!(
-        list.iter().all(|m| m["cause"] != "long_compute"),
-        "nothing computed long"
+        long * 4 < injected.len().max(1),
+        "{long} long computes against {} injected preemptions",
+        injected.len()
     );
     assert!(d["summary"]
         .as_str()
