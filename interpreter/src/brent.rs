@@ -2,8 +2,10 @@
 //! and parabolic steps through the best three points wherever the parabola's vertex
 //! stays inside the bracket and the step shrinks. The one search of a valley the
 //! interpreter uses: the planner's peaks and valleys along a curve
-//! ([`crate::blocks`], its speed split) and the contour's nearest point on the path
-//! ([`crate::contour`]), each with its own start and tolerance.
+//! ([`crate::blocks`], its speed split), the contour's nearest point on the path
+//! ([`crate::contour`]), and `cnc cam`'s and the NURBS offset's worst errors and
+//! nearest points ([`refine_max`], [`refine_min`]), each with its own start and
+//! tolerance.
 
 /// The least of `f` on `[a, b]` from the point `start` (`(x, f(x))`), as `(x, f(x))`:
 /// until the bracket round the best point is within `tol(x)` (at most `steps` steps).
@@ -83,4 +85,21 @@ pub(crate) fn minimise(
         }
     }
     Some((x, fx))
+}
+
+/// The least of `f` near the sample `at` in `[a, b]` (a scan's best, its neighbours
+/// the bracket), to a 1e-13 share of the bracket; the sample itself where nothing
+/// better is found.
+pub(crate) fn refine_min(a: f64, b: f64, at: f64, f: impl Fn(f64) -> f64) -> (f64, f64) {
+    let start = (at, f(at));
+    let tol = 1e-13 * (b - a).abs();
+    minimise(a, b, start, 200, |_| tol, |x| Some(f(x)))
+        .filter(|m| m.1 <= start.1)
+        .unwrap_or(start)
+}
+
+/// The most of `f` near the sample `at` in `[a, b]`, as [`refine_min`].
+pub(crate) fn refine_max(a: f64, b: f64, at: f64, f: impl Fn(f64) -> f64) -> (f64, f64) {
+    let (x, v) = refine_min(a, b, at, |x| -f(x));
+    (x, -v)
 }

@@ -13,7 +13,7 @@
 //!
 //! A piece against its basis curve's direction is the same NURBS reversed (points and
 //! knots mirrored). Trims given as points are turned into parameters by the nearest
-//! point of the curve (64 samples a knot span, refined by golden-section search), and
+//! point of the curve (64 samples a knot span, refined by Brent's search), and
 //! refused when that is farther than [`super::JOIN_MM`] from the point.
 //!
 //! The cut is a profile at `--depth`: every curve must lie in one plane parallel to XY
@@ -162,22 +162,12 @@ impl Spline {
             }
         }
         let (lo0, hi0) = (self.knots[0], self.knots[self.knots.len() - 1]);
-        let (mut lo, mut hi) = ((best.0 - best.2).max(lo0), (best.0 + best.2).min(hi0));
-        let g = (5f64.sqrt() - 1.0) / 2.0;
-        for _ in 0..100 {
-            let (x1, x2) = (hi - g * (hi - lo), lo + g * (hi - lo));
-            if d(x1) < d(x2) {
-                hi = x2;
-            } else {
-                lo = x1;
-            }
-        }
-        let u = (lo + hi) / 2.0;
-        if d(u) < best.1 {
-            (u, d(u))
-        } else {
-            (best.0, best.1)
-        }
+        crate::brent::refine_min(
+            (best.0 - best.2).max(lo0),
+            (best.0 + best.2).min(hi0),
+            best.0,
+            d,
+        )
     }
 }
 

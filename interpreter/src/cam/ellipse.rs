@@ -17,7 +17,7 @@
 //!   from 8 up. The error is measured against the true offset `C(t) + D·n(t)`: the
 //!   fitted curve sampled 64 times a span, each sample's nearest point on the offset
 //!   found by Newton's method from its own parameter, the worst sample refined by
-//!   golden-section search between its neighbours.
+//!   Brent's search between its neighbours.
 //!
 //! Not in the real-time path; the fit's least squares are nalgebra's (normal equations
 //! by Cholesky). The count of control points is searched by doubling from 8, then
@@ -200,19 +200,13 @@ pub fn fit_error(c: &Curve, a: f64, b: f64, d: f64) -> f64 {
             worst = (e, u);
         }
     }
-    // Golden-section search for the largest error between the worst sample's neighbours.
+    // The largest error between the worst sample's neighbours.
     let step = spans / count as f64;
-    let (mut lo, mut hi) = ((worst.1 - step).max(0.0), (worst.1 + step).min(spans));
-    let g = (5f64.sqrt() - 1.0) / 2.0;
-    for _ in 0..60 {
-        let (x1, x2) = (hi - g * (hi - lo), lo + g * (hi - lo));
-        if err(x1) > err(x2) {
-            hi = x2;
-        } else {
-            lo = x1;
-        }
-    }
-    worst.0.max(err((lo + hi) / 2.0))
+    let lo = (worst.1 - step).max(0.0);
+    let hi = (worst.1 + step).min(spans);
+    worst
+        .0
+        .max(crate::brent::refine_max(lo, hi, worst.1, err).1)
 }
 
 /// Most control points tried before the tolerance is called out of reach.

@@ -17,7 +17,7 @@
 //!   half) is found by doubling, then bisection.
 //! * **The error** is `|F(u) − O(u)|`, the distance to the offset point of the same
 //!   parameter: never less than the distance to the offset curve, so the bound is safe.
-//!   It is sampled 16 times a fitted span, the worst refined by golden-section search
+//!   It is sampled 16 times a fitted span, the worst refined by Brent's search
 //!   between its neighbours.
 //! * **Refused**, with the parameter where it happens, as LinuxCNC refuses the corners
 //!   it cannot compensate:
@@ -148,20 +148,6 @@ impl Curve<'_> {
     }
 }
 
-fn golden(mut lo: f64, mut hi: f64, f: impl Fn(f64) -> f64) -> (f64, f64) {
-    let g = (5f64.sqrt() - 1.0) / 2.0;
-    for _ in 0..60 {
-        let (x1, x2) = (hi - g * (hi - lo), lo + g * (hi - lo));
-        if f(x1) > f(x2) {
-            hi = x2;
-        } else {
-            lo = x1;
-        }
-    }
-    let u = (lo + hi) / 2.0;
-    (u, f(u))
-}
-
 /// How many samples the span `[a, b]` gets for the gouge and crossing tests: at least
 /// [`PER_SPAN`], and enough that the offset's chords are at most a quarter of the
 /// offset apart (so a crossing is not stepped over), at most [`MAX_SPAN_SAMPLES`].
@@ -207,8 +193,7 @@ fn check(c: &Curve, tol: f64) -> Result<(), Refusal> {
                 continue;
             }
             let u0 = w[0] + h * i as f64;
-            let (u, b) = golden((u0 - h).max(w[0]), (u0 + h).min(w[1]), bend);
-            let (u, b) = if b > bends[i] { (u, b) } else { (u0, bends[i]) };
+            let (u, b) = crate::brent::refine_max((u0 - h).max(w[0]), (u0 + h).min(w[1]), u0, bend);
             if b >= 1.0 {
                 return Err(Refusal::Gouge {
                     u,
@@ -383,7 +368,12 @@ fn fit_span(c: &Curve, s: usize, lo: f64, hi: f64) -> Option<(Vec<f64>, Vec<[f64
             worst = (u, e);
         }
     }
-    let (_, refined) = golden((worst.0 - step).max(lo), (worst.0 + step).min(hi), err);
+    let (_, refined) = crate::brent::refine_max(
+        (worst.0 - step).max(lo),
+        (worst.0 + step).min(hi),
+        worst.0,
+        err,
+    );
     Some((knots, ctrl, worst.1.max(refined)))
 }
 
