@@ -58,6 +58,9 @@ pub enum Command {
         /// format: `T1 P1 D6.0 ;comment`, diameters in mm). `G41.1`/`G42.1 D…` need none.
         #[arg(long, value_name = "FILE")]
         tool_table: Option<PathBuf>,
+        /// Allow what the dialect's own control refuses (see `cnc run --help`).
+        #[arg(long = "dialect-extension", value_name = "NAME")]
+        extensions: Vec<crate::program::dialect::Extension>,
     },
     /// Replay a command log through a fresh stack, without the NC program. Under the
     /// lock-step servo the new setpoints.csv and feedback.csv equal the original run's,
@@ -226,6 +229,9 @@ pub enum Role {
         /// The tool table (see `cnc run --tool-table`).
         #[arg(long)]
         tool_table: Option<PathBuf>,
+        /// What the program may do beyond its dialect (see `cnc run --dialect-extension`).
+        #[arg(long = "dialect-extension")]
+        extensions: Vec<crate::program::dialect::Extension>,
     },
     Interpolator(interpolator::cli::Args),
     ServoSim(servo_sim::cli::Args),
@@ -380,6 +386,7 @@ pub fn main() -> ExitCode {
             dialect,
             subroutine_path,
             tool_table,
+            extensions,
         } => {
             let machine = match shared::machine::load(machine.as_deref()) {
                 Ok(m) => m,
@@ -423,6 +430,7 @@ pub fn main() -> ExitCode {
                 tools,
                 offset_tolerance_mm: None,
                 uncompensated: false,
+                extensions,
             };
             match process::check_with(text, &opts, &machine, period_ns) {
                 Ok((prog, blocks)) if estimate => {
@@ -554,6 +562,7 @@ pub fn main() -> ExitCode {
             dialect,
             subroutine_path,
             tool_table,
+            extensions,
         }) => run_interpreter_streaming(
             &common,
             program,
@@ -566,6 +575,7 @@ pub fn main() -> ExitCode {
                 dialect,
                 subroutine_dirs: subroutine_path,
                 tool_table,
+                extensions,
             },
         ),
         Command::Role(Role::Interpolator(args)) => match interpolator::cli::run(&args) {

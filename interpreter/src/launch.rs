@@ -131,6 +131,12 @@ pub struct RunArgs {
     /// (the diameter on the line) need none. The run directory keeps a copy.
     #[arg(long, value_name = "FILE")]
     pub tool_table: Option<PathBuf>,
+    /// Allow what the dialect's own control refuses; may be given more than once.
+    /// `g06.2-comp`: a Fanuc `G06.2` NURBS under cutter compensation (`G41`/`G42`) is
+    /// offset as a LinuxCNC `G5.2`/`G6.2` is (fitted within the chord tolerance),
+    /// instead of Fanuc's alarm PS1006.
+    #[arg(long = "dialect-extension", value_name = "NAME")]
+    pub extensions: Vec<crate::program::dialect::Extension>,
 }
 
 /// How long the survivors of a failed process get to stop by themselves.
@@ -364,6 +370,7 @@ fn run_inner(args: &RunArgs) -> Result<bool, String> {
         tools,
         offset_tolerance_mm: None,
         uncompensated: false,
+        extensions: args.extensions.clone(),
     };
     let blocks = match process::compile_source(&src.name, &src.text, &opts, &machine, period_ns) {
         Ok(c) => c.blocks,
@@ -395,6 +402,9 @@ fn run_inner(args: &RunArgs) -> Result<bool, String> {
     }
     for d in &subroutine_dirs {
         input.extend(["--subroutine-path".into(), d.display().to_string()]);
+    }
+    for e in &args.extensions {
+        input.extend(["--dialect-extension".into(), e.to_string()]);
     }
     if let Some(path) = &args.tool_table {
         let copy = dir.join("tool.tbl");

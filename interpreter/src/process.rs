@@ -236,6 +236,8 @@ pub struct Streaming {
     pub subroutine_dirs: Vec<PathBuf>,
     /// The tool table file `G41`/`G42` take radii from (`--tool-table`).
     pub tool_table: Option<PathBuf>,
+    /// What the program may do beyond its dialect (`--dialect-extension`).
+    pub extensions: Vec<program::dialect::Extension>,
 }
 
 impl Default for Streaming {
@@ -246,6 +248,7 @@ impl Default for Streaming {
             dialect: None,
             subroutine_dirs: Vec::new(),
             tool_table: None,
+            extensions: Vec::new(),
         }
     }
 }
@@ -334,6 +337,7 @@ pub fn run_streaming<S: Service>(
                     .transpose()?,
                 offset_tolerance_mm: None,
                 uncompensated: false,
+                extensions: streaming.extensions.clone(),
             };
             let c = compile_source(&name, &src.text, &opts, &cfg.machine, cfg.period_ns)?;
             dialect = c.dialect.map(|d| d.name().to_string());

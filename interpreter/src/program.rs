@@ -28,6 +28,7 @@ mod fanuc;
 mod feed;
 mod flow;
 mod linuxcnc;
+mod meet;
 mod offset;
 mod plain;
 mod subfile;
@@ -154,6 +155,20 @@ pub enum Move {
 
 impl Move {
     /// The source line the move carries.
+    pub fn line(&self) -> u32 {
+        match self {
+            Move::Line { line, .. }
+            | Move::Arc { line, .. }
+            | Move::Nurbs { line, .. }
+            | Move::Dwell { line, .. }
+            | Move::End { line }
+            | Move::PathMode { line, .. }
+            | Move::Spindle { line, .. }
+            | Move::Stop { line, .. } => *line,
+        }
+    }
+
+    /// The source line the move carries, to change.
     fn line_mut(&mut self) -> &mut u32 {
         match self {
             Move::Line { line, .. }
@@ -200,6 +215,8 @@ pub struct Options {
     /// Read `G41`/`G42` but leave the moves where the program puts them: the programmed
     /// path of a compensated program, which the report draws beside the tool's.
     pub uncompensated: bool,
+    /// What the program may do beyond its dialect's control (`--dialect-extension`).
+    pub extensions: Vec<dialect::Extension>,
 }
 
 /// The offset tolerance of a program read without a machine: the built-in machine's
@@ -245,6 +262,8 @@ struct State {
     offset_tol: f64,
     /// [`Options::uncompensated`].
     uncompensated: bool,
+    /// [`dialect::Extension::FanucNurbsComp`]: `G06.2` under compensation is offset.
+    fanuc_nurbs_comp: bool,
     /// [`Program::compensated`].
     compensated: bool,
     /// After `G40`: where the tool is, off the programmed point by the radius, for the
@@ -407,6 +426,9 @@ fn interpret_lines(text: &str, opts: &Options, way: Way) -> Result<Program, Vec<
         comp: None,
         offset_tol: opts.offset_tolerance_mm.unwrap_or(DEFAULT_OFFSET_TOL_MM),
         uncompensated: opts.uncompensated,
+        fanuc_nurbs_comp: opts
+            .extensions
+            .contains(&dialect::Extension::FanucNurbsComp),
         compensated: false,
         exit_from: None,
         comp_used: false,
@@ -785,7 +807,9 @@ fn execute(st: &mut State, lw: &LineWords, moves: &mut Vec<Move>) -> Result<(), 
     // ends it (an alarm), and the line then runs as it would have.
     if st.fanuc.is_some() {
         if fanuc::continues(lw, &codes) {
-            return fanuc::block(st, lw, unit, moves);
+            let before = moves.len();
+            fanuc::block(st, lw, unit, moves)?;
+            return compensate_curve(st, lw, moves, before);
         }
         let (col, what) = fanuc::interrupter(lw);
         if let Some(n) = st.fanuc.take() {

@@ -36,19 +36,28 @@
 //! **NURBS moves** (`G5.2`, `G6.2`; beyond LinuxCNC, which under `G5.2` loses the open
 //! move before the curve and runs the curve uncompensated: `rs274 -g` prints no move
 //! for it) are offset by [`nurbs`]: the corner into the curve is judged as into a
-//! straight move along its first tangent (an arc round a convex one, on within
-//! [`CORNER_TOL`] of tangent), and the curve's offset is fitted within the machine's
-//! chord tolerance ([`super::offset`], which refuses a bend tighter than the tool on its
-//! side, an offset that crosses itself and a corner inside the curve, naming the curve
-//! parameter). Not yet: a concave corner into or out of a curve (the offset would have
-//! to be cut short where it meets the next move's; refused), and a curve as the entry
-//! move.
+//! straight move along its first tangent and the corner out of it as out of a straight
+//! move along its last (an arc round a convex one, on within [`CORNER_TOL`] of tangent),
+//! and the curve's offset is fitted within the machine's chord tolerance
+//! ([`super::offset`], which refuses a bend tighter than the tool on its side, an
+//! offset that crosses itself and a corner inside the curve, naming the curve
+//! parameter). At a concave corner the two offset paths are cut short where they meet,
+//! as LinuxCNC cuts lines and arcs ([`super::meet`] finds the point): the move before
+//! (a line or an arc still open, or a NURBS move's fitted offset, split there by knot
+//! insertion) ends there and the move after starts there. So a NURBS move's offset
+//! stays open at its end until the next move comes ([`Ended::Nurbs`]), like the queue.
+//! Refused there: paths that never meet (the part between the two moves is thinner
+//! than the tool), a meeting only at the far end of a curve (the whole curve would be
+//! skipped), and two curves whose offsets cross more than once near the corner. Not
+//! yet: a curve as the entry move (refused; the entry brings the tool onto the offset
+//! along a line or an arc).
 //!
 //! Not here: the XZ and YZ planes (LinuxCNC compensates in XZ for lathes; this control
 //! drives a mill), the `G5`/`G5.1` splines under compensation (refused, as LinuxCNC
-//! does), Fanuc's `G06.2` (alarm PS1006, as a Fanuc control gives), and `G93` inverse
-//! time with it (a compensated move's length is not the programmed one, so `1/F`
-//! minutes would time a different path).
+//! does), Fanuc's `G06.2` unless asked for (alarm PS1006, as a Fanuc control gives;
+//! `--dialect-extension g06.2-comp` offsets it as here), and `G93` inverse time with it
+//! (a compensated move's length is not the programmed one, so `1/F` minutes would time
+//! a different path).
 //!
 //! The radius: `G41.1`/`G42.1 D` give the diameter in the program's units; `G41`/`G42`
 //! take it from the tool table ([`super::tools`]): `D<n>`'s tool, or without `D` the
@@ -56,7 +65,7 @@
 //! offset, and so is `G41` with no `D` and no tool changed in (LinuxCNC would offset
 //! by the empty spindle's zero).
 
-use super::{LineWords, Move, Plane, State};
+use super::{meet, LineWords, Move, Plane, State};
 use crate::parse::Diagnostic;
 use std::f64::consts::{FRAC_PI_2, PI};
 
@@ -112,19 +121,20 @@ pub(super) struct Comp {
     endpoint: Option<[f64; 2]>,
     /// [`ARC_GROWTH_TOL`] in the program's units.
     growth_tol: f64,
-    /// The last move in XY has ended where it is (a stop, or a NURBS move): a concave
-    /// corner after it, which would have to cut it short, is refused.
+    /// The last move in XY is not an open line or arc of the queue: a stop, after which
+    /// a concave corner is refused, or a NURBS move, which one cuts short.
     ended: Option<Ended>,
 }
 
-/// How the last move in XY ended, where it cannot be cut short.
+/// How the last move in XY ended, where it is not an open line or arc.
 #[derive(Clone, Copy, Debug)]
 enum Ended {
     /// `M0`/`M1`: the open moves were closed where they were.
     Stop,
-    /// The NURBS move of `line`; `kappa`: its signed curvature at its end (+ turning
-    /// left), for the corner after it.
-    Nurbs { line: u32, kappa: f64 },
+    /// The NURBS move `moves[index]`, its offset still open at its end (a
+    /// concave corner after it cuts it short, [`Comp::cut_nurbs_end`]); `kappa`: its
+    /// signed curvature at its end (+ turning left), for the corner after it.
+    Nurbs { index: usize, kappa: f64 },
 }
 
 /// The compensation codes: `G41` 410, `G41.1` 411, `G42` 420, `G42.1` 421.
@@ -248,30 +258,23 @@ pub(super) fn turn_on(
     Ok(())
 }
 
-/// A concave corner after a move that has ended where it was: a stop (`M0`, `M1`), or a
-/// NURBS move (its offset is fitted whole and is not cut short).
-fn ended_before_concave(c: &Comp, lw: &LineWords) -> Diagnostic {
-    match c.ended {
-        Some(Ended::Nurbs { line: l, .. }) => lw.err(
-            "G41/G42",
-            lw.first_col(),
-            format!("concave corner after the NURBS move of line {l} under cutter compensation: the tool would have to stop short of the curve's end, which is not done yet; join the move to the curve tangentially or on the outside"),
-        ),
-        // (After `M0`/`M1` the move before is finished: it cannot be cut short.
-        // LinuxCNC reads an empty queue here, undefined; the tool would gouge.)
-        _ => lw.err(
-            "G41/G42",
-            lw.first_col(),
-            "concave corner right after a stop (M0, M1): the move before it has ended where it was, and the tool cannot be brought into the corner without gouging; put the stop elsewhere",
-        ),
-    }
+/// A concave corner after a move that has ended where it was: a stop (`M0`, `M1`).
+/// (After `M0`/`M1` the move before is finished: it cannot be cut short. LinuxCNC reads
+/// an empty queue here, undefined; the tool would gouge.)
+fn ended_before_concave(lw: &LineWords) -> Diagnostic {
+    lw.err(
+        "G41/G42",
+        lw.first_col(),
+        "concave corner right after a stop (M0, M1): the move before it has ended where it was, and the tool cannot be brought into the corner without gouging; put the stop elsewhere",
+    )
 }
 
 /// A NURBS move (`m`, as the program made it: its first control point where the
-/// programmed path is) under compensation: the corner into it as into a straight move
-/// along its first tangent (an arc round a convex one; within [`CORNER_TOL`] of
-/// tangent, on; a concave one refused), then its offset fitted within `tol`
-/// ([`super::offset`]). It ends where its offset ends.
+/// programmed path is) under compensation: its offset fitted within `tol`
+/// ([`super::offset`]), and the corner into it judged as into a straight move along its
+/// first tangent: an arc round a convex one; within [`CORNER_TOL`] of tangent, on; at a
+/// concave one the move before and the offset are cut short where they meet. It ends
+/// where its offset ends, open to be cut short by a concave corner after it.
 pub(super) fn nurbs(
     st: &mut State,
     lw: &LineWords,
@@ -320,46 +323,125 @@ pub(super) fn nurbs(
     let concave = !(-CORNER_TOL..=PI + CORNER_TOL).contains(&beta)
         || (beta > PI - CORNER_TOL && turns_away(c, side, c.open_arc(moves)))
         || ((beta - PI).abs() < CORNER_TOL && d * kappa0 < 0.0);
-    if concave {
-        return Err(refuse("concave corner into a NURBS move under cutter compensation: the tool would have to start the curve's offset part way along, which is not done yet; join the curve to the move before tangentially or on the outside".into()));
-    }
-    c.end_open_at(moves, lw, xy(cur))?;
-    c.close();
-    // Where the curve's offset starts: the corner's end, or (straight on, within a
-    // nanometre) where the tool is.
-    let mut start = mid;
-    if beta > CORNER_TOL {
-        // Convex: round the programmed corner.
-        let turn = if side == Side::Left { -1 } else { 1 };
-        push_arc(moves, line, feed, cur, with_z(mid, cur[2]), op, turn);
-    } else if dist(mid, xy(cur)) > 1e-9 {
-        // Straight on (within the tolerance): across the little gap.
-        moves.push(Move::Line {
-            line,
-            from: cur,
-            to: with_z(mid, cur[2]),
-            rapid: false,
-            feed,
-        });
-    } else {
-        start = xy(cur);
-    }
     let n = fitted.ctrl.len();
+    let mut knots_o = fitted.knots;
     let mut pts: Vec<[f64; 4]> = fitted.ctrl.iter().map(|p| [p[0], p[1], z, 1.0]).collect();
+    // Where the curve's offset starts.
+    let start;
+    if concave {
+        // The tool turns where the offset paths before and along the curve meet: the
+        // move before is cut short there and the curve's offset starts there.
+        let gouge = || {
+            refuse("NURBS move in concave corner cannot be reached by the tool without gouging: the tool's path along the move before never meets its path along the curve".into())
+        };
+        let lo = knots_o[3];
+        let (u, joint) = match c.ended {
+            Some(Ended::Stop) => return Err(ended_before_concave(lw)),
+            Some(Ended::Nurbs { index, .. }) => {
+                let Move::Nurbs {
+                    knots: ka,
+                    ctrl: ca,
+                    ..
+                } = &moves[index]
+                else {
+                    unreachable!("an open NURBS is a NURBS move");
+                };
+                let a = meet::Spline {
+                    knots: ka,
+                    ctrl: ca,
+                };
+                let b = meet::Spline {
+                    knots: &knots_o,
+                    ctrl: &pts,
+                };
+                let (s, t) = match meet::splines(&a, &b) {
+                    meet::Splines::At { s, t } => (s, t),
+                    meet::Splines::Apart => return Err(gouge()),
+                    meet::Splines::Tangled => return Err(refuse("NURBS move in concave corner after a NURBS move: the tool's paths along the two curves cross more than once near the corner, so where it should turn is not clear; join the curves tangentially or on the outside".into())),
+                };
+                let la = moves[index].line();
+                let x = c.cut_nurbs_end(moves, index, s).ok_or_else(|| {
+                    refuse(format!("NURBS move in concave corner cannot be reached by the tool without gouging: its path meets the path along the NURBS move of line {} only at that curve's start", la))
+                })?;
+                c.joined_at(moves, x);
+                (t, Some(x))
+            }
+            None => {
+                let other = match (c.open_arc(moves), c.queued.first()) {
+                    (Some((pc, oldrad, _)), _) => meet::Other::Circle { c: pc, r: oldrad },
+                    // The line through the tool square to where the programmed corner
+                    // is: along the move before (and, after an entry move, as LinuxCNC
+                    // moves its end).
+                    (None, Some(_)) => meet::Other::Line {
+                        p: xy(cur),
+                        dir: [-(cur[1] - op[1]), cur[0] - op[0]],
+                    },
+                    (None, None) => return Err(ended_before_concave(lw)),
+                };
+                let b = meet::Spline {
+                    knots: &knots_o,
+                    ctrl: &pts,
+                };
+                (
+                    meet::spline_other(&b, &other, true).ok_or_else(gouge)?,
+                    None,
+                )
+            }
+        };
+        let hi = knots_o[n];
+        if u >= hi {
+            return Err(refuse("NURBS move in concave corner cannot be reached by the tool without gouging: the tool's path along the move before meets its path along the curve only at the curve's end".into()));
+        }
+        if u > lo {
+            (knots_o, pts) = meet::piece(&knots_o, &pts, u, hi);
+        }
+        start = match joint {
+            Some(x) => x,
+            None => {
+                let x = [pts[0][0], pts[0][1]];
+                c.end_open_at(moves, lw, x)?;
+                x
+            }
+        };
+        c.close();
+    } else {
+        c.end_open_at(moves, lw, xy(cur))?;
+        c.close();
+        if beta > CORNER_TOL {
+            // Convex: round the programmed corner.
+            let turn = if side == Side::Left { -1 } else { 1 };
+            push_arc(moves, line, feed, cur, with_z(mid, cur[2]), op, turn);
+            start = mid;
+        } else if dist(mid, xy(cur)) > 1e-9 {
+            // Straight on (within the tolerance): across the little gap.
+            moves.push(Move::Line {
+                line,
+                from: cur,
+                to: with_z(mid, cur[2]),
+                rapid: false,
+                feed,
+            });
+            start = mid;
+        } else {
+            // (Straight on, within a nanometre.)
+            start = xy(cur);
+        }
+    }
     // The fit's ends are the offset's ends: the corner's end, to the bit.
     pts[0] = [start[0], start[1], z, 1.0];
-    let end = [pts[n - 1][0], pts[n - 1][1], z];
+    let last_pt = pts[pts.len() - 1];
+    let end = [last_pt[0], last_pt[1], z];
     moves.push(Move::Nurbs {
         line,
         degree: 3,
-        knots: fitted.knots,
+        knots: knots_o,
         ctrl: pts,
         feed,
     });
     let last = shared::nurbs::eval(degree, &knots, &ctrl, knots[ctrl.len()]);
     c.endpoint = Some(xy(end));
     c.ended = Some(Ended::Nurbs {
-        line,
+        index: moves.len() - 1,
         kappa: curvature(&last),
     });
     c.tool = end;
@@ -622,6 +704,67 @@ impl Comp {
         });
     }
 
+    /// The open NURBS move `moves[index]` (the last in XY) cut short at its offset's
+    /// parameter `s`; where it ends now. `None` where that leaves nothing of it.
+    fn cut_nurbs_end(&mut self, moves: &mut [Move], index: usize, s: f64) -> Option<[f64; 2]> {
+        let Move::Nurbs { knots, ctrl, .. } = &mut moves[index] else {
+            unreachable!("an open NURBS is a NURBS move");
+        };
+        let (lo, hi) = (knots[3], knots[ctrl.len()]);
+        if s <= lo {
+            return None;
+        }
+        if s < hi {
+            (*knots, *ctrl) = meet::piece(knots, ctrl, lo, s);
+        }
+        let last = ctrl[ctrl.len() - 1];
+        Some([last[0], last[1]])
+    }
+
+    /// The moves along Z queued after a NURBS move cut short at `x` move there too; the
+    /// next move starts there.
+    fn joined_at(&mut self, moves: &mut [Move], x: [f64; 2]) {
+        for q in &self.queued {
+            if let Move::Line { from, to, .. } = &mut moves[q.index] {
+                from[..2].copy_from_slice(&x);
+                to[..2].copy_from_slice(&x);
+            }
+        }
+        self.queued.clear();
+        self.endpoint = Some(x);
+    }
+
+    /// Where a concave corner after the open NURBS move `moves[index]` turns: the
+    /// curve's offset cut short where it meets `other` (the offset of the move after),
+    /// and the moves along Z after it moved there. Refused where they never meet, or
+    /// only at the curve's start.
+    fn turn_after_nurbs(
+        &mut self,
+        moves: &mut [Move],
+        lw: &LineWords,
+        index: usize,
+        other: &meet::Other,
+        what: &str,
+    ) -> Result<[f64; 2], Diagnostic> {
+        let Move::Nurbs {
+            knots, ctrl, line, ..
+        } = &moves[index]
+        else {
+            unreachable!("an open NURBS is a NURBS move");
+        };
+        let l = *line;
+        let s = meet::spline_other(&meet::Spline { knots, ctrl }, other, false);
+        let x = s.and_then(|s| self.cut_nurbs_end(moves, index, s)).ok_or_else(|| {
+            lw.err(
+                "G41/G42",
+                lw.first_col(),
+                format!("{what} in concave corner after the NURBS move of line {l} cannot be reached by the tool without gouging: its offset path does not meet the tool's path along the curve before the curve's start"),
+            )
+        })?;
+        self.joined_at(moves, x);
+        Ok(x)
+    }
+
     /// The open moves close where they end.
     fn close(&mut self) {
         self.queued.clear();
@@ -775,52 +918,66 @@ pub(super) fn straight(
         c.endpoint = Some(mid);
         start = with_z(mid, cur[2]);
     } else if concave {
-        if c.queued.is_empty() || c.ended.is_some() {
-            return Err(ended_before_concave(c, lw));
-        }
-        let mid = match open_arc {
-            None => {
-                // Line to line: back along the offset path to where the two meet.
-                let half = (beta + PI) / 2.0;
-                if half == 0.0 {
-                    return Err(lw.err(
-                        "G41/G42",
-                        lw.first_col(),
-                        "Zero degree inside corner is invalid for cutter compensation",
-                    ));
-                }
-                at(xy(cur), r / half.tan(), theta + gamma)
+        let mid = if let Some(Ended::Nurbs { index, .. }) = c.ended {
+            let other = meet::Other::Line {
+                p: xy(end),
+                dir: [p[0] - op[0], p[1] - op[1]],
+            };
+            let what = if rapid {
+                "Straight traverse"
+            } else {
+                "Straight feed"
+            };
+            c.turn_after_nurbs(moves, lw, index, &other, what)?
+        } else {
+            if c.queued.is_empty() || c.ended.is_some() {
+                return Err(ended_before_concave(lw));
             }
-            Some((pc, oldrad, pturn)) => {
-                // Arc to line: where the line's offset meets the arc's.
-                let base = angle(xy(op), xy(p));
-                let th = if pturn > 0 {
-                    base + FRAC_PI_2
-                } else {
-                    base - FRAC_PI_2
-                };
-                let phi = angle(xy(op), pc);
-                let tool_in = inside(side, pturn);
-                let uncomp = if tool_in { oldrad + r } else { oldrad - r };
-                let d = uncomp * (th - phi).cos();
-                let l = (if tool_in { d - r } else { d + r }) / oldrad;
-                if !(-1.0..=1.0).contains(&l) {
-                    return Err(lw.err(
+            let mid = match open_arc {
+                None => {
+                    // Line to line: back along the offset path to where the two meet.
+                    let half = (beta + PI) / 2.0;
+                    if half == 0.0 {
+                        return Err(lw.err(
+                            "G41/G42",
+                            lw.first_col(),
+                            "Zero degree inside corner is invalid for cutter compensation",
+                        ));
+                    }
+                    at(xy(cur), r / half.tan(), theta + gamma)
+                }
+                Some((pc, oldrad, pturn)) => {
+                    // Arc to line: where the line's offset meets the arc's.
+                    let base = angle(xy(op), xy(p));
+                    let th = if pturn > 0 {
+                        base + FRAC_PI_2
+                    } else {
+                        base - FRAC_PI_2
+                    };
+                    let phi = angle(xy(op), pc);
+                    let tool_in = inside(side, pturn);
+                    let uncomp = if tool_in { oldrad + r } else { oldrad - r };
+                    let d = uncomp * (th - phi).cos();
+                    let l = (if tool_in { d - r } else { d + r }) / oldrad;
+                    if !(-1.0..=1.0).contains(&l) {
+                        return Err(lw.err(
                         "G41/G42",
                         lw.first_col(),
                         "Arc to straight motion makes a corner the compensated tool can't fit in without gouging",
                     ));
+                    }
+                    let a = (if tool_in == (pturn > 0) {
+                        -l.acos()
+                    } else {
+                        l.acos()
+                    }) + th
+                        + PI;
+                    at(pc, oldrad, a)
                 }
-                let a = (if tool_in == (pturn > 0) {
-                    -l.acos()
-                } else {
-                    l.acos()
-                }) + th
-                    + PI;
-                at(pc, oldrad, a)
-            }
+            };
+            c.end_open_at(moves, lw, mid)?;
+            mid
         };
-        c.end_open_at(moves, lw, mid)?;
         start = with_z(mid, cur[2]);
     } else {
         // Straight on (within the tolerance): no corner.
@@ -956,68 +1113,77 @@ pub(super) fn arc(
         || ((beta - PI).abs() < CORNER_TOL && !tool_in);
     let start;
     if concave {
-        if c.queued.is_empty() || c.ended.is_some() {
-            return Err(ended_before_concave(c, lw));
-        }
-        let mid = match c.open_arc(moves) {
-            None => {
-                // Line to arc: where the line's offset meets the arc's.
-                let cy = arc_radius * (beta - FRAC_PI_2).sin();
-                let (from_centre, toward) = if tool_in {
-                    (arc_radius - r, cy + r)
-                } else {
-                    (arc_radius + r, cy - r)
-                };
-                let l = toward / from_centre;
-                if !(-1.0..=1.0).contains(&l) {
-                    return Err(lw.err(
+        let mid = if let Some(Ended::Nurbs { index, .. }) = c.ended {
+            let other = meet::Other::Circle {
+                c: centre,
+                r: dist(centre, xy(new_end)),
+            };
+            c.turn_after_nurbs(moves, lw, index, &other, "Arc move")?
+        } else {
+            if c.queued.is_empty() || c.ended.is_some() {
+                return Err(ended_before_concave(lw));
+            }
+            let mid = match c.open_arc(moves) {
+                None => {
+                    // Line to arc: where the line's offset meets the arc's.
+                    let cy = arc_radius * (beta - FRAC_PI_2).sin();
+                    let (from_centre, toward) = if tool_in {
+                        (arc_radius - r, cy + r)
+                    } else {
+                        (arc_radius + r, cy - r)
+                    };
+                    let l = toward / from_centre;
+                    if !(-1.0..=1.0).contains(&l) {
+                        return Err(lw.err(
                         "G41/G42",
                         lw.first_col(),
                         "Arc move in concave corner cannot be reached by the tool without gouging",
                     ));
+                    }
+                    let a = match (tool_in, turn > 0) {
+                        (true, true) => theta + l.asin(),
+                        (true, false) => theta - l.asin(),
+                        (false, true) => theta + PI - l.asin(),
+                        (false, false) => theta + PI + l.asin(),
+                    };
+                    at(centre, from_centre, a)
                 }
-                let a = match (tool_in, turn > 0) {
-                    (true, true) => theta + l.asin(),
-                    (true, false) => theta - l.asin(),
-                    (false, true) => theta + PI - l.asin(),
-                    (false, false) => theta + PI + l.asin(),
-                };
-                at(centre, from_centre, a)
-            }
-            Some((pc, oldrad, pturn)) => {
-                // Arc to arc: where the two offset circles meet.
-                let newrad = if tool_in {
-                    arc_radius - r
-                } else {
-                    arc_radius + r
-                };
-                let cc = dist(pc, centre);
-                if oldrad == 0.0 || cc == 0.0 {
-                    return Err(lw.err(
-                        "G41/G42",
-                        lw.first_col(),
-                        "Arc to arc motion is invalid because the arcs have the same center",
-                    ));
-                }
-                let a = (oldrad * oldrad + cc * cc - newrad * newrad) / (2.0 * oldrad * cc);
-                if !(-1.0..=1.0).contains(&a) {
-                    return Err(lw.err(
+                Some((pc, oldrad, pturn)) => {
+                    // Arc to arc: where the two offset circles meet.
+                    let newrad = if tool_in {
+                        arc_radius - r
+                    } else {
+                        arc_radius + r
+                    };
+                    let cc = dist(pc, centre);
+                    if oldrad == 0.0 || cc == 0.0 {
+                        return Err(lw.err(
+                            "G41/G42",
+                            lw.first_col(),
+                            "Arc to arc motion is invalid because the arcs have the same center",
+                        ));
+                    }
+                    let a = (oldrad * oldrad + cc * cc - newrad * newrad) / (2.0 * oldrad * cc);
+                    if !(-1.0..=1.0).contains(&a) {
+                        return Err(lw.err(
                         "G41/G42",
                         lw.first_col(),
                         "Arc to arc motion makes a corner the compensated tool can't fit in without gouging",
                     ));
+                    }
+                    let pullback = a.acos();
+                    let cc_dir = angle(pc, centre);
+                    let dir = if inside(side, pturn) == (turn > 0) {
+                        cc_dir + pullback
+                    } else {
+                        cc_dir - pullback
+                    };
+                    at(pc, oldrad, dir)
                 }
-                let pullback = a.acos();
-                let cc_dir = angle(pc, centre);
-                let dir = if inside(side, pturn) == (turn > 0) {
-                    cc_dir + pullback
-                } else {
-                    cc_dir - pullback
-                };
-                at(pc, oldrad, dir)
-            }
+            };
+            c.end_open_at(moves, lw, mid)?;
+            mid
         };
-        c.end_open_at(moves, lw, mid)?;
         start = with_z(mid, cur[2]);
     } else if beta > CORNER_TOL {
         // Convex: round the programmed corner first.

@@ -55,6 +55,53 @@ impl core::str::FromStr for Dialect {
     }
 }
 
+/// What a program may ask of a dialect beyond its own control, named on the command line
+/// (`--dialect-extension NAME`, given once for each): a code the dialect's control
+/// refuses and this one can do.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Extension {
+    /// `g06.2-comp`: Fanuc's `G06.2` under cutter radius compensation (`G41`/`G42`) is
+    /// offset as LinuxCNC's NURBS moves are (the fitted offset, see
+    /// `program/comp.rs`), instead of alarm PS1006, which a Fanuc control gives and
+    /// which a Fanuc user therefore gets without it.
+    FanucNurbsComp,
+}
+
+impl Extension {
+    /// Every extension, in the order `--help` lists them.
+    pub const ALL: [Extension; 1] = [Extension::FanucNurbsComp];
+
+    /// Its name on the command line.
+    pub fn name(self) -> &'static str {
+        match self {
+            Extension::FanucNurbsComp => "g06.2-comp",
+        }
+    }
+}
+
+impl core::fmt::Display for Extension {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+impl core::str::FromStr for Extension {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        let s = s.to_ascii_lowercase();
+        Extension::ALL
+            .into_iter()
+            .find(|e| e.name() == s)
+            .ok_or_else(|| {
+                let names: Vec<&str> = Extension::ALL.iter().map(|e| e.name()).collect();
+                format!(
+                    "unknown dialect extension `{s}`: expected {}",
+                    names.join(", ")
+                )
+            })
+    }
+}
+
 /// The dialect as a program is read: forced, or found at a line by a code.
 #[derive(Debug, Clone, Copy)]
 pub(super) struct DialectState {

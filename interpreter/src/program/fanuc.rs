@@ -253,9 +253,11 @@ pub(super) fn open(st: &mut State, lw: &LineWords, g: &Word, unit: f64) -> Resul
             "G06.2 is still the motion: a block with coordinates is the first control point of a new curve and needs its knot K (Fanuc alarm PS1002); give G1 or G0 for a straight move",
         ));
     }
-    if st.cutter_comp || st.inverse_time {
-        let why = if st.cutter_comp {
-            "cutter compensation (G41/G42) is active: cancel it with G40 first"
+    // (Read uncompensated, for the report's programmed path, a program that ran.)
+    let comp_refused = st.cutter_comp && !st.fanuc_nurbs_comp && !st.uncompensated;
+    if comp_refused || st.inverse_time {
+        let why = if comp_refused {
+            "cutter compensation (G41/G42) is active: cancel it with G40 first, or let this control offset the curve with --dialect-extension g06.2-comp"
         } else {
             "inverse-time feed (G93) is active: switch to G94 and give F in mm/min"
         };
