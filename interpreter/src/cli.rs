@@ -80,8 +80,20 @@ pub enum Command {
     /// Inspect command logs.
     #[command(subcommand)]
     Log(LogCommand),
-    /// Print the built-in machine file (TOML), a starting point for your own.
-    Machine,
+    /// Print the built-in machine file (TOML), a starting point for your own, or make
+    /// one from a LinuxCNC INI file.
+    Machine {
+        /// Read the limits of a LinuxCNC configuration: `[TRAJ]`, `[AXIS_X/Y/Z]` and
+        /// `[JOINT_n]` velocities, accelerations and soft limits, `FERROR` and
+        /// `[EMCMOT]SERVO_PERIOD`, in `[TRAJ]LINEAR_UNITS`. Each key of the machine file
+        /// names the INI line it came from; each INI key with no counterpart is a
+        /// warning on stderr.
+        #[arg(long, value_name = "INI")]
+        from_ini: Option<PathBuf>,
+        /// Write the machine file here instead of to stdout.
+        #[arg(long, value_name = "FILE")]
+        out: Option<PathBuf>,
+    },
     /// Write NURBS part programs from geometry (CAM).
     #[command(subcommand)]
     Cam(CamCommand),
@@ -490,8 +502,44 @@ pub fn main() -> ExitCode {
             }
         }
         Command::Log(LogCommand::Show { log, json }) => crate::replay::show(&log, json),
-        Command::Machine => {
-            print!("{}", shared::Machine::default_toml());
+        Command::Machine { from_ini, out } => {
+            let text = match from_ini {
+                None => shared::Machine::default_toml(),
+                Some(ini) => {
+                    let made = std::fs::read_to_string(&ini)
+                        .map_err(|e| format!("{}: {e}", ini.display()))
+                        .and_then(|t| {
+                            // `#INCLUDE` names a file beside the INI, as LinuxCNC reads it.
+                            let dir = ini
+                                .parent()
+                                .map(std::path::Path::to_path_buf)
+                                .unwrap_or_default();
+                            let include = |name: &str| {
+                                let path = dir.join(name);
+                                std::fs::read_to_string(&path)
+                                    .map_err(|e| format!("{}: {e}", path.display()))
+                            };
+                            shared::machine_ini::from_ini(&t, &ini.display().to_string(), &include)
+                        });
+                    match made {
+                        Ok(m) => {
+                            for w in &m.warnings {
+                                eprintln!("warning: {w}");
+                            }
+                            m.toml
+                        }
+                        Err(e) => return fail(e),
+                    }
+                }
+            };
+            match out {
+                None => print!("{text}"),
+                Some(path) => {
+                    if let Err(e) = std::fs::write(&path, text) {
+                        return fail(format!("{}: {e}", path.display()));
+                    }
+                }
+            }
             ExitCode::SUCCESS
         }
         Command::Cam(CamCommand::Ellipse {

@@ -19,6 +19,7 @@ pub mod clock;
 pub mod cmdlog;
 pub mod ipc;
 pub mod machine;
+pub mod machine_ini;
 pub mod nurbs;
 pub mod path;
 pub mod profile;

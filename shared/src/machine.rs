@@ -350,25 +350,40 @@ impl Machine {
     /// The default machine file, as TOML, each key with a comment giving its meaning and
     /// unit (what `cnc machine` prints).
     pub fn default_toml() -> String {
-        let mut out = String::from(
+        Machine::default().documented_toml(
             "# cnc machine file: every key is optional (missing keys take these defaults).\n",
-        );
+            |_| Vec::new(),
+        )
+    }
+
+    /// This machine as TOML after `header`, each key with a comment giving its meaning
+    /// and unit, then the lines `notes` gives for it (by its dotted name,
+    /// `axes.x.max_mm`), each a comment.
+    pub fn documented_toml(&self, header: &str, notes: impl Fn(&str) -> Vec<String>) -> String {
+        let mut out = String::from(header);
         let mut section = "";
-        for line in Machine::default().to_toml().lines() {
+        for line in self.to_toml().lines() {
             if line.starts_with('[') {
                 section = line.trim_matches(|c| c == '[' || c == ']');
                 out.push('\n');
             }
             let key = line.split('=').next().unwrap_or("").trim();
-            if let Some((_, doc)) = KEY_DOCS.iter().find(|(k, _)| {
-                k.rsplit_once('.')
-                    .map_or(section.is_empty() && *k == key, |(s, k)| {
-                        s == section && k == key
-                    })
-            }) {
+            let full = if section.is_empty() {
+                key.to_string()
+            } else {
+                format!("{section}.{key}")
+            };
+            if let Some((_, doc)) = KEY_DOCS.iter().find(|(k, _)| *k == full) {
                 out.push_str("# ");
                 out.push_str(doc);
                 out.push('\n');
+            }
+            if line.contains('=') {
+                for n in notes(&full) {
+                    out.push_str("# ");
+                    out.push_str(&n);
+                    out.push('\n');
+                }
             }
             out.push_str(line);
             out.push('\n');
