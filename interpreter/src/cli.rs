@@ -444,7 +444,14 @@ pub fn main() -> ExitCode {
                 uncompensated: false,
                 extensions,
             };
-            match process::check_with(text, &opts, &machine, period_ns) {
+            let checked = process::check_with(text, &opts, &machine, period_ns);
+            if let Ok((prog, _)) = &checked {
+                eprint!(
+                    "{}",
+                    process::format_notes(&src.name, &process::notes(prog, &machine))
+                );
+            }
+            match checked {
                 Ok((prog, blocks)) if estimate => {
                     let blocks = crate::blocks::commands(&blocks);
                     match crate::estimate::estimate(&blocks, &machine, period_ns) {

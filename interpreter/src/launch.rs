@@ -373,7 +373,10 @@ fn run_inner(args: &RunArgs) -> Result<bool, String> {
         extensions: args.extensions.clone(),
     };
     let blocks = match process::compile_source(&src.name, &src.text, &opts, &machine, period_ns) {
-        Ok(c) => c.blocks,
+        Ok(c) => {
+            eprint!("{}", process::format_notes(&src.name, &c.notes));
+            c.blocks
+        }
         Err(errors) => {
             say_err(&errors);
             return Ok(false);

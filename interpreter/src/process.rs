@@ -117,6 +117,66 @@ pub fn check_with(
     }
 }
 
+/// What the machine changes of what a program asks, each at the first source line
+/// that asks it: a feed above `max_feed_mm_per_min` runs at that limit (the planner
+/// clamps it). One note for each feed asked for, with how many more moves ask it.
+pub fn notes(prog: &program::Program, machine: &Machine) -> Vec<(u32, String)> {
+    let max = machine.max_feed_mm_per_min;
+    // (feed, first line, moves)
+    let mut over: Vec<(f64, u32, usize)> = Vec::new();
+    for m in &prog.moves {
+        let (line, feed) = match m {
+            program::Move::Line {
+                line,
+                feed,
+                rapid: false,
+                ..
+            }
+            | program::Move::Arc { line, feed, .. }
+            | program::Move::Nurbs { line, feed, .. } => (*line, *feed),
+            _ => continue,
+        };
+        if feed <= max {
+            continue;
+        }
+        match over.iter_mut().find(|o| o.0 == feed) {
+            Some(o) => o.2 += 1,
+            None => over.push((feed, line, 1)),
+        }
+    }
+    over.into_iter()
+        .map(|(feed, line, n)| {
+            let who = match n {
+                1 => "the move runs".to_string(),
+                2 => "this move and 1 more at that feed run".to_string(),
+                n => format!("this move and {} more at that feed run", n - 1),
+            };
+            (
+                line,
+                format!(
+                    "feed {} mm/min is above the machine's max_feed_mm_per_min: {who} at {} mm/min",
+                    shown(feed),
+                    shown(max)
+                ),
+            )
+        })
+        .collect()
+}
+
+/// A figure as a user reads it: at most three decimals, no trailing zeros.
+fn shown(v: f64) -> String {
+    let s = format!("{v:.3}");
+    s.trim_end_matches('0').trim_end_matches('.').to_string()
+}
+
+/// `notes` as `cnc check` prints them: `NAME:LINE: note: …`, one a line.
+pub fn format_notes(name: &str, notes: &[(u32, String)]) -> String {
+    notes
+        .iter()
+        .map(|(line, n)| format!("{name}:{line}: note: {n}\n"))
+        .collect()
+}
+
 /// A program ready to send: its blocks and what the reports say about it.
 #[derive(Debug, Clone)]
 pub struct Compiled {
@@ -124,6 +184,8 @@ pub struct Compiled {
     /// The NC dialect a G-code program was read in; none for a STEP-NC part.
     pub dialect: Option<program::Dialect>,
     pub messages: Vec<(u32, String)>,
+    /// What the machine changes of what the program asks ([`notes`]).
+    pub notes: Vec<(u32, String)>,
     /// The largest scallop height of a STEP-NC part's surface paths (as planned).
     pub max_scallop_mm: Option<f64>,
 }
@@ -144,6 +206,7 @@ pub fn compile_source(
             blocks,
             dialect: None,
             messages: Vec::new(),
+            notes: Vec::new(),
             max_scallop_mm: Some(scallop),
         });
     }
@@ -152,6 +215,7 @@ pub fn compile_source(
     Ok(Compiled {
         blocks,
         dialect: Some(prog.dialect),
+        notes: notes(&prog, machine),
         messages: prog.messages,
         max_scallop_mm: None,
     })
@@ -318,6 +382,7 @@ pub fn run_streaming<S: Service>(
     let mut salvaged = None;
     let mut dialect = None;
     let mut max_scallop_mm = None;
+    let mut notes = Vec::new();
     let (name, blocks, messages) = match &cfg.replay {
         Some(log) => {
             let r = load_replay(log, cfg.salvage)?;
@@ -342,6 +407,7 @@ pub fn run_streaming<S: Service>(
             let c = compile_source(&name, &src.text, &opts, &cfg.machine, cfg.period_ns)?;
             dialect = c.dialect.map(|d| d.name().to_string());
             max_scallop_mm = c.max_scallop_mm;
+            notes = c.notes;
             (name, c.blocks, c.messages)
         }
     };
@@ -383,6 +449,7 @@ pub fn run_streaming<S: Service>(
             blocks.len()
         },
         messages,
+        notes,
         salvaged,
         dialect,
         max_scallop_mm,

@@ -566,6 +566,12 @@ fn interpret_lines(text: &str, opts: &Options, way: Way) -> Result<Program, Vec<
         let lw = LineWords::new(&parsed.words, line);
         let before = prog.moves.len();
         if let Err(d) = execute(&mut st, &lw, &mut prog.moves) {
+            // After a compensated move is refused the tool's place is not known: the
+            // moves until `G40` run uncompensated, rather than each be refused again
+            // for where the refused one left the tool.
+            if d.rule == "G41/G42" {
+                st.comp = None;
+            }
             errors.push(d);
         }
         if shown_line != line {

@@ -17,6 +17,10 @@ pub struct InterpreterSummary {
     pub program: String,
     pub blocks: usize,
     pub messages: Vec<(u32, String)>,
+    /// What the machine changed of what the program asked, by source line
+    /// ([`crate::process::notes`]).
+    #[serde(default)]
+    pub notes: Vec<(u32, String)>,
     /// Set when a damaged command log was salvaged: what was wrong, what ran.
     #[serde(default)]
     pub salvaged: Option<String>,
@@ -95,6 +99,10 @@ pub struct Report {
     /// The NC dialect the program was read in (`linuxcnc`, `fanuc`); null for replays.
     #[serde(default)]
     pub dialect: Option<String>,
+    /// What the machine changed of what the program asked (a feed above its limit),
+    /// `[source line, note]`.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub notes: Vec<(u32, String)>,
     /// A STEP-NC part's largest scallop height between passes (mm), as the pass planner
     /// predicts it; absent for G-code.
     #[serde(default, skip_serializing_if = "Option::is_none")]
@@ -418,6 +426,7 @@ pub fn assemble(
         blocks: interp.as_ref().map_or(0, |s| s.blocks),
         salvaged,
         dialect: interp.as_ref().and_then(|s| s.dialect.clone()),
+        notes: interp.as_ref().map(|s| s.notes.clone()).unwrap_or_default(),
         max_scallop_mm: interp.as_ref().and_then(|s| s.max_scallop_mm),
         measured_max_scallop_mm: scallop.map(|s| s.max_mm),
         measured_max_scallop_at_mm: scallop.map(|s| s.at_mm),

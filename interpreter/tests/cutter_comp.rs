@@ -1146,3 +1146,66 @@ fn fanuc_g06_2_under_compensation_is_offset_only_when_asked() {
         theirs.moves
     );
 }
+
+/// The review's cases for concave corners at NURBS moves: an arc just larger than the
+/// tool after a straight curve (the curve's offset passes in and out of the arc's small
+/// offset circle between two of the search's samples: it was refused, where the same
+/// program with a line is cut), the mirror case into a curve, a curve cut short to a
+/// hundred-millionth of a millimetre (it was sent as a block of no length), and a
+/// Fanuc `G06.2` that climbs in Z (its offset was flattened to its first Z; refused).
+#[test]
+fn concave_corners_at_nurbs_the_review_found_wrong() {
+    use interpreter::program::dialect::Extension;
+    use interpreter::program::tools::ToolTable;
+    use interpreter::program::{interpret_with, Options};
+    let tol = interpreter::program::DEFAULT_OFFSET_TOL_MM / 2.0 + 1e-9;
+    let arc_after = "G21 G17 G90 G94 F500\nG0 X0 Y-10\nG41.1 D6\nG1 X0 Y0\n\
+                     G5.2 L3 X10 Y0 P1\nX20 Y0 P1\nG5.3\n\
+                     G3 X18.0635 Y6.1000 I-0.9682 J3.0500\nG40 G1 X8.0635 Y16.1000\nM2\n";
+    let arc_before = "G21 G17 G90 G94 F500\nG0 X4.0635 Y20.1\nG42.1 D6\nG1 X8.0635 Y16.1\n\
+                      G1 X18.0635 Y6.1000\nG2 X20 Y0 I0.9682 J-3.0500\n\
+                      G5.2 L3 X10 Y0 P1\nX0 Y0 P1\nG5.3\nG40 G1 X0 Y-10\nM2\n";
+    for (name, text, exit) in [("arc after", arc_after, 9), ("arc before", arc_before, 10)] {
+        let (worst, cut) = departure(text, 3.0, 4, exit)
+            .unwrap_or_else(|e| panic!("{name}: refused at {e}\n{text}"));
+        assert!(worst <= tol, "{name}: {worst} mm\n{text}");
+        assert!(cut >= 1, "{name}");
+    }
+    // A curve that the concave corner after it cuts to 1e-8 mm: no block of no length.
+    let eps = 1e-8;
+    let mut theta = 146.6f64.to_radians();
+    for _ in 0..50 {
+        // (−10 + ε)·sin θ − 3·cos θ = −3: the next line's offset through (20 + ε, 3).
+        let f = (-10.0 + eps) * theta.sin() - 3.0 * theta.cos() + 3.0;
+        let df = (-10.0 + eps) * theta.cos() + 3.0 * theta.sin();
+        theta -= f / df;
+    }
+    let end = [30.0 + 20.0 * theta.cos(), 20.0 * theta.sin()];
+    let text = format!(
+        "G21 G17 G90 G94 F500\nG0 X0 Y-10\nG41.1 D6\nG1 X0 Y0\nG1 X20 Y0\n\
+         G5.2 L3 X25 Y0 P1\nX30 Y0 P1\nG5.3\nG1 X{:.15} Y{:.15}\nG40 G1 X0 Y30\nM2\n",
+        end[0], end[1]
+    );
+    let prog = interpret(&text).unwrap_or_else(|e| panic!("{e:?}\n{text}"));
+    for m in &prog.moves {
+        if let Move::Nurbs { ctrl, .. } = m {
+            let length: f64 = ctrl
+                .windows(2)
+                .map(|w| (w[1][0] - w[0][0]).hypot(w[1][1] - w[0][1]))
+                .sum();
+            assert!(length > 1e-6, "a NURBS block of {length} mm: {m:?}");
+        }
+    }
+    // A climbing G06.2 under compensation is refused, not flattened.
+    let climb = "G21 G17 G90 G94 F500\nG0 X0 Y-10 Z0\nG41 D1\nG1 X0 Y0\nG1 X20 Y0\n\
+                 G06.2 P4 K0 X20 Y0 Z0\nK0 X30 Y0 Z-2\nK0 X35 Y10 Z-4\nK0 X45 Y10 Z-6\nK1 X50 Y0 Z-8\n\
+                 K2\nK2\nK2\nK2\nG1 X60 Y0\nG40 G1 X70 Y-10\nM30\n";
+    let opts = Options {
+        tools: Some(ToolTable::parse("tool.tbl", "T1 P1 D6\n").unwrap()),
+        extensions: vec![Extension::FanucNurbsComp],
+        ..Options::default()
+    };
+    let e = interpret_with(climb, &opts).unwrap_err();
+    assert_eq!(e[0].line, 6, "{e:?}");
+    assert!(e[0].message.contains("stay at one height"), "{e:?}");
+}

@@ -587,3 +587,47 @@ fn a_compensated_run_shows_the_programmed_path_beside_the_tool_s() {
     let page = html::render(&circle).unwrap();
     assert!(!page.contains("class=\"programmed\""));
 }
+
+/// A feed above the machine's `max_feed_mm_per_min` runs at that limit, and a user is
+/// told: `cnc check` and `cnc run` print a note naming the first line that asks for it
+/// (and how many more moves do), `report.json` keeps it, and the page's summary shows
+/// it. A program within the limit gets no note.
+#[test]
+fn a_feed_above_the_machine_s_limit_is_a_note_with_its_line() {
+    let d = scratch("feed-note");
+    let prog = d.join("fast.ngc");
+    // The built-in machine's max_feed_mm_per_min is 10 000.
+    fs::write(
+        &prog,
+        "G21 G90 G94\nG1 X10 F20000\nG1 X20\nG1 X30 F500\nM2\n",
+    )
+    .unwrap();
+    let says = "fast.ngc:2: note: feed 20000 mm/min is above the machine's max_feed_mm_per_min: this move and 1 more at that feed run at 10000 mm/min";
+    let o = Command::new(env!("CARGO_BIN_EXE_cnc"))
+        .arg("check")
+        .arg(&prog)
+        .output()
+        .unwrap();
+    assert!(o.status.success());
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(err.contains(says), "{err}");
+    assert_eq!(err.matches("note:").count(), 1, "{err}");
+    let run = d.join("run");
+    run_sim(Some(&prog), &run);
+    let notes = &report(&run)["notes"];
+    assert_eq!(notes[0][0], 2, "{notes}");
+    assert!(notes[0][1]
+        .as_str()
+        .unwrap()
+        .starts_with("feed 20000 mm/min"));
+    let page = fs::read_to_string(html::write(&run, None).unwrap()).unwrap();
+    assert!(cell(&page, "notes").contains("line 2: feed 20000 mm/min"));
+    // Within the limit: nothing to say.
+    fs::write(&prog, "G21 G90 G94\nG1 X10 F2000\nM2\n").unwrap();
+    let o = Command::new(env!("CARGO_BIN_EXE_cnc"))
+        .arg("check")
+        .arg(&prog)
+        .output()
+        .unwrap();
+    assert!(!String::from_utf8_lossy(&o.stderr).contains("note:"));
+}

@@ -54,6 +54,9 @@ pub struct Report {
     pub program: Option<String>,
     /// The NC dialect the program was read in; absent in older reports and replays.
     pub dialect: Option<String>,
+    /// What the machine changed of what the program asked, by source line (a feed above
+    /// its limit); absent in older reports.
+    pub notes: Vec<(u32, String)>,
     pub clock: Option<String>,
     pub period_ns: Option<u64>,
     pub cycles: Option<u64>,
@@ -544,6 +547,18 @@ fn load_report(path: &Path, problems: &mut Vec<String>) -> Option<Report> {
         fault: f.get("fault", |x| x.as_str().map(str::to_owned)),
         program: f.get("program", |x| x.as_str().map(str::to_owned)),
         dialect: v.get("dialect").and_then(Value::as_str).map(str::to_owned),
+        notes: v
+            .get("notes")
+            .and_then(Value::as_array)
+            .map(|a| {
+                a.iter()
+                    .filter_map(|n| {
+                        let line = n.get(0)?.as_u64()? as u32;
+                        Some((line, n.get(1)?.as_str()?.to_owned()))
+                    })
+                    .collect()
+            })
+            .unwrap_or_default(),
         clock: f.get("clock", |x| x.as_str().map(str::to_owned)),
         period_ns: f.get("period_ns", Value::as_u64),
         cycles: f.get("cycles", Value::as_u64),

@@ -117,6 +117,14 @@ fn summary(run: &Run, max_contour: Option<f64>, out: &mut String) {
         }),
     );
     row(out, "outcome", "outcome", &outcome(r));
+    if !r.notes.is_empty() {
+        let notes: Vec<String> = r
+            .notes
+            .iter()
+            .map(|(line, n)| format!("line {line}: {}", esc(n)))
+            .collect();
+        row(out, "notes", "notes", &notes.join("<br>"));
+    }
     row(
         out,
         "period_ns",

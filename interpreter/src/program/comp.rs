@@ -313,6 +313,13 @@ pub(super) fn nurbs(
     let first = shared::nurbs::eval(degree, &knots, &ctrl, knots[degree]);
     let op = [first.p[0], first.p[1]];
     let z = first.p[2];
+    // (LinuxCNC's G5.2 takes no Z; a G6.2 or Fanuc's G06.2 can climb.)
+    if let Some(p) = ctrl.iter().find(|p| p[2] != ctrl[0][2]) {
+        return Err(refuse(format!(
+            "a NURBS under cutter radius compensation must stay at one height: its control points go from Z{} to Z{}, and the offset is made in the XY plane only, so the tool would not follow the curve's Z; move along Z before or after the curve",
+            ctrl[0][2], p[2]
+        )));
+    }
     let alpha = first.d1[1].atan2(first.d1[0]);
     let (_, beta, gamma) = corner(side, op, xy(cur), alpha);
     let mid = at(op, r, alpha + gamma);
@@ -395,6 +402,9 @@ pub(super) fn nurbs(
         if u > lo {
             (knots_o, pts) = meet::piece(&knots_o, &pts, u, hi);
         }
+        if polygon_length(&pts) < DEGENERATE_MM {
+            return Err(refuse("NURBS move in concave corner cannot be reached by the tool without gouging: the tool's path along the move before meets its path along the curve only at the curve's end".into()));
+        }
         start = match joint {
             Some(x) => x,
             None => {
@@ -446,6 +456,16 @@ pub(super) fn nurbs(
     });
     c.tool = end;
     Ok(())
+}
+
+/// A NURBS offset whose control polygon is shorter than this (mm) is cut to nothing.
+const DEGENERATE_MM: f64 = 1e-6;
+
+/// The length of a control polygon, in XY.
+fn polygon_length(ctrl: &[[f64; 4]]) -> f64 {
+    ctrl.windows(2)
+        .map(|w| (w[1][0] - w[0][0]).hypot(w[1][1] - w[0][1]))
+        .sum()
 }
 
 /// LinuxCNC's angles at the corner `op` between the move the tool came along (it is at
@@ -718,6 +738,22 @@ impl Comp {
             (*knots, *ctrl) = meet::piece(knots, ctrl, lo, s);
         }
         let last = ctrl[ctrl.len() - 1];
+        if polygon_length(ctrl) < DEGENERATE_MM {
+            // Cut to nothing: a move of no length, dropped with the lines cut short to
+            // nothing at the program's end.
+            let (line, feed) = match &moves[index] {
+                Move::Nurbs { line, feed, .. } => (*line, *feed),
+                _ => unreachable!("an open NURBS is a NURBS move"),
+            };
+            let at = [last[0], last[1], last[2]];
+            moves[index] = Move::Line {
+                line,
+                from: at,
+                to: at,
+                rapid: false,
+                feed,
+            };
+        }
         Some([last[0], last[1]])
     }
 

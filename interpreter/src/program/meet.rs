@@ -91,39 +91,52 @@ fn side(other: &Other, q: [f64; 2]) -> f64 {
 
 /// Where `s` first meets `other`, searched from its start (`from_start`) or back from
 /// its end: the spline's parameter there. `None`: they do not meet.
+///
+/// A change of sign between two samples is bisected. Where the distance dips between
+/// samples without changing sign there (the curve may pass in and out of a small
+/// circle, or across a line and back, between two samples), the dip is searched for its
+/// least (Brent's method) and, if that crosses, the crossing before it is bisected.
 pub(super) fn spline_other(s: &Spline, other: &Other, from_start: bool) -> Option<f64> {
     let mut us = s.samples();
     if !from_start {
         us.reverse();
     }
-    let g = |u: f64| side(other, s.at(u));
-    let g0 = g(us[0]);
+    // Positive on the corner's side.
+    let g0 = side(other, s.at(us[0]));
     if g0 == 0.0 {
         return Some(us[0]);
     }
-    let mut prev = us[0];
-    for &u in &us[1..] {
-        let gu = g(u);
-        if gu == 0.0 {
-            return Some(u);
-        }
-        if (gu > 0.0) != (g0 > 0.0) {
-            // Bisect [prev, u]: `prev` on the corner's side.
-            let (mut a, mut b) = (prev, u);
-            for _ in 0..200 {
-                let m = 0.5 * (a + b);
-                if m == a || m == b {
-                    break;
-                }
-                if (g(m) > 0.0) == (g0 > 0.0) {
-                    a = m;
-                } else {
-                    b = m;
-                }
+    let sign = g0.signum();
+    let g = |u: f64| sign * side(other, s.at(u));
+    // The first parameter where `g` is not positive, between `a` (where it is) and `b`
+    // (where it is not).
+    let bisect = |mut a: f64, mut b: f64| {
+        for _ in 0..200 {
+            let m = 0.5 * (a + b);
+            if m == a || m == b {
+                break;
             }
-            return Some(b);
+            if g(m) > 0.0 {
+                a = m;
+            } else {
+                b = m;
+            }
         }
-        prev = u;
+        b
+    };
+    let gs: Vec<f64> = us.iter().map(|&u| g(u)).collect();
+    for i in 1..us.len() {
+        if gs[i] <= 0.0 {
+            return Some(bisect(us[i - 1], us[i]));
+        }
+        // A dip at sample i: the least between its neighbours.
+        if i + 1 < us.len() && gs[i] < gs[i - 1] && gs[i] <= gs[i + 1] {
+            let (lo, hi) = (us[i - 1].min(us[i + 1]), us[i - 1].max(us[i + 1]));
+            let (x, least) = crate::brent::refine_min(lo, hi, us[i], g);
+            if least <= 0.0 {
+                return Some(bisect(us[i - 1], x));
+            }
+        }
     }
     None
 }
@@ -317,6 +330,27 @@ mod tests {
             (a - 2.0).abs() < 1e-12 && (b - 8.0).abs() < 1e-12,
             "{a} {b}"
         );
+    }
+
+    /// A small circle that a straight spline passes in and out of between two samples
+    /// (32 a span: 3.4375 and 3.59375 here) is still met, at the closed-form crossing.
+    #[test]
+    fn a_small_circle_between_two_samples_is_met() {
+        let (k, c) = straight(0.0);
+        let s = Spline {
+            knots: &k,
+            ctrl: &c,
+        };
+        // Round (3.515, 0.05), radius 0.06: crossings at x = 3.515 ± √0.0011.
+        let circle = Other::Circle {
+            c: [3.515, 0.05],
+            r: 0.06,
+        };
+        let half = 0.0011f64.sqrt();
+        let a = spline_other(&s, &circle, true).expect("met from the start");
+        let b = spline_other(&s, &circle, false).expect("met from the end");
+        assert!((a - (3.515 - half)).abs() < 1e-12, "{a}");
+        assert!((b - (3.515 + half)).abs() < 1e-12, "{b}");
     }
 
     /// Two splines crossing once meet there; parallel ones never do; one crossing the
