@@ -249,15 +249,6 @@ pub enum Role {
     ServoSim(servo_sim::cli::Args),
 }
 
-fn init_tracing() {
-    tracing_subscriber::fmt()
-        .with_env_filter(
-            tracing_subscriber::EnvFilter::try_from_default_env().unwrap_or_else(|_| "warn".into()),
-        )
-        .with_writer(std::io::stderr)
-        .init();
-}
-
 fn fail(msg: impl std::fmt::Display) -> ExitCode {
     let _ = std::io::Write::write_fmt(&mut std::io::stderr(), format_args!("cnc: {msg}\n"));
     ExitCode::FAILURE
@@ -386,7 +377,7 @@ fn check_step(
 
 pub fn main() -> ExitCode {
     let cli = Cli::parse();
-    init_tracing();
+    shared::logging::init();
     match cli.command {
         Command::Run(args) => launch::run(&args),
         Command::Check {

@@ -72,7 +72,9 @@ fn catch_interrupts() {
 
 #[derive(Debug, Clone, clap::Args)]
 pub struct RunArgs {
-    /// The NC program (RS274/NGC with LinuxCNC G5.2 NURBS); the built-in demo when absent.
+    /// The NC program (RS274/NGC with LinuxCNC's G5.2/G6.2 NURBS, or Fanuc's G06.2), or a
+    /// STEP-NC part (`.stp`, `.step`, `.p21`: ISO 14649 free-form workingsteps); the
+    /// built-in demo when absent.
     pub program: Option<PathBuf>,
     /// Run directory [default: runs/<UTC timestamp>/]. It must be new or empty, unless
     /// --force.

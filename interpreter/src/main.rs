@@ -15,12 +15,7 @@ struct Cli {
 }
 
 fn main() -> std::process::ExitCode {
-    tracing_subscriber::fmt()
-        .with_env_filter(
-            tracing_subscriber::EnvFilter::try_from_default_env().unwrap_or_else(|_| "warn".into()),
-        )
-        .with_writer(std::io::stderr)
-        .init();
+    shared::logging::init();
     let cli = Cli::parse();
     interpreter::cli::run_interpreter(&cli.common, cli.program, None, None, false)
 }

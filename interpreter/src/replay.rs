@@ -171,6 +171,18 @@ impl From<&CommandBlock> for BlockView {
     }
 }
 
+/// A number as a person reads it in `cnc log show`: at most six decimals (a nanometre in
+/// mm), no trailing zeros. (`--json` keeps every bit.)
+fn short(v: f64) -> String {
+    let s = format!("{v:.6}");
+    let s = s.trim_end_matches('0').trim_end_matches('.');
+    if s == "-0" {
+        "0".into()
+    } else {
+        s.into()
+    }
+}
+
 fn line_of(b: &CommandBlock) -> String {
     let kind = b.kind().map_or("?", BlockKind::name);
     match b.kind() {
@@ -178,28 +190,38 @@ fn line_of(b: &CommandBlock) -> String {
             let pts: Vec<String> = b
                 .ctrl()
                 .iter()
-                .map(|c| format!("({} {} {} w{})", c[0], c[1], c[2], c[3]))
+                .map(|c| {
+                    format!(
+                        "({} {} {} w{})",
+                        short(c[0]),
+                        short(c[1]),
+                        short(c[2]),
+                        short(c[3])
+                    )
+                })
                 .collect();
             format!(
-                "{:>6} {}{} line {} degree {} feed {:.1} mm/min ({:.1} -> {:.1}) length {:.4} mm{} ctrl {}",
+                "{:>6} {}{} source line {} degree {} feed {} mm/min ({} -> {}) length {} mm{} ctrl {}",
                 b.seq,
                 kind,
                 if b.flags & FLAG_RAPID != 0 { " rapid" } else { "" },
                 b.source_line,
                 b.degree,
-                b.feed_mm_per_min,
-                b.start_feed_mm_per_min,
-                b.end_feed_mm_per_min,
-                b.length_mm,
+                short(b.feed_mm_per_min),
+                short(b.start_feed_mm_per_min),
+                short(b.end_feed_mm_per_min),
+                short(b.length_mm),
                 if b.helix.axis != NO_AXIS { " helix" } else { "" },
                 pts.join(" ")
             )
         }
         Some(BlockKind::Dwell) => format!(
-            "{:>6} {kind} line {} {} ns",
-            b.seq, b.source_line, b.dwell_ns
+            "{:>6} {kind} source line {} {} s",
+            b.seq,
+            b.source_line,
+            short(b.dwell_ns as f64 * 1e-9)
         ),
-        _ => format!("{:>6} {kind} line {}", b.seq, b.source_line),
+        _ => format!("{:>6} {kind} source line {}", b.seq, b.source_line),
     }
 }
 
@@ -253,5 +275,23 @@ pub fn show(source: &Path, json: bool) -> ExitCode {
             ExitCode::FAILURE
         }
         None => ExitCode::SUCCESS,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// `cnc log show` names the source line as such and prints numbers as a person reads
+    /// them: a dwell in seconds, a coordinate to a nanometre without trailing zeros.
+    #[test]
+    fn log_lines_say_source_line_and_round_sensibly() {
+        let mut d = CommandBlock::empty(BlockKind::Dwell, 7, 12);
+        d.dwell_ns = 1_500_000_000;
+        assert_eq!(line_of(&d), "     7 dwell source line 12 1.5 s");
+        assert_eq!(short(20.000000003333), "20");
+        assert_eq!(short(-0.0000001), "0");
+        assert_eq!(short(1828.7999999999997), "1828.8");
+        assert_eq!(short(0.125), "0.125");
     }
 }

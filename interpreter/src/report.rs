@@ -443,6 +443,19 @@ pub fn assemble(
     }
 }
 
+/// The summary's timing figures, rounded as the deadline line rounds them
+/// ([`interpolator::rt::latency::us`]), so that one figure reads the same in both.
+fn timing_text(misses: u64, wake: &Percentiles, compute: &Percentiles) -> String {
+    use interpolator::rt::latency::us;
+    format!(
+        "{misses} misses, wake-up late p50 {} p99 {} max {}, compute p99 {}",
+        us(wake.p50),
+        us(wake.p99),
+        us(wake.max),
+        us(compute.p99)
+    )
+}
+
 impl Report {
     pub fn write(&self, path: &Path) -> std::io::Result<()> {
         std::fs::write(
@@ -454,13 +467,7 @@ impl Report {
     /// The short summary `cnc run` prints.
     pub fn summary_text(&self, dir: &Path) -> String {
         let timing = match (self.misses, self.wake_late_ns, self.compute_ns) {
-            (Some(m), Some(w), Some(c)) => format!(
-                "{m} misses, wake-up late p50 {} µs p99 {} µs max {} µs, compute p99 {} µs",
-                w.p50 / 1000,
-                w.p99 / 1000,
-                w.max / 1000,
-                c.p99 / 1000
-            ),
+            (Some(m), Some(w), Some(c)) => timing_text(m, &w, &c),
             _ => format!("not measured ({} clock)", self.clock),
         };
         let contour = match (self.max_contour_error_um, &self.roundness) {
@@ -593,4 +600,30 @@ pub fn write_orphan_report(dir: &Path, program: &str, period_ns: u64) -> Result<
         .map_err(|e| format!("writing report.json: {e}"))?;
     crate::html::write(dir, None).map_err(|e| format!("writing report.html: {e}"))?;
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A p99 of 278.6 µs reads 279 µs in the timing line, as in the deadline line (it
+    /// read 278 there: cut, not rounded).
+    #[test]
+    fn timing_rounds_as_the_deadline_line() {
+        let wake = Percentiles {
+            p50: 36_400,
+            p99: 278_600,
+            max: 1_974_000,
+            ..Percentiles::default()
+        };
+        let compute = Percentiles {
+            p99: 8_200,
+            ..Percentiles::default()
+        };
+        assert_eq!(
+            timing_text(10, &wake, &compute),
+            "10 misses, wake-up late p50 36 µs p99 279 µs max 1974 µs, compute p99 8.2 µs"
+        );
+        assert_eq!(interpolator::rt::latency::us(278_600), "279 µs");
+    }
 }

@@ -631,3 +631,23 @@ fn a_feed_above_the_machine_s_limit_is_a_note_with_its_line() {
         .unwrap();
     assert!(!String::from_utf8_lossy(&o.stderr).contains("note:"));
 }
+
+/// `RUST_LOG=info` shows the program's `(MSG, …)` on stderr, and a pipe gets it as
+/// plain text: no terminal colour codes where stderr is not a terminal.
+#[test]
+fn logs_to_a_pipe_are_plain_text() {
+    let d = scratch("plain-log");
+    let prog = d.join("msg.ngc");
+    fs::write(&prog, "G21 G90\n(MSG, hello there)\nG1 X5 F1000\nM2\n").unwrap();
+    let o = Command::new(env!("CARGO_BIN_EXE_cnc"))
+        .args(["run", "--clock", "sim", "--out"])
+        .arg(d.join("run"))
+        .arg(&prog)
+        .env("RUST_LOG", "info")
+        .output()
+        .unwrap();
+    assert!(o.status.success());
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(err.contains("msg.ngc:2: MSG hello there"), "{err}");
+    assert!(!err.contains('\u{1b}'), "colour codes in a pipe: {err:?}");
+}

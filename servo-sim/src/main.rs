@@ -11,12 +11,7 @@ struct Cli {
 }
 
 fn main() -> anyhow::Result<()> {
-    tracing_subscriber::fmt()
-        .with_env_filter(
-            tracing_subscriber::EnvFilter::try_from_default_env().unwrap_or_else(|_| "warn".into()),
-        )
-        .with_writer(std::io::stderr)
-        .init();
+    shared::logging::init();
     let cli = Cli::parse();
     let machine = shared::machine::load(cli.args.machine.as_deref()).map_err(anyhow::Error::msg)?;
     servo_sim::cli::run(&cli.args, machine)

@@ -18,6 +18,7 @@ pub mod alloc_count;
 pub mod clock;
 pub mod cmdlog;
 pub mod ipc;
+pub mod logging;
 pub mod machine;
 pub mod machine_ini;
 pub mod nurbs;
