@@ -214,20 +214,36 @@ fn demo_page_rounds_its_full_circle_and_a_linuxcnc_page_has_none() {
     fs::write(d.join("butterfly.html"), page).unwrap();
 }
 
-/// The rows of the miss table: (cycle, cause in words).
+/// The rows of the miss table, the ones shown and the ones folded away after the worst
+/// `SHOWN_ROWS`: (cycle, cause in words).
 fn miss_rows(page: &str) -> Vec<(u64, String)> {
-    let table = &page[page.find("id=\"miss-table\"").unwrap()..];
-    let table = &table[..table.find("</table>").unwrap()];
-    table
-        .split("<tr><td>")
-        .skip(1)
-        .map(|r| {
-            let cells: Vec<&str> = r.split("<td>").collect();
-            let cycle = r[..r.find('<').unwrap()].parse().unwrap();
-            let cause = cells[4].trim_end_matches("</td>").to_string();
-            (cycle, cause)
-        })
-        .collect()
+    let rows = |id: &str| -> Vec<(u64, String)> {
+        let Some(at) = page.find(&format!("id=\"{id}\"")) else {
+            return Vec::new();
+        };
+        let table = &page[at..];
+        let table = &table[..table.find("</table>").unwrap()];
+        table
+            .split("<tr><td>")
+            .skip(1)
+            .map(|r| {
+                let cells: Vec<&str> = r.split("<td>").collect();
+                let cycle = r[..r.find('<').unwrap()].parse().unwrap();
+                let cause = cells[4].trim_end_matches("</td>").to_string();
+                (cycle, cause)
+            })
+            .collect()
+    };
+    let shown = rows("miss-table");
+    let folded = rows("miss-table-more");
+    let limit = interpreter::html::timing::SHOWN_ROWS;
+    assert!(shown.len() <= limit, "{} rows shown", shown.len());
+    assert!(folded.is_empty() || shown.len() == limit);
+    assert_eq!(
+        page.contains("<details><summary>The other"),
+        !folded.is_empty()
+    );
+    shown.into_iter().chain(folded).collect()
 }
 
 /// The misses of a deadline-misses.json: (cycle, cause in words), in cycle order.
@@ -650,4 +666,67 @@ fn logs_to_a_pipe_are_plain_text() {
     let err = String::from_utf8_lossy(&o.stderr);
     assert!(err.contains("msg.ngc:2: MSG hello there"), "{err}");
     assert!(!err.contains('\u{1b}'), "colour codes in a pipe: {err:?}");
+}
+
+/// Thirty misses: the worst twenty in the table, the other ten folded away under a
+/// `<details>` (the page needs no script to open it), all still listed, worst first.
+#[test]
+fn misses_after_the_worst_twenty_are_folded_away() {
+    let run = circle_run("fold");
+    let list: Vec<Value> = (0..30u64)
+        .map(|k| {
+            serde_json::json!({"cycle": 100 + k, "line": 3, "cause": "late_wake",
+                "wake_late_ns": 1_200_000, "compute_ns": 5_000, "publish_ns": 9_000,
+                "overrun_ns": 10_000 * (k + 1)})
+        })
+        .collect();
+    let mut rep = report(&run);
+    rep["clock"] = "real".into();
+    rep["misses"] = 30.into();
+    for k in ["wake_late_ns", "compute_ns", "publish_ns"] {
+        rep[k] = serde_json::json!({"p50": 20000, "p99": 90000, "max": 1500000});
+    }
+    rep["miss_list"] = list.clone().into();
+    fs::write(run.join("report.json"), rep.to_string()).unwrap();
+    let mut d: Value =
+        serde_json::from_str(&fs::read_to_string(run.join("deadline-misses.json")).unwrap())
+            .unwrap();
+    d["measured"] = true.into();
+    d["clock"] = "real".into();
+    d["misses"] = 30.into();
+    d["miss_list"] = list.into();
+    fs::write(run.join("deadline-misses.json"), d.to_string()).unwrap();
+    let page = html::render(&run).unwrap();
+    let rows = miss_rows(&page);
+    let cycles: Vec<u64> = rows.iter().map(|r| r.0).collect();
+    assert_eq!(cycles, (100..130).rev().collect::<Vec<u64>>());
+    assert!(page.contains("<details><summary>The other 10 misses listed</summary>"));
+}
+
+/// The feed plot's scale is the feed moves' where rapids are more than twice as fast:
+/// at F300 with 10 000 mm/min rapids the feed is not a flat line at the bottom. On a
+/// STEP-NC part, whose surface passes share their source line with the rapids between
+/// them, the feed limit drawn is the passes' (it was the rapid rate over the whole run,
+/// and so was the scale).
+#[test]
+fn the_feed_moves_set_the_feed_plot_s_scale() {
+    let d = scratch("feed-scale");
+    let prog = d.join("slow.ngc");
+    fs::write(
+        &prog,
+        "G21 G90 G94\nG0 X50 Y0\nG1 X50 Y20 F300\nG0 X0 Y0\nM2\n",
+    )
+    .unwrap();
+    let run = d.join("run");
+    run_sim(Some(&prog), &run);
+    let page = fs::read_to_string(html::write(&run, None).unwrap()).unwrap();
+    assert!(
+        page.contains("The scale is the feed moves': rapids, up to 10000 mm/min, run off the top."),
+        "no note of the scale"
+    );
+    let part = Path::new(env!("CARGO_MANIFEST_DIR")).join("../examples/seed-surface.stp");
+    let run = d.join("step");
+    run_sim(Some(&part), &run);
+    let page = fs::read_to_string(html::write(&run, None).unwrap()).unwrap();
+    assert!(page.contains("rapids, up to 10000 mm/min, run off the top"));
 }

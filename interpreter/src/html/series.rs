@@ -42,11 +42,22 @@ pub fn motion(run: &Run, out: &mut String) {
     let tr = time_range(run);
     let cols = chart("x", "", "", tr, (0.0, 1.0)).plot_w();
     let period = run.period_s();
-    let mut limit_of_line: HashMap<u32, f64> = HashMap::new();
+    // The feed limit of each source line: its feed moves' highest, or where it has only
+    // rapids, theirs. (A STEP-NC part's surface paths share their line with the rapids
+    // between them: the rapid rate would be drawn over every pass.) Lines with rapids
+    // only are told apart, for the scale below.
+    let mut limit_of_line: HashMap<u32, (f64, bool)> = HashMap::new();
     for b in run.motion() {
-        let e = limit_of_line.entry(b.source_line).or_insert(0.0);
-        *e = e.max(b.feed_mm_per_min);
+        let rapid = b.flags & shared::protocol::FLAG_RAPID != 0;
+        let e = limit_of_line.entry(b.source_line).or_insert((0.0, true));
+        match (rapid, e.1) {
+            (false, true) => *e = (b.feed_mm_per_min, false),
+            (false, false) | (true, true) => e.0 = e.0.max(b.feed_mm_per_min),
+            (true, false) => {}
+        }
     }
+    // The highest speed and limit of the feed moves alone.
+    let mut feed_hi = 0.0f64;
     let [mut speed, mut limit, mut acc, mut jerk] = [0; 4].map(|_| Reducer::new(tr.0, tr.1, cols));
     // Positions of the last four consecutive cycles, newest first.
     let mut hist: Vec<[f64; 3]> = Vec::with_capacity(4);
@@ -63,12 +74,22 @@ pub fn motion(run: &Run, out: &mut String) {
         prev_cycle = Some(cyc);
         hist.insert(0, p);
         hist.truncate(4);
-        if let Some(f) = limit_of_line.get(&sp.line[i]) {
-            limit.push(t, *f);
+        // The feed limit of a line with feed moves, if it has any.
+        let line_limit = limit_of_line.get(&sp.line[i]).copied();
+        let feeding = line_limit.and_then(|(f, rapid_only)| (!rapid_only).then_some(f));
+        if let Some((f, _)) = line_limit {
+            limit.push(t, f);
         }
         let d = |k: usize| [0, 1, 2].map(|j| hist[k][j] - hist[k + 1][j]);
         if hist.len() >= 2 {
-            speed.push(t, norm(d(0)) / period * 60.0);
+            let v = norm(d(0)) / period * 60.0;
+            speed.push(t, v);
+            // (A cycle of a line with feed moves may be one of its rapids: for the scale
+            // it counts up to a quarter above the feed limit, which covers the tool
+            // centre running faster than the contact point on a surface.)
+            if let Some(f) = feeding {
+                feed_hi = feed_hi.max(f).max(v.min(1.25 * f));
+            }
         }
         if hist.len() >= 3 {
             let (a, b) = (d(0), d(1));
@@ -85,9 +106,14 @@ pub fn motion(run: &Run, out: &mut String) {
     let peak = run.report.as_ref().and_then(|r| r.peak_feed_mm_per_min);
     let (lo, hi) = y_extent(&speed);
     let (_, lhi) = y_extent(&limit);
+    let all_hi = hi.max(if lhi.is_finite() { lhi } else { hi });
+    // Where the rapids are more than twice as fast as anything the feed moves do, the
+    // feed moves set the scale and the rapids run off the top (clipped): at F300 with
+    // 10 000 mm/min rapids the feed would otherwise be a flat line at the bottom.
+    let rapids_clipped = feed_hi > 0.0 && all_hi > 2.0 * feed_hi;
     let y = pad_range(
         lo.min(0.0),
-        hi.max(if lhi.is_finite() { lhi } else { hi }),
+        if rapids_clipped { feed_hi } else { all_hi },
         true,
     );
     let c = chart(
@@ -116,7 +142,15 @@ pub fn motion(run: &Run, out: &mut String) {
     );
     let _ = write!(
         out,
-        "<p class=\"note\">The feed limit is the block's planned maximum (the programmed feed, or the rapid rate for G0, reduced where the curvature demands it), drawn for the source line of each cycle.{}</p>",
+        "<p class=\"note\">The feed limit is the block's planned maximum (the programmed feed, or the rapid rate for G0, reduced where the curvature demands it), drawn for the source line of each cycle (a line with both feed moves and rapids: its feed moves').{}{}</p>",
+        if rapids_clipped {
+            format!(
+                " The scale is the feed moves': rapids, up to {} mm/min, run off the top.",
+                num(all_hi.round())
+            )
+        } else {
+            String::new()
+        },
         peak.map_or(String::new(), |p| format!(
             " Peak feed reported by the interpolator: {} mm/min.",
             num(p.round())

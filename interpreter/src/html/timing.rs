@@ -23,6 +23,11 @@ use std::fmt::Write;
 /// deadline-misses.json, and the page says how many it leaves out.
 pub const MAX_ROWS: usize = 1000;
 
+/// Rows of the miss table shown at once; the rest fold away under a `<details>` (no
+/// script: the browser opens it), so that a run with hundreds of misses does not fill
+/// the page with them.
+pub const SHOWN_ROWS: usize = 20;
+
 /// Marker colour, SVG shape and words for a miss cause.
 fn cause(c: &str) -> (&'static str, &'static str, &'static str) {
     match c {
@@ -471,11 +476,19 @@ fn misses(run: &Run, list: &[Miss], count: Option<u64>, out: &mut String) {
             worst.len()
         )
     };
+    let head = "<tr><th>cycle</th><th>time (s)</th><th>line</th><th>source</th><th>cause</th><th>wake-up late (µs)</th><th>compute (µs)</th><th>off the CPU (µs)</th><th>publish (µs)</th><th>late by (µs)</th></tr>";
     let _ = write!(
         out,
-        "<h3>Misses</h3><p class=\"note\">{listed} Late by: finish minus deadline (downstream: how long the drives' answer is overdue). Off the CPU: the part of the compute time the interpolator's thread was not running (compute time minus the thread's own CPU time); when that is the largest part of the cycle, the cause is a preemption, not slow path evaluation.</p><table class=\"data\" id=\"miss-table\"><tr><th>cycle</th><th>time (s)</th><th>line</th><th>source</th><th>cause</th><th>wake-up late (µs)</th><th>compute (µs)</th><th>off the CPU (µs)</th><th>publish (µs)</th><th>late by (µs)</th></tr>"
+        "<h3>Misses</h3><p class=\"note\">{listed} Late by: finish minus deadline (downstream: how long the drives' answer is overdue). Off the CPU: the part of the compute time the interpolator's thread was not running (compute time minus the thread's own CPU time); when that is the largest part of the cycle, the cause is a preemption, not slow path evaluation.</p><table class=\"data\" id=\"miss-table\">{head}"
     );
-    for m in worst {
+    let rest = worst.len().saturating_sub(SHOWN_ROWS);
+    for (k, m) in worst.into_iter().enumerate() {
+        if k == SHOWN_ROWS {
+            let _ = write!(
+                out,
+                "</table><details><summary>The other {rest} misses listed</summary><table class=\"data\" id=\"miss-table-more\">{head}"
+            );
+        }
         let _ = write!(
             out,
             "<tr><td>{}</td><td>{:.3}</td><td>{}</td><td><code>{}</code></td><td>{}</td><td>{:.1}</td><td>{:.1}</td><td>{:.1}</td><td>{:.1}</td><td>{:.1}</td></tr>",
@@ -492,4 +505,7 @@ fn misses(run: &Run, list: &[Miss], count: Option<u64>, out: &mut String) {
         );
     }
     out.push_str("</table>");
+    if rest > 0 {
+        out.push_str("</details>");
+    }
 }
