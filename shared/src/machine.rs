@@ -78,6 +78,78 @@ pub struct AxisLimits {
     /// motion whose exact path leaves them and the interpolator refuses such a block again.
     pub min_mm: f64,
     pub max_mm: f64,
+    /// `[axes.x.servo]`: this axis's drive where it differs from the shared `[servo]`
+    /// (real axes carry different masses and tunings); each key given replaces the
+    /// shared one for this axis. Left out of the file (and so of the machine's hash)
+    /// when empty, so machine files without it keep their hash and their replays.
+    #[serde(default, skip_serializing_if = "ServoOverride::is_empty")]
+    pub servo: ServoOverride,
+}
+
+/// One axis's changes to the shared servo model: each key given replaces the shared
+/// value (see [`Servo`] for what each means). The simulation's `substeps` stays shared.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct ServoOverride {
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub kv_per_s: Option<f64>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub vel_kp_n_per_mm_s: Option<f64>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub vel_ti_ms: Option<f64>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub motor_inertia_kg: Option<f64>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub load_kg: Option<f64>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub viscous_n_per_mm_s: Option<f64>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub coulomb_n: Option<f64>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub force_limit_n: Option<f64>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub encoder_resolution_mm: Option<f64>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub vel_ff: Option<f64>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub acc_ff: Option<f64>,
+}
+
+impl ServoOverride {
+    /// Whether it changes nothing.
+    pub fn is_empty(&self) -> bool {
+        *self == ServoOverride::default()
+    }
+
+    /// `shared` with this axis's changes.
+    pub fn apply(&self, shared: &Servo) -> Servo {
+        let mut s = shared.clone();
+        let pick = |o: Option<f64>, v: &mut f64| {
+            if let Some(o) = o {
+                *v = o;
+            }
+        };
+        pick(self.kv_per_s, &mut s.kv_per_s);
+        pick(self.vel_kp_n_per_mm_s, &mut s.vel_kp_n_per_mm_s);
+        pick(self.vel_ti_ms, &mut s.vel_ti_ms);
+        pick(self.viscous_n_per_mm_s, &mut s.viscous_n_per_mm_s);
+        pick(self.coulomb_n, &mut s.coulomb_n);
+        pick(self.force_limit_n, &mut s.force_limit_n);
+        pick(self.encoder_resolution_mm, &mut s.encoder_resolution_mm);
+        pick(self.vel_ff, &mut s.vel_ff);
+        pick(self.acc_ff, &mut s.acc_ff);
+        // A mass given for the axis replaces an older file's shared `mass_kg`.
+        if self.motor_inertia_kg.is_some() || self.load_kg.is_some() {
+            if let Some(total) = s.mass_kg.take() {
+                // (Split as the shared mass was: all of it load, none motor.)
+                s.motor_inertia_kg = 0.0;
+                s.load_kg = total;
+            }
+        }
+        pick(self.motor_inertia_kg, &mut s.motor_inertia_kg);
+        pick(self.load_kg, &mut s.load_kg);
+        s
+    }
 }
 
 impl AxisLimits {
@@ -95,6 +167,7 @@ impl Default for AxisLimits {
             max_jerk_mm_per_s3: 100_000.0,
             min_mm: -1_000.0,
             max_mm: 1_000.0,
+            servo: ServoOverride::default(),
         }
     }
 }
@@ -220,7 +293,6 @@ impl Machine {
     /// Every number within the range a machine can have ([`RANGES`], [`MAX_TRAVEL_MM`],
     /// [`MAX_SUBSTEPS`]); the error names the key, the range and the value found.
     pub fn check(&self) -> Result<(), String> {
-        let s = &self.servo;
         let mut named: Vec<(String, f64, &Range)> = vec![
             ("rapid_mm_per_min".into(), self.rapid_mm_per_min, &FEED),
             (
@@ -241,39 +313,16 @@ impl Machine {
                 self.max_following_error_mm,
                 &FOLLOWING,
             ),
-            ("servo.kv_per_s".into(), s.kv_per_s, &KV),
-            (
-                "servo.vel_kp_n_per_mm_s".into(),
-                s.vel_kp_n_per_mm_s,
-                &VEL_KP,
-            ),
-            ("servo.vel_ti_ms".into(), s.vel_ti_ms, &VEL_TI),
-            ("servo.force_limit_n".into(), s.force_limit_n, &FORCE),
-            (
-                "servo.encoder_resolution_mm".into(),
-                s.encoder_resolution_mm,
-                &ENCODER,
-            ),
-            (
-                "servo.motor_inertia_kg".into(),
-                s.motor_inertia_kg,
-                &PART_MASS,
-            ),
-            ("servo.load_kg".into(), s.load_kg, &PART_MASS),
-            (
-                "servo motor_inertia_kg + load_kg (or mass_kg)".into(),
-                s.total_mass_kg(),
-                &MASS,
-            ),
-            (
-                "servo.viscous_n_per_mm_s".into(),
-                s.viscous_n_per_mm_s,
-                &VISCOUS,
-            ),
-            ("servo.coulomb_n".into(), s.coulomb_n, &COULOMB),
-            ("servo.vel_ff".into(), s.vel_ff, &GAIN),
-            ("servo.acc_ff".into(), s.acc_ff, &GAIN),
         ];
+        named.extend(servo_ranges("servo", &self.servo));
+        for (axis, l) in ["x", "y", "z"].iter().zip(self.axes.as_array()) {
+            if !l.servo.is_empty() {
+                named.extend(servo_ranges(
+                    &format!("axes.{axis}.servo"),
+                    &l.servo.apply(&self.servo),
+                ));
+            }
+        }
         for (axis, l) in ["x", "y", "z"].iter().zip(self.axes.as_array()) {
             named.push((
                 format!("axes.{axis}.max_vel_mm_per_min"),
@@ -323,6 +372,7 @@ impl Machine {
             ));
         }
         let budget = (self.min_period_us * 1000 / 2 / SUBSTEP_NS).min(MAX_SUBSTEPS as u64);
+        let s = &self.servo;
         if s.substeps == 0 || s.substeps as u64 > budget {
             return Err(format!(
                 "servo.substeps must be from 1 to {budget}, got {}: the servo-sim integrates \
@@ -373,8 +423,18 @@ impl Machine {
             } else {
                 format!("{section}.{key}")
             };
-            if let Some((_, doc)) = KEY_DOCS.iter().find(|(k, _)| *k == full) {
+            // (An axis's own servo key means what the shared one does, for that axis.)
+            let (shared_key, axis) = match full.strip_prefix("axes.") {
+                Some(rest) if rest.get(1..8) == Some(".servo.") => {
+                    (format!("servo.{}", &rest[8..]), rest[..1].to_uppercase())
+                }
+                _ => (full.clone(), String::new()),
+            };
+            if let Some((_, doc)) = KEY_DOCS.iter().find(|(k, _)| *k == shared_key) {
                 out.push_str("# ");
+                if !axis.is_empty() {
+                    out.push_str(&format!("{axis} axis only: "));
+                }
                 out.push_str(doc);
                 out.push('\n');
             }
@@ -389,6 +449,12 @@ impl Machine {
             out.push('\n');
         }
         out
+    }
+
+    /// The servo model of axis `i` (0 X, 1 Y, 2 Z): the shared `[servo]` with the axis's
+    /// own `[axes.*.servo]` keys.
+    pub fn axis_servo(&self, i: usize) -> Servo {
+        self.axes.as_array()[i].servo.apply(&self.servo)
     }
 
     /// Fingerprint of this machine (FNV-1a of its canonical TOML): what a command log
@@ -413,6 +479,44 @@ pub const MIN_FEED_MM_PER_MIN: f64 = 0.1;
 /// The largest travel limit, in mm either way: 100 m, longer than the longest machine
 /// axes built. Positions stay where a `f64` resolves far below a nanometre.
 pub const MAX_TRAVEL_MM: f64 = 100_000.0;
+
+/// The ranges a servo model's numbers must lie in, each named `{prefix}.key`.
+fn servo_ranges(prefix: &str, s: &Servo) -> Vec<(String, f64, &'static Range)> {
+    vec![
+        (format!("{prefix}.kv_per_s"), s.kv_per_s, &KV),
+        (
+            format!("{prefix}.vel_kp_n_per_mm_s"),
+            s.vel_kp_n_per_mm_s,
+            &VEL_KP,
+        ),
+        (format!("{prefix}.vel_ti_ms"), s.vel_ti_ms, &VEL_TI),
+        (format!("{prefix}.force_limit_n"), s.force_limit_n, &FORCE),
+        (
+            format!("{prefix}.encoder_resolution_mm"),
+            s.encoder_resolution_mm,
+            &ENCODER,
+        ),
+        (
+            format!("{prefix}.motor_inertia_kg"),
+            s.motor_inertia_kg,
+            &PART_MASS,
+        ),
+        (format!("{prefix}.load_kg"), s.load_kg, &PART_MASS),
+        (
+            format!("{prefix} motor_inertia_kg + load_kg (or mass_kg)"),
+            s.total_mass_kg(),
+            &MASS,
+        ),
+        (
+            format!("{prefix}.viscous_n_per_mm_s"),
+            s.viscous_n_per_mm_s,
+            &VISCOUS,
+        ),
+        (format!("{prefix}.coulomb_n"), s.coulomb_n, &COULOMB),
+        (format!("{prefix}.vel_ff"), s.vel_ff, &GAIN),
+        (format!("{prefix}.acc_ff"), s.acc_ff, &GAIN),
+    ]
+}
 
 /// Most servo-sim sub-steps per period.
 pub const MAX_SUBSTEPS: u32 = 1000;
@@ -657,6 +761,44 @@ mod tests {
             assert!(text.contains(&format!("\n{name} = ")), "{key} missing");
         }
         assert_eq!(text.matches("\n# ").count(), KEY_DOCS.len(), "{text}");
+    }
+
+    #[test]
+    fn an_axis_s_own_servo_keys_replace_the_shared_ones() {
+        let m = Machine::from_toml(
+            "[servo]\nkv_per_s = 40.0\nload_kg = 30.0\n\n[axes.z.servo]\nload_kg = 80.0\n",
+        )
+        .unwrap();
+        assert_eq!(m.axis_servo(0), m.servo);
+        assert_eq!(m.axis_servo(2).load_kg, 80.0);
+        assert_eq!(m.axis_servo(2).kv_per_s, 40.0, "the rest from [servo]");
+        assert_eq!(Machine::from_toml(&m.to_toml()).unwrap(), m);
+        let doc = m.documented_toml("", |_| Vec::new());
+        assert!(
+            doc.contains("[axes.z.servo]\n# Z axis only: moving load (table, fixture, part), kg\nload_kg = 80.0"),
+            "{doc}"
+        );
+        // A machine without them writes and hashes as before (replays of older runs
+        // still find their machine): the built-in one's hash, pinned from before.
+        assert!(!Machine::default().to_toml().contains(".servo]"));
+        assert_eq!(Machine::default().hash(), 0x7b69_3019_0002_42d7);
+        assert_ne!(
+            m.hash(),
+            Machine::from_toml("[servo]\nkv_per_s = 40.0\n")
+                .unwrap()
+                .hash()
+        );
+        // Checked like the shared section, named by the axis; the simulation's sub-steps
+        // stay shared.
+        let e = Machine::from_toml("[axes.y.servo]\nkv_per_s = -5.0\n").unwrap_err();
+        assert!(e.contains("axes.y.servo.kv_per_s"), "{e}");
+        let e = Machine::from_toml("[axes.y.servo]\nsubsteps = 5\n").unwrap_err();
+        assert!(e.contains("unknown field `substeps`"), "{e}");
+        // An older file's shared mass_kg gives way to an axis's own masses.
+        let old = Machine::from_toml("[servo]\nmass_kg = 80.0\n\n[axes.x.servo]\nload_kg = 10.0\n")
+            .unwrap();
+        assert_eq!(old.axis_servo(0).total_mass_kg(), 10.0);
+        assert_eq!(old.axis_servo(1).total_mass_kg(), 80.0);
     }
 
     #[test]
