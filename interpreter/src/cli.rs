@@ -507,15 +507,10 @@ pub fn main() -> ExitCode {
                     let made = std::fs::read_to_string(&ini)
                         .map_err(|e| format!("{}: {e}", ini.display()))
                         .and_then(|t| {
-                            // `#INCLUDE` names a file beside the INI, as LinuxCNC reads it.
-                            let dir = ini
-                                .parent()
-                                .map(std::path::Path::to_path_buf)
-                                .unwrap_or_default();
-                            let include = |name: &str| {
-                                let path = dir.join(name);
-                                std::fs::read_to_string(&path)
-                                    .map_err(|e| format!("{}: {e}", path.display()))
+                            // `from_ini` names each `#INCLUDE`d file by its path from
+                            // here (beside the file that includes it).
+                            let include = |path: &str| {
+                                std::fs::read_to_string(path).map_err(|e| format!("{path}: {e}"))
                             };
                             shared::machine_ini::from_ini(&t, &ini.display().to_string(), &include)
                         });

@@ -136,10 +136,13 @@ pub fn notes(prog: &program::Program, machine: &Machine) -> Vec<(u32, String)> {
             | program::Move::Nurbs { line, feed, .. } => (*line, *feed),
             _ => continue,
         };
-        if feed <= max {
+        // (A rounding above the limit is the limit: an inch F at the limit converts to
+        // a hair over it.)
+        if feed <= max * (1.0 + 1e-9) {
             continue;
         }
-        match over.iter_mut().find(|o| o.0 == feed) {
+        // One note for each feed as it is shown.
+        match over.iter_mut().find(|o| shown(o.0) == shown(feed)) {
             Some(o) => o.2 += 1,
             None => over.push((feed, line, 1)),
         }

@@ -638,6 +638,20 @@ fn a_feed_above_the_machine_s_limit_is_a_note_with_its_line() {
         .starts_with("feed 20000 mm/min"));
     let page = fs::read_to_string(html::write(&run, None).unwrap()).unwrap();
     assert!(cell(&page, "notes").contains("line 2: feed 20000 mm/min"));
+    // An inch feed at the limit (34.2 in/min is 868.68 mm/min, a hair over in floating
+    // point) is at the limit: no note.
+    let machine = d.join("m.toml");
+    fs::write(&machine, "max_feed_mm_per_min = 868.68\n").unwrap();
+    fs::write(&prog, "G20 G90 G94\nG1 X1 F34.2\nM2\n").unwrap();
+    let o = Command::new(env!("CARGO_BIN_EXE_cnc"))
+        .arg("check")
+        .arg("--machine")
+        .arg(&machine)
+        .arg(&prog)
+        .output()
+        .unwrap();
+    assert!(o.status.success());
+    assert!(!String::from_utf8_lossy(&o.stderr).contains("note:"));
     // Within the limit: nothing to say.
     fs::write(&prog, "G21 G90 G94\nG1 X10 F2000\nM2\n").unwrap();
     let o = Command::new(env!("CARGO_BIN_EXE_cnc"))

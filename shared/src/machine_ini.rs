@@ -54,6 +54,12 @@ pub struct FromIni {
 /// The sections whose keys are read or warned about one by one.
 const MOTION_SECTIONS: [&str; 3] = ["TRAJ", "KINS", "EMCMOT"];
 
+/// A value this large is LinuxCNC's "no limit" (its defaults are ±1e99).
+const UNLIMITED: f64 = 1e30;
+
+/// Half the travel (mm) of an axis the INI's machine does not have.
+const ABSENT_TRAVEL_MM: f64 = 0.001;
+
 /// Most levels of `#INCLUDE` within one another.
 const MAX_INCLUDE_DEPTH: usize = 8;
 
@@ -77,14 +83,20 @@ fn parse(
                     i + 1
                 ));
             }
-            let inner = include(name).map_err(|e| format!("{file}:{}: #INCLUDE {e}", i + 1))?;
-            parse(&inner, name, include, depth + 1, section, out)?;
+            // Beside the file that includes it (LinuxCNC master; 2.9 does not nest).
+            let path = match std::path::Path::new(file).parent() {
+                Some(d) if !d.as_os_str().is_empty() => d.join(name).display().to_string(),
+                _ => name.to_string(),
+            };
+            let inner = include(&path).map_err(|e| format!("{file}:{}: #INCLUDE {e}", i + 1))?;
+            parse(&inner, &path, include, depth + 1, section, out)?;
             continue;
         }
         if line.is_empty() || line.starts_with('#') || line.starts_with(';') {
             continue;
         }
-        if let Some(name) = line.strip_prefix('[').and_then(|l| l.strip_suffix(']')) {
+        // (`[AXIS_Z]   ; the quill`: what follows the bracket is a comment.)
+        if let Some((name, _)) = line.strip_prefix('[').and_then(|l| l.split_once(']')) {
             *section = name.trim().to_string();
             continue;
         }
@@ -265,6 +277,10 @@ pub fn from_ini(
                     .find_map(|p| p.strip_prefix("coordinates="))
                     .map(str::to_string)
             })
+            // trivkins without `coordinates=` maps joints to XYZABCUVW in order, whatever
+            // [TRAJ]COORDINATES says; a file without [KINS] (before 2.8) has joints
+            // as its coordinates.
+            .or_else(|| kins.as_ref().map(|_| "XYZABCUVW".to_string()))
             .or_else(|| coordinates.as_ref().map(|(_, c)| c.clone()))
             .unwrap_or_else(|| "XYZ".to_string());
         let letters: Vec<char> = letters
@@ -298,34 +314,43 @@ pub fn from_ini(
             1 => &mut m.axes.y,
             _ => &mut m.axes.z,
         };
-        // The tightest of the axis and its joints, and where it came from.
+        // The tightest of the axis and its joints, and where it came from; a section
+        // without the key counts with LinuxCNC's default for it (`emccfg.h`: 1 unit/s
+        // and 1 unit/s² for axes and joints alike), where it has one.
         let tightest = |r: &mut Reading,
                         ini_key: &str,
-                        lower: bool|
+                        lower: bool,
+                        default: Option<f64>|
          -> Result<Option<(f64, String)>, String> {
             let mut best: Option<(f64, String)> = None;
             for s in &sources {
-                if let Some((v, line)) = r.number(s, ini_key)? {
-                    let better = best
-                        .as_ref()
-                        .is_none_or(|(b, _)| if lower { v < *b } else { v > *b });
-                    if better {
-                        best = Some((v, from(s, ini_key, &line, v)));
-                    }
+                let (v, n) = match (r.number(s, ini_key)?, default) {
+                    // (1e99 is how LinuxCNC writes "no limit": this section sets none.)
+                    (Some((v, _)), _) if v.abs() >= UNLIMITED => continue,
+                    (Some((v, line)), _) => (v, from(s, ini_key, &line, v)),
+                    (None, Some(d)) => (
+                        d,
+                        format!("[{s}]{ini_key} not given in {file}: LinuxCNC's default {d}"),
+                    ),
+                    (None, None) => continue,
+                };
+                let better = best
+                    .as_ref()
+                    .is_none_or(|(b, _)| if lower { v < *b } else { v > *b });
+                if better {
+                    best = Some((v, n));
                 }
             }
             Ok(best)
         };
-        let mut given = false;
-        if let Some((v, n)) = tightest(&mut r, "MAX_VELOCITY", true)? {
-            given = true;
+        if let Some((v, n)) = tightest(&mut r, "MAX_VELOCITY", true, Some(1.0))? {
             axis.max_vel_mm_per_min = tidy(v * unit * 60.0);
             r.note(
                 &format!("axes.{key}.max_vel_mm_per_min"),
                 format!("{n} {unit_name}/s"),
             );
         }
-        if let Some((v, n)) = tightest(&mut r, "MAX_ACCELERATION", true)? {
+        if let Some((v, n)) = tightest(&mut r, "MAX_ACCELERATION", true, Some(1.0))? {
             axis.max_acc_mm_per_s2 = tidy(v * unit);
             r.note(
                 &format!("axes.{key}.max_acc_mm_per_s2"),
@@ -333,29 +358,41 @@ pub fn from_ini(
             );
             axis.max_jerk_mm_per_s3 = tidy(axis.max_acc_mm_per_s2 / period_s);
             r.note(&format!("axes.{key}.max_jerk_mm_per_s3"), jerk_note.clone());
-            given = true;
         }
-        if let Some((v, n)) = tightest(&mut r, "MIN_LIMIT", false)? {
-            given = true;
+        if let Some((v, n)) = tightest(&mut r, "MIN_LIMIT", false, None)? {
             axis.min_mm = tidy(v * unit);
             r.note(&format!("axes.{key}.min_mm"), n);
         }
-        if let Some((v, n)) = tightest(&mut r, "MAX_LIMIT", true)? {
-            given = true;
+        if let Some((v, n)) = tightest(&mut r, "MAX_LIMIT", true, None)? {
             axis.max_mm = tidy(v * unit);
             r.note(&format!("axes.{key}.max_mm"), n);
         }
-        if !given {
-            warnings.push(format!(
-                "{file}: no limits for {name} in [{section}] or its joints: {name} keeps this control's defaults"
-            ));
+        // An axis the machine does not have (a lathe's Y): LinuxCNC refuses a program
+        // that moves it; here its travel is held to a micrometre either side of the
+        // start, so that `cnc check` refuses such a program too.
+        if let Some((line, c)) = &coordinates {
+            if !c.to_ascii_uppercase().contains(name) {
+                axis.min_mm = -ABSENT_TRAVEL_MM;
+                axis.max_mm = ABSENT_TRAVEL_MM;
+                let n = format!(
+                    "{name} is not in {line} [TRAJ]COORDINATES = {c}: travel held to ±{ABSENT_TRAVEL_MM} mm, so that a program moving {name} is refused"
+                );
+                r.note(&format!("axes.{key}.min_mm"), n.clone());
+                r.note(&format!("axes.{key}.max_mm"), n);
+            }
         }
         for j in &joints_of[a] {
             let s = format!("JOINT_{j}");
-            if let Some((v, line)) = r.number(&s, "FERROR")? {
-                if ferror.as_ref().is_none_or(|(b, _)| v * unit < *b) {
-                    ferror = Some((tidy(v * unit), from(&s, "FERROR", &line, v)));
-                }
+            // (LinuxCNC's default FERROR is 1 unit.)
+            let (v, n) = match r.number(&s, "FERROR")? {
+                Some((v, line)) => (v, from(&s, "FERROR", &line, v)),
+                None => (
+                    1.0,
+                    format!("[{s}]FERROR not given in {file}: LinuxCNC's default 1"),
+                ),
+            };
+            if ferror.as_ref().is_none_or(|(b, _)| v * unit < *b) {
+                ferror = Some((tidy(v * unit), n));
             }
         }
     }
@@ -367,7 +404,14 @@ pub fn from_ini(
         );
     }
     m.check().map_err(|e| {
-        format!("{file}: the machine it describes is not one this control runs: {e}")
+        // Where the value the check refuses came from.
+        let whence = r
+            .notes
+            .iter()
+            .find(|(k, _)| e.starts_with(k.as_str()))
+            .map(|(_, n)| format!(" ({n})"))
+            .unwrap_or_default();
+        format!("{file}: the machine it describes is not one this control runs: {e}{whence}")
     })?;
 
     // What was not read.
@@ -446,7 +490,8 @@ mod tests {
                    [AXIS_X]\nMAX_VELOCITY = 1.5\nMAX_ACCELERATION = 8\nMIN_LIMIT = -10\nMAX_LIMIT = 10\n\
                    [AXIS_Y]\nMAX_VELOCITY = 1.5\nMAX_ACCELERATION = 8\nMIN_LIMIT = -20\nMAX_LIMIT = 20\n\
                    [JOINT_1]\nMAX_VELOCITY = 1.2\nMAX_ACCELERATION = 9\nMIN_LIMIT = -19\nFERROR = 0.05\nMIN_FERROR = 0.01\n\
-                   [JOINT_2]\nMAX_VELOCITY = 1.4\nMAX_LIMIT = 18\nFERROR = 0.04\n\
+                   [JOINT_2]\nMAX_VELOCITY = 1.4\nMAX_LIMIT = 18\nFERROR = 0.04\nMAX_ACCELERATION = 9\n\
+                   [JOINT_0]\nMAX_VELOCITY = 1.5\nMAX_ACCELERATION = 8\nFERROR = 0.05\n\
                    [DISPLAY]\nDISPLAY = axis\nCYCLE_TIME = 0.1\n";
         let f = from_ini(ini, "m.ini", &none).unwrap();
         let m = &f.machine;
@@ -463,8 +508,11 @@ mod tests {
         assert_eq!(m.axes.y.max_acc_mm_per_s2, 203.2);
         assert_eq!((m.axes.y.min_mm, m.axes.y.max_mm), (-482.6, 457.2));
         assert_eq!(m.max_following_error_mm, 1.016);
-        // Z: nothing given, our default.
-        assert_eq!(m.axes.z, Machine::default().axes.z);
+        // Z (joint 3): nothing given, so LinuxCNC's defaults of 1 in/s and 1 in/s² for
+        // the axis and its joint; its travel ours (LinuxCNC's is ±1e99: none).
+        assert_eq!(m.axes.z.max_vel_mm_per_min, 1524.0);
+        assert_eq!(m.axes.z.max_acc_mm_per_s2, 25.4);
+        assert_eq!(m.axes.z.max_mm, Machine::default().axes.z.max_mm);
         assert_eq!(&Machine::from_toml(&f.toml).unwrap(), m);
         assert!(
             f.toml.contains(
@@ -478,8 +526,42 @@ mod tests {
         assert!(warned(
             "m.ini:27: [JOINT_1]MIN_FERROR = 0.01: no counterpart"
         ));
-        assert!(warned("m.ini:33: [DISPLAY]: 2 keys"));
+        assert!(warned("m.ini:38: [DISPLAY]: 2 keys"));
         assert!(!warned("MAX_VELOCITY") && !warned("COORDINATES"));
+    }
+
+    /// The review's cases: a key left out is LinuxCNC's default (1 unit/s, 1 unit/s²,
+    /// FERROR 1), not ours, which is looser; plain `trivkins` maps joints to XYZABCUVW
+    /// whatever COORDINATES says; an axis not in COORDINATES (a lathe's Y) is held to
+    /// ±1 µm of travel; a section header may carry a comment; 1e99 is no limit; a value
+    /// refused by the range check names its INI line.
+    #[test]
+    fn what_linuxcnc_would_do_with_what_is_left_out() {
+        let lathe = "[TRAJ]\nLINEAR_UNITS = mm\nCOORDINATES = X Z\n[KINS]\nKINEMATICS = trivkins\n\
+                     [AXIS_X]    ; the cross slide\nMAX_VELOCITY = 50\nMAX_ACCELERATION = 500\n\
+                     [AXIS_Z]\nMAX_VELOCITY = 50\nMAX_ACCELERATION = 500\nMAX_LIMIT = 1e99\n\
+                     [JOINT_0]\nMAX_VELOCITY = 60\nMAX_ACCELERATION = 600\nFERROR = 0.5\n\
+                     [JOINT_2]\nMAX_VELOCITY = 20\nMAX_ACCELERATION = 100\nMAX_LIMIT = 5\nFERROR = 0.3\n";
+        let m = from_ini(lathe, "l.ini", &none).unwrap().machine;
+        assert_eq!(
+            m.axes.x.max_vel_mm_per_min, 3000.0,
+            "the axis, under its joint"
+        );
+        // Z is joint 2 (XYZABCUVW), not joint 1 (the second letter of X Z).
+        assert_eq!(m.axes.z.max_vel_mm_per_min, 1200.0);
+        assert_eq!(m.axes.z.max_mm, 5.0, "1e99 sets no limit; the joint's does");
+        assert_eq!((m.axes.y.min_mm, m.axes.y.max_mm), (-0.001, 0.001));
+        assert_eq!(m.max_following_error_mm, 0.3);
+        let bare = "[TRAJ]\nLINEAR_UNITS = mm\n[AXIS_X]\nMIN_LIMIT = 0\nMAX_LIMIT = 200\n";
+        let m = from_ini(bare, "b.ini", &none).unwrap().machine;
+        assert_eq!(m.axes.x.max_vel_mm_per_min, 60.0);
+        assert_eq!(m.axes.x.max_acc_mm_per_s2, 1.0);
+        assert_eq!(m.max_following_error_mm, 1.0);
+        let e = from_ini("[AXIS_X]\nMAX_ACCELERATION = 0.5\n", "a.ini", &none).unwrap_err();
+        assert!(
+            e.contains("(from a.ini:2 [AXIS_X]MAX_ACCELERATION = 0.5"),
+            "{e}"
+        );
     }
 
     /// `#INCLUDE` reads the named file in its place; what is wrong is named at its line.
@@ -488,6 +570,8 @@ mod tests {
         let inc = |name: &str| match name {
             "base.inc" => Ok("[TRAJ]\nLINEAR_UNITS = mm\nMAX_LINEAR_VELOCITY = 50\n".to_string()),
             "loop.inc" => Ok("#INCLUDE loop.inc\n".to_string()),
+            "sub/a.inc" => Ok("#INCLUDE b.inc\n".to_string()),
+            "sub/b.inc" => Ok("[TRAJ]\nMAX_LINEAR_VELOCITY = 20\n".to_string()),
             other => none(other),
         };
         let f = from_ini("#INCLUDE base.inc\n[KINS]\nJOINTS = 3\n", "m.ini", &inc).unwrap();
@@ -495,6 +579,9 @@ mod tests {
         assert!(f
             .toml
             .contains("from base.inc:3 [TRAJ]MAX_LINEAR_VELOCITY = 50 mm/s"));
+        // An include within an include is looked for beside the file that names it.
+        let f = from_ini("#INCLUDE sub/a.inc\n", "m.ini", &inc).unwrap();
+        assert_eq!(f.machine.max_feed_mm_per_min, 1200.0);
         for (text, says) in [
             (
                 "[TRAJ]\nMAX_LINEAR_VELOCITY = fast\n",

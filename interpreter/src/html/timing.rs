@@ -486,7 +486,8 @@ fn misses(run: &Run, list: &[Miss], count: Option<u64>, out: &mut String) {
         if k == SHOWN_ROWS {
             let _ = write!(
                 out,
-                "</table><details><summary>The other {rest} misses listed</summary><table class=\"data\" id=\"miss-table-more\">{head}"
+                "</table><details><summary>The other {rest} {} listed</summary><table class=\"data\" id=\"miss-table-more\">{head}",
+                if rest == 1 { "miss" } else { "misses" }
             );
         }
         let _ = write!(
