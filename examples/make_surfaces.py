@@ -6,6 +6,8 @@
 * torus-patch.stp: an exact rational piece of a torus (major radius 40, minor 15 mm):
   toroidal angle 0..90 deg, poloidal angle 45..135 deg (the crown), rotated and placed.
 * cubic-wave.stp: p = q = 3, 8 x 8 control points, passes along v.
+* tspline-bump.stp: a T-spline surface (T_SPLINE_SURFACE, the project's Part 21 form)
+  with eight T-junctions and a local bump, zig-zag UV passes.
 * seed-surface-planecc.stp: the seed surface finished with a PLANE_CC_STRATEGY instead:
   zig-zag passes in vertical planes at 30 degrees to the x axis (normal (cos 30, sin 30, 0)
   turned by -90 degrees: the planes run at 30 degrees), chordal tolerance 1 um.
@@ -62,8 +64,17 @@ def knots_of(vals):
 
 
 def write(name, title, surf, tool, tech, strategy, placements):
-    """surf: (p, q, pts[i][j], weights or None, knots_u, knots_v)."""
+    """surf: (p, q, pts[i][j], weights or None, knots_u, knots_v), or a function that
+    writes the surface instance with a Writer and returns its number."""
     w = Writer()
+    if callable(surf):
+        s = surf(w)
+    else:
+        s = b_spline(w, title, surf)
+    write_part(w, name, title, s, tool, tech, strategy, placements)
+
+
+def b_spline(w, title, surf):
     p, q, pts, weights, ku, kv = surf
     rows = []
     for row in pts:
@@ -86,6 +97,10 @@ def write(name, title, surf, tool, tech, strategy, placements):
             f".UNSPECIFIED.) GEOMETRIC_REPRESENTATION_ITEM() RATIONAL_B_SPLINE_SURFACE({wd}) "
             f"REPRESENTATION_ITEM('{title}') SURFACE())"
         )
+    return s
+
+
+def write_part(w, name, title, s, tool, tech, strategy, placements):
     (setup_o, wp_o, feat_o) = placements
     wp_place = w.placement("workpiece", *wp_o)
     material = w.add("MATERIAL('EN AW-6082','aluminium',())")
@@ -213,7 +228,74 @@ def cubic_wave():
     )
 
 
+def t_spline_bump():
+    """A T-spline with local refinement: a 40 x 30 mm clamped bicubic mesh (s lines
+    0, 10, 20, 30, 40; t lines 0, 7.5, 15, 22.5, 30) with two short vertical lines
+    (s = 15, 25) and two short horizontal ones (t = 11.25, 18.75) around the middle:
+    eight T-junctions, and a bump of 3 mm raised on the refined points only. The local
+    knots are written out (the reader checks them against its own rays)."""
+    s_lines = [0.0] * 4 + [10.0, 15.0, 20.0, 25.0, 30.0] + [40.0] * 4
+    t_lines = [0.0] * 4 + [7.5, 11.25, 15.0, 18.75, 22.5] + [30.0] * 4
+    m, n = len(s_lines) - 1, len(t_lines) - 1
+    whole_s = [2, 3, 4, 6, 8, 9, 10]
+    whole_t = [2, 3, 4, 6, 8, 9, 10]
+    # 0-based (line, from, to); the short lines run between lines 4 and 8 across.
+    s_segs = [(i, 2, n - 2) for i in whole_s] + [(5, 4, 8), (7, 4, 8)]
+    t_segs = [(j, 2, m - 2) for j in whole_t] + [(5, 4, 8), (7, 4, 8)]
+
+    def vertical(i, j):
+        return i <= 1 or i >= m - 1 or any(a == i and b <= j <= c for a, b, c in s_segs)
+
+    def horizontal(j, i):
+        return j <= 1 or j >= n - 1 or any(a == j and b <= i <= c for a, b, c in t_segs)
+
+    def ray(lines, at, crossed):
+        below = [lines[k] for k in range(at - 1, -1, -1) if crossed(k)][:2]
+        above = [lines[k] for k in range(at + 1, len(lines)) if crossed(k)][:2]
+        return [below[1], below[0], lines[at], above[0], above[1]]
+
+    anchors, pts, sk, tk = [], [], [], []
+    for i in range(2, m - 1):
+        for j in range(2, n - 1):
+            if not (vertical(i, j) and horizontal(j, i)):
+                continue
+            ks = ray(s_lines, i, lambda k: vertical(k, j))
+            kt = ray(t_lines, j, lambda k: horizontal(k, i))
+            # Greville abscissae: no two points of a clamped edge on one spot.
+            x = sum(ks[1:4]) / 3.0
+            y = sum(kt[1:4]) / 3.0
+            z = 2.0 * math.sin(math.pi * x / 40.0) + 0.04 * y
+            if 4 <= i <= 8 and 4 <= j <= 8:
+                z += 3.0 * math.exp(-((x - 20.0) ** 2 + (y - 15.0) ** 2) / 20.0)
+            anchors.append((i + 1, j + 1))
+            pts.append([round(x, 6), round(y, 6), round(z, 6)])
+            sk.append(ks)
+            tk.append(kt)
+
+    def surf(w):
+        refs = ",".join(f"#{w.point(p)}" for p in pts)
+        reals = lambda xs: "(" + ",".join(fmt(x) for x in xs) + ")"
+        tuples = lambda ts: "(" + ",".join("(" + ",".join(str(x) for x in t) + ")" for t in ts) + ")"
+        one = lambda ts: tuples([(a + 1, b + 1, c + 1) for a, b, c in ts])
+        return w.add(
+            f"T_SPLINE_SURFACE('t-spline bump',3,3,{reals(s_lines)},{reals(t_lines)},"
+            f"{one(s_segs)},{one(t_segs)},({refs}),$,{tuples(anchors)},"
+            f"({','.join(reals(k) for k in sk)}),({','.join(reals(k) for k in tk)}))"
+        )
+
+    write(
+        "tspline-bump.stp",
+        "t-spline bump",
+        surf,
+        (6.0, 90.0),
+        (2400.0, 9000.0),
+        ("ZIGZAG", [1, 0], [0, 1], None, 0.02),
+        ([[0, 0, 0]], [[0, 0, 0]], [[10.0, 10.0, 0]]),
+    )
+
+
 if __name__ == "__main__":
+    t_spline_bump()
     seed_surface()
     torus_patch()
     cubic_wave()

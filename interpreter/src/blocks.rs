@@ -389,6 +389,11 @@ struct Shape {
     /// in length as well as in direction); `None` for curves.
     m_start: Option<[f64; 3]>,
     m_end: Option<[f64; 3]>,
+    /// Surface blocks: the tool point's acceleration per squared contact speed at the
+    /// start and at the end, `d²M/ds²` ([`path::tool_rate2`]; it jumps between blocks at
+    /// every knot of a cubic surface); `None` for curves.
+    m2_start: Option<[f64; 3]>,
+    m2_end: Option<[f64; 3]>,
 }
 
 impl Shape {
@@ -406,6 +411,8 @@ impl Shape {
         surface_ratio: None,
         m_start: None,
         m_end: None,
+        m2_start: None,
+        m2_end: None,
     };
 }
 
@@ -617,6 +624,14 @@ fn shape(g: Geometry, machine: &Machine, period_s: f64, feed_mm_s: f64, share: f
         },
         m_end: match g {
             Geometry::Curve(b) if surface => Some(path::tool_rate(b, 1.0)),
+            _ => None,
+        },
+        m2_start: match g {
+            Geometry::Curve(b) if surface => Some(path::tool_rate2(b, 0.0)),
+            _ => None,
+        },
+        m2_end: match g {
+            Geometry::Curve(b) if surface => Some(path::tool_rate2(b, 1.0)),
             _ => None,
         },
     }
@@ -1375,6 +1390,27 @@ fn junction_speed(
             v = v.min(acc * period_s / dm).min(room * period_s / dm);
         }
     }
+    // The tool point's acceleration step across the junction at the contact speed `v`,
+    // `v²·|m2_b − m2_a|` in one period, within half of the jerk the two blocks' profiles
+    // may use along the tool point's path (the other half they keep:
+    // `surface_step_leaves`) and half of the weakest axis's share. It holds the
+    // tangential part too: where the surface's curvature changes at a different rate on
+    // the two sides (every knot of a cubic), the ratio of the tool point's speed to the
+    // contact speed turns at a different rate. Without it the T-spline example
+    // (`examples/tspline-bump.stp`) crossed the knot line over its bump at 5.1 times the
+    // jerk limit.
+    if let Some(step) = surface_jerk_step(a, b) {
+        let weakest = machine
+            .axes
+            .as_array()
+            .iter()
+            .fold(f64::INFINITY, |m, x| m.min(x.max_jerk_mm_per_s3));
+        let room = 0.5
+            * tool_jerk(a)
+                .min(tool_jerk(b))
+                .min((1.0 - NORMAL_SHARE) * weakest);
+        v = v.min((room * period_s / (SAMPLED_STEP * step)).sqrt());
+    }
     let dk = at.dk;
     if is_jump(dk) {
         match at.load {
@@ -1666,6 +1702,28 @@ fn tool_acc(s: &Shape) -> f64 {
     s.acc * s.surface_ratio.unwrap_or(1.0)
 }
 
+/// The most jerk a block's profile puts on the tool point's path.
+fn tool_jerk(s: &Shape) -> f64 {
+    s.jerk * s.surface_ratio.unwrap_or(1.0)
+}
+
+/// `|m2_b − m2_a|` at a junction of surface blocks (1/mm): the tool point's acceleration
+/// step per squared contact speed; `None` if it is nothing, or where the tool point's
+/// velocity steps there too (`|m_b − m_a|` above [`TOOL_KINK`], a surface only C¹): such
+/// a kink is passed within one period's acceleration, and no finite jerk follows it.
+fn surface_jerk_step(a: &Shape, b: &Shape) -> Option<f64> {
+    if path::norm(sub(b.m_start?, a.m_end?)) > TOOL_KINK {
+        return None;
+    }
+    let step = path::norm(sub(b.m2_start?, a.m2_end?));
+    (step > 1e-9).then_some(step)
+}
+
+/// A velocity step of the tool point per unit of contact speed above this counts as a
+/// kink of its path ([`path::tool_rate`]'s differences are good to about 1e-6 on a
+/// smooth surface; a degree-2 surface's knots step by 1e-3 and more).
+const TOOL_KINK: f64 = 1e-4;
+
 /// What the tool point's velocity step at a junction of surface blocks passed at `v`
 /// (`v·|m_b − m_a|` in one period, along the tool point's path where the surface's
 /// curvature jumps: the ratio of its speed to the contact speed steps) leaves the two
@@ -1674,15 +1732,27 @@ fn tool_acc(s: &Shape) -> f64 {
 /// profile accelerating at 962 mm/s² passed such a step of 315 mm/s² (1.28 times the
 /// LinuxCNC machine's 1000: `seed-surface-planecc.stp`, the feed table).
 fn surface_step_leaves(a: &Shape, b: &Shape, v: f64, period_s: f64) -> Option<Jerk> {
-    let (ma, mb) = (a.m_end?, b.m_start?);
-    let step = v * path::norm(sub(mb, ma)) / period_s;
-    if step.is_nan() || step <= 0.0 {
+    let dm = a
+        .m_end
+        .zip(b.m_start)
+        .map(|(ma, mb)| path::norm(sub(mb, ma)));
+    let step = v * dm.unwrap_or(0.0) / period_s;
+    // The acceleration step's jerk (`junction_speed`), on the tool point's path.
+    let jerk_step = surface_jerk_step(a, b).map_or(0.0, |d| SAMPLED_STEP * v * v * d / period_s);
+    let some = |x: f64| x > 0.0 && !x.is_nan();
+    if !some(step) && !some(jerk_step) {
         return None;
     }
-    let left = |s: &Shape| (s.acc - step / s.surface_ratio.unwrap_or(1.0)).max(0.0);
+    let left = |s: &Shape, have: f64, taken: f64| {
+        if some(taken) {
+            (have - taken / s.surface_ratio.unwrap_or(1.0)).max(0.0)
+        } else {
+            f64::INFINITY
+        }
+    };
     Some(Jerk {
-        acc: left(a).min(left(b)),
-        jerk: f64::INFINITY,
+        acc: left(a, a.acc, step).min(left(b, b.acc, step)),
+        jerk: left(a, a.jerk, jerk_step).min(left(b, b.jerk, jerk_step)),
     })
 }
 

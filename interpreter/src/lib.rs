@@ -12,7 +12,9 @@
 //! * [`step`] reads STEP-NC (ISO 10303-21 files with the ISO 14649 free-form subset)
 //!   and [`surface_path`] (iso-parametric passes, `UV_STRATEGY`) or [`surface_plane`]
 //!   (passes in parallel planes, `PLANE_CC_STRATEGY`) plans the ball-nose passes over
-//!   their surfaces, which [`surface_blocks`] turns into surface blocks;
+//!   their surfaces, which [`surface_blocks`] turns into surface blocks; a T-spline
+//!   surface is first cut into tensor-product regions of its Bézier patches by
+//!   [`tspline`];
 //! * [`cam`] writes part programs of exact NURBS moves from geometry (`cnc cam`): an
 //!   ellipse or its fitted offset, and the curves of a CAD STEP file ([`step::curves`]);
 //! * [`process`] is the interpreter process; [`launch`] starts all three processes for
@@ -42,3 +44,4 @@ pub mod step;
 pub mod surface_blocks;
 pub mod surface_path;
 pub mod surface_plane;
+pub mod tspline;

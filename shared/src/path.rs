@@ -143,6 +143,34 @@ pub fn tool_rate(block: &CommandBlock, t: f64) -> [f64; 3] {
     }
 }
 
+/// The second derivative of a surface block's tool reference point `M` with respect to
+/// the contact path's length at `t` of its pass (`d²M/ds²`, 1/mm): the tool point's
+/// acceleration per squared contact speed when the contact speed is steady. One-sided
+/// differences of 1e-3 into the block (second order in `M` and in the contact speed);
+/// zero where the contact point stands still. Where the surface is only C² (every knot
+/// of a cubic) it jumps between two blocks that meet: `M` involves the normal, so its
+/// second derivative involves the surface's third. Reference evaluators: not for the
+/// cycle.
+pub fn tool_rate2(block: &CommandBlock, t: f64) -> [f64; 3] {
+    let h = if t < 0.5 { 1e-3 } else { -1e-3 };
+    let speed = |x: f64| norm(contact(block, x, &surface_at(block, x)).d1);
+    let (c0, c1, c2) = (speed(t), speed(t + h), speed(t + 2.0 * h));
+    let (m0, m1, m2) = (
+        eval(block, t).p,
+        eval(block, t + h).p,
+        eval(block, t + 2.0 * h).p,
+    );
+    if c0 <= 1e-12 {
+        return [0.0; 3];
+    }
+    let dc = (-3.0 * c0 + 4.0 * c1 - c2) / (2.0 * h);
+    [0, 1, 2].map(|i| {
+        let d1 = (-3.0 * m0[i] + 4.0 * m1[i] - m2[i]) / (2.0 * h);
+        let d2 = (m0[i] - 2.0 * m1[i] + m2[i]) / (h * h);
+        (d2 - d1 * dc / c0) / (c0 * c0)
+    })
+}
+
 /// The surface point of a validated surface block's pass at `t` (standard algorithm:
 /// not for the cycle, which keeps a moving-data evaluator).
 pub fn surface_at(block: &CommandBlock, t: f64) -> SurfacePoint {

@@ -306,6 +306,8 @@ proptest::proptest! {
             surface_ratio: None,
             m_start: None,
             m_end: None,
+            m2_start: None,
+            m2_end: None,
         };
         let a = line(da, acc[0]);
         let mut b = line(db, acc[1]);

@@ -105,10 +105,30 @@ pub fn check_part(name: &str, text: &str, machine: &shared::Machine) -> Result<S
         let n_surf = cmds.iter().filter(|c| c.is_surface()).count();
         let sf = &s.surface;
         let _ = writeln!(o, "  #{} '{}' (line {}):", s.id, s.name, s.line);
+        if let Some(t) = &sf.t_spline {
+            let _ = writeln!(
+                o,
+                "    surface #{}: {}T-spline, degree 3, {} control points, {} T-junction{}; \
+                 T-region {} of {}: {} x {} Bézier patches",
+                sf.id,
+                if sf.rational { "rational " } else { "" },
+                t.points,
+                t.t_junctions,
+                if t.t_junctions == 1 { "" } else { "s" },
+                t.region,
+                t.regions,
+                t.cells.0,
+                t.cells.1
+            );
+        }
         let _ = writeln!(
             o,
-            "    surface #{}: {}B-spline, degrees p={} q={}, {} x {} control points, knots {} + {}",
-            sf.id,
+            "    {}: {}B-spline, degrees p={} q={}, {} x {} control points, knots {} + {}",
+            if sf.t_spline.is_some() {
+                "its patches as one surface".to_string()
+            } else {
+                format!("surface #{}", sf.id)
+            },
             if sf.rational { "rational " } else { "" },
             sf.geometry.degree_u,
             sf.geometry.degree_v,

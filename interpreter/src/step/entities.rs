@@ -489,6 +489,7 @@ impl<'a> Ctx<'a> {
             },
             rational: rational.is_some(),
             workpiece: to_machine.clone(),
+            t_spline: None,
         };
         s.data()
             .validate(MAX_READ_CTRL)
@@ -769,20 +770,24 @@ impl<'a> Ctx<'a> {
             feat,
             surf_p,
             "surface_list",
-            &["B_SPLINE_SURFACE_WITH_KNOTS"],
+            &["B_SPLINE_SURFACE_WITH_KNOTS", "T_SPLINE_SURFACE"],
         )?;
         Ok((op, to_machine, surf_inst))
     }
 
-    fn workingstep(&self, ws: &Instance, setup: &Instance) -> Result<FreeformStep, Vec<StepError>> {
+    /// A workingstep; a T-spline surface gives one per T-region.
+    fn workingstep(
+        &self,
+        ws: &Instance,
+        setup: &Instance,
+    ) -> Result<Vec<FreeformStep>, Vec<StepError>> {
         let (op, to_machine, surf_inst) = self.workingstep_head(ws, setup).map_err(|e| vec![e])?;
         let rec = &ws.records[0];
         let orec = &op.records[0];
         // FREEFORM_OPERATION: its_toolpath, its_tool_direction, its_id, retract_plane,
         // start_point, its_tool, its_technology, its_machine_functions, overcut_length,
         // approach, retract, its_machining_strategy.
-        let (surface, tool, tech, strategy) = (
-            self.surface(surf_inst, &to_machine),
+        let (tool, tech, strategy) = (
             self.attr(op, orec, 5, "its_tool")
                 .and_then(|p| self.tool(op, p)),
             self.attr(op, orec, 6, "its_technology")
@@ -790,22 +795,46 @@ impl<'a> Ctx<'a> {
             self.attr(op, orec, 11, "its_machining_strategy")
                 .and_then(|p| self.strategy(op, p, &to_machine)),
         );
+        let surfaces = if !surf_inst.complex && surf_inst.records[0].name == "T_SPLINE_SURFACE" {
+            // Seed 003: row strips when the passes run along s, column strips along t.
+            let along_s = strategy
+                .as_ref()
+                .ok()
+                .and_then(Strategy::uv)
+                .is_none_or(|u| u.passes == Passes::AlongU);
+            self.t_spline_regions(surf_inst, &to_machine, along_s)
+        } else {
+            self.surface(surf_inst, &to_machine)
+                .map(|s| vec![s])
+                .map_err(|e| vec![e])
+        };
         // Every part's error is reported, not only the first one's.
         let mut errs: Vec<StepError> = Vec::new();
-        let surface = surface.map_err(|e| errs.push(e)).ok();
+        let surfaces = surfaces.map_err(|e| errs.extend(e)).ok();
         let tool = tool.map_err(|e| errs.push(e)).ok();
         let tech = tech.map_err(|e| errs.push(e)).ok();
         let strategy = strategy.map_err(|e| errs.push(e)).ok();
-        match (surface, tool, tech, strategy) {
-            (Some(surface), Some(tool), Some(technology), Some(strategy)) => Ok(FreeformStep {
-                id: ws.id,
-                line: ws.line,
-                name: self.text(rec, 0),
-                surface,
-                tool,
-                technology,
-                strategy,
-            }),
+        match (surfaces, tool, tech, strategy) {
+            (Some(surfaces), Some(tool), Some(technology), Some(strategy)) => {
+                let name = self.text(rec, 0);
+                Ok(surfaces
+                    .into_iter()
+                    .map(|surface| FreeformStep {
+                        id: ws.id,
+                        line: ws.line,
+                        name: match &surface.t_spline {
+                            Some(t) if t.regions > 1 => {
+                                format!("{name} (T-region {} of {})", t.region, t.regions)
+                            }
+                            _ => name.clone(),
+                        },
+                        surface,
+                        tool: tool.clone(),
+                        technology: technology.clone(),
+                        strategy: strategy.clone(),
+                    })
+                    .collect())
+            }
             _ => Err(errs),
         }
     }
@@ -859,7 +888,7 @@ pub fn read(ex: &Exchange) -> Result<Vec<FreeformStep>, Vec<StepError>> {
             }
             found += 1;
             match cx.workingstep(ws, setup) {
-                Ok(s) => steps.push(s),
+                Ok(s) => steps.extend(s),
                 Err(e) => cx.errs.extend(e),
             }
         }

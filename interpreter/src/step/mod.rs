@@ -27,6 +27,11 @@
 //!   `B_SPLINE_SURFACE_WITH_KNOTS(u_multiplicities, v_multiplicities, u_knots, v_knots,
 //!   knot_spec)` and `RATIONAL_B_SPLINE_SURFACE(weights_data)`. `control_points_list[i][j]`
 //!   is `P_ij`, `i` along `u`; points are `CARTESIAN_POINT(name, (x, y, z))` in mm.
+//! * Or the surface: `T_SPLINE_SURFACE(name, s_degree, t_degree, s_knot_lines,
+//!   t_knot_lines, s_segments, t_segments, control_points, weights, anchors,
+//!   s_local_knots, t_local_knots)`, the project's own form (seed 003 names the entity
+//!   but prints no attributes), read by [`tspline`]: it becomes one free-form workingstep
+//!   per T-region, each a tensor-product surface of its Bézier patches.
 //! * `FREEFORM_OPERATION(its_toolpath, its_tool_direction, its_id, retract_plane,
 //!   start_point, its_tool, its_technology, its_machine_functions, overcut_length,
 //!   approach, retract, its_machining_strategy)`.
@@ -56,6 +61,7 @@ pub mod check;
 pub mod curves;
 pub mod entities;
 pub mod p21;
+pub mod tspline;
 
 use crate::surface_blocks::OwnedSurface;
 use shared::nurbs::surface::{Passes, SurfaceData};
@@ -171,6 +177,22 @@ pub struct StepSurface {
     pub rational: bool,
     /// Workpiece (file) coordinates to machine coordinates, as applied to `ctrl`.
     pub workpiece: Placement,
+    /// Set when the surface is one T-region of a `T_SPLINE_SURFACE` (its Bézier patches
+    /// joined, [`crate::tspline`]).
+    pub t_spline: Option<TSplineRegion>,
+}
+
+/// Where a T-spline's region comes from, for `cnc check`.
+#[derive(Debug, Clone, PartialEq)]
+pub struct TSplineRegion {
+    /// Control points of the whole T-spline.
+    pub points: usize,
+    pub t_junctions: usize,
+    /// This region's place (1-based) among `regions`.
+    pub region: usize,
+    pub regions: usize,
+    /// T-cells along `s` and `t` (each one Bézier patch).
+    pub cells: (usize, usize),
 }
 
 impl StepSurface {
