@@ -7,7 +7,8 @@
   toroidal angle 0..90 deg, poloidal angle 45..135 deg (the crown), rotated and placed.
 * cubic-wave.stp: p = q = 3, 8 x 8 control points, passes along v.
 * tspline-bump.stp: a T-spline surface (T_SPLINE_SURFACE, the project's Part 21 form)
-  with eight T-junctions and a local bump, zig-zag UV passes.
+  with eight T-junctions, a local bump and a notch left out of its T-image, zig-zag UV
+  passes in two T-regions.
 * seed-surface-planecc.stp: the seed surface finished with a PLANE_CC_STRATEGY instead:
   zig-zag passes in vertical planes at 30 degrees to the x axis (normal (cos 30, sin 30, 0)
   turned by -90 degrees: the planes run at 30 degrees), chordal tolerance 1 um.
@@ -232,8 +233,9 @@ def t_spline_bump():
     """A T-spline with local refinement: a 40 x 30 mm clamped bicubic mesh (s lines
     0, 10, 20, 30, 40; t lines 0, 7.5, 15, 22.5, 30) with two short vertical lines
     (s = 15, 25) and two short horizontal ones (t = 11.25, 18.75) around the middle:
-    eight T-junctions, and a bump of 3 mm raised on the refined points only. The local
-    knots are written out (the reader checks them against its own rays)."""
+    eight T-junctions, and a bump of 3 mm raised on the refined points only; a notch at
+    one corner left out of the T-image. The local knots are written out (the reader
+    checks them against its own rays)."""
     s_lines = [0.0] * 4 + [10.0, 15.0, 20.0, 25.0, 30.0] + [40.0] * 4
     t_lines = [0.0] * 4 + [7.5, 11.25, 15.0, 18.75, 22.5] + [30.0] * 4
     m, n = len(s_lines) - 1, len(t_lines) - 1
@@ -254,6 +256,9 @@ def t_spline_bump():
         above = [lines[k] for k in range(at + 1, len(lines)) if crossed(k)][:2]
         return [below[1], below[0], lines[at], above[0], above[1]]
 
+    # A notch left out of the T-image at the corner s 30..40, t 22.5..30 (1-based lines
+    # (i0, j0, i1, j1)): the UV passes cover it in two T-regions.
+    hole = (9, 9, 10, 10)
     anchors, pts, sk, tk = [], [], [], []
     for i in range(2, m - 1):
         for j in range(2, n - 1):
@@ -280,7 +285,8 @@ def t_spline_bump():
         return w.add(
             f"T_SPLINE_SURFACE('t-spline bump',3,3,{reals(s_lines)},{reals(t_lines)},"
             f"{one(s_segs)},{one(t_segs)},({refs}),$,{tuples(anchors)},"
-            f"({','.join(reals(k) for k in sk)}),({','.join(reals(k) for k in tk)}))"
+            f"({','.join(reals(k) for k in sk)}),({','.join(reals(k) for k in tk)}),"
+            f"{tuples([hole])})"
         )
 
     write(

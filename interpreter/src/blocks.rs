@@ -1716,7 +1716,8 @@ fn surface_jerk_step(a: &Shape, b: &Shape) -> Option<f64> {
         return None;
     }
     let step = path::norm(sub(b.m2_start?, a.m2_end?));
-    (step > 1e-9).then_some(step)
+    // (Above the differences' rounding and truncation, about 1e-8 and 1e-7 per mm.)
+    (step > 1e-6).then_some(step)
 }
 
 /// A velocity step of the tool point per unit of contact speed above this counts as a

@@ -32,9 +32,11 @@
 //!   along horizontal line `j` meets, `s_i1` and `s_i0` the same towards `−s`; the same for
 //!   `t` along vertical line `i`. [`TSpline::new`] derives them, or checks the ones given.
 //!
-//! The surface's domain (its *T-image*) is `[s_lines[3], s_lines[m−3]] ×
-//! [t_lines[3], t_lines[n−3]]` (for a clamped boundary, `s_lines[0..=3]` are equal); every
-//! cell of it must be covered by some blending function's support.
+//! The surface's domain is `[s_lines[3], s_lines[m−3]] × [t_lines[3], t_lines[n−3]]` (for
+//! a clamped boundary, `s_lines[0..=3]` are equal). Its *T-image*, the part machined, is
+//! the domain less the mesh's `holes` (rectangles between its lines: a hole inside, a
+//! notch at the edge); every cell of it must be covered by some blending function's
+//! support.
 //!
 //! # Bézier extraction
 //!
@@ -56,8 +58,7 @@
 //! patches are joined into one tensor-product NURBS with knots of multiplicity 3 at every
 //! inner line ([`TSpline::region_surface`]): the same patches, so the same surface, and the
 //! planner's passes, scallop spacing and plane intersections work on it as on any other.
-//! A mesh with all of its outer lines whole covers its whole rectangle, so such a file
-//! gives one region; [`regions`] is tested on cell matrices with gaps and holes.
+//! A T-image without holes is one region.
 
 use crate::surface_blocks::OwnedSurface;
 use shared::nurbs::reference::cox_de_boor_der;
@@ -67,7 +68,11 @@ pub const DEGREE: usize = 3;
 /// More control points than this are refused (the planner allocates per patch).
 pub const MAX_POINTS: usize = 100_000;
 /// More index lines than this in a direction are refused.
-pub const MAX_LINES: usize = 4096;
+pub const MAX_LINES: usize = 1100;
+/// More spans of distinct line values than this across the domain in a direction are
+/// refused: a T-region's surface has `3·spans + 1` control points that way, and the
+/// reader takes at most 1024.
+pub const MAX_CELLS: usize = 341;
 
 /// A problem of a T-spline, with the control point it belongs to (0-based), if any.
 #[derive(Debug, Clone, PartialEq)]
@@ -94,6 +99,9 @@ pub struct TMesh {
     pub s_segments: Vec<[usize; 3]>,
     /// `(j, i0, i1)`: horizontal line `j` from vertical line `i0` to `i1`.
     pub t_segments: Vec<[usize; 3]>,
+    /// `(i0, j0, i1, j1)`: rectangles between those lines left out of the T-image (a
+    /// hole, or a notch at its edge): the surface is not machined there.
+    pub holes: Vec<[usize; 4]>,
 }
 
 impl TMesh {
@@ -111,25 +119,20 @@ impl TMesh {
     pub fn horizontal_at(&self, j: usize, i: usize) -> bool {
         self.horizontal_covers(j, i, i)
     }
-    /// Whether vertical line `i` has an edge from horizontal index `a` to `b`.
-    pub fn vertical_covers(&self, i: usize, a: usize, b: usize) -> bool {
-        let m = self.m();
-        i <= 1
-            || i + 1 >= m
-            || self
-                .s_segments
-                .iter()
-                .any(|&[si, j0, j1]| si == i && j0 <= a && b <= j1)
+    /// Sorts the segments by line, as the lookups below need ([`TSpline::new`] does).
+    pub fn sort(&mut self) {
+        self.s_segments.sort_unstable();
+        self.t_segments.sort_unstable();
     }
-    /// Whether horizontal line `j` has an edge from vertical index `a` to `b`.
+    /// Whether vertical line `i` has an edge from horizontal index `a` to `b` (segments
+    /// sorted: [`TMesh::sort`]).
+    pub fn vertical_covers(&self, i: usize, a: usize, b: usize) -> bool {
+        i <= 1 || i + 1 >= self.m() || on_line(&self.s_segments, i, a, b)
+    }
+    /// Whether horizontal line `j` has an edge from vertical index `a` to `b` (segments
+    /// sorted: [`TMesh::sort`]).
     pub fn horizontal_covers(&self, j: usize, a: usize, b: usize) -> bool {
-        let n = self.n();
-        j <= 1
-            || j + 1 >= n
-            || self
-                .t_segments
-                .iter()
-                .any(|&[tj, i0, i1]| tj == j && i0 <= a && b <= i1)
+        j <= 1 || j + 1 >= self.n() || on_line(&self.t_segments, j, a, b)
     }
     /// The five local knots of an anchor by the rays (module page), `s` then `t`.
     pub fn ray_knots(&self, anchor: [usize; 2]) -> ([f64; 5], [f64; 5]) {
@@ -148,6 +151,16 @@ impl TMesh {
             self.t_lines[n - 3],
         )
     }
+}
+
+/// Whether a segment of line `line` spans `a..=b` (`segs` sorted by line: a binary
+/// search finds the line's own, so a check costs its segments, not the mesh's).
+fn on_line(segs: &[[usize; 3]], line: usize, a: usize, b: usize) -> bool {
+    let from = segs.partition_point(|x| x[0] < line);
+    segs[from..]
+        .iter()
+        .take_while(|x| x[0] == line)
+        .any(|&[_, lo, hi]| lo <= a && b <= hi)
 }
 
 /// The knots the two rays from line `at` meet: two lines below, `at`, two above.
@@ -192,6 +205,11 @@ pub struct TPoint {
 pub struct TSpline {
     pub mesh: TMesh,
     pub points: Vec<TPoint>,
+    /// The T-cells' edges in `s` and `t` (distinct line values in the domain) and, per
+    /// cell (`[row · columns + column]`), the points whose blending functions reach it.
+    cell_s: Vec<f64>,
+    cell_t: Vec<f64>,
+    cell_points: Vec<Vec<u32>>,
 }
 
 /// A control point as given: its anchor, point and weight, and its local knots if the
@@ -215,7 +233,8 @@ fn knots_agree(a: &[f64; 5], b: &[f64; 5], scale: f64) -> bool {
 impl TSpline {
     /// Checks the mesh and the points against each other (module page) and derives the
     /// local knots the file leaves out. Every problem found is returned.
-    pub fn new(mesh: TMesh, given: Vec<GivenPoint>) -> Result<TSpline, Vec<TError>> {
+    pub fn new(mut mesh: TMesh, given: Vec<GivenPoint>) -> Result<TSpline, Vec<TError>> {
+        mesh.sort();
         check_mesh(&mesh).map_err(|e| vec![e])?;
         let (m, n) = (mesh.m(), mesh.n());
         let mut errs = Vec::new();
@@ -318,6 +337,34 @@ impl TSpline {
         // Every vertex in the anchor range carries a control point.
         for (i, column) in at.iter().enumerate().take(m - 1).skip(2) {
             for (j, point) in column.iter().enumerate().take(n - 1).skip(2) {
+                let inner = i > 2 && i + 2 < m && j > 2 && j + 2 < n;
+                if inner && point.is_some() {
+                    let edges = [
+                        mesh.vertical_covers(i, j, j + 1),
+                        mesh.vertical_covers(i, j - 1, j),
+                        mesh.horizontal_covers(j, i, i + 1),
+                        mesh.horizontal_covers(j, i - 1, i),
+                    ];
+                    if edges.iter().filter(|x| **x).count() < 3 {
+                        errs.push(terr(
+                            "t-mesh",
+                            None,
+                            format!(
+                                "vertex ({}, {}) has {} edge{}: inside the mesh a vertex \
+                                 has four, or three at a T-junction, so every face is a \
+                                 rectangle",
+                                i + 1,
+                                j + 1,
+                                edges.iter().filter(|x| **x).count(),
+                                if edges.iter().filter(|x| **x).count() == 1 {
+                                    ""
+                                } else {
+                                    "s"
+                                }
+                            ),
+                        ));
+                    }
+                }
                 if point.is_none() && mesh.vertical_at(i, j) && mesh.horizontal_at(j, i) {
                     errs.push(terr(
                         "t-mesh",
@@ -334,7 +381,42 @@ impl TSpline {
         if !errs.is_empty() {
             return Err(errs);
         }
-        let ts = TSpline { mesh, points };
+        let (cell_s, cell_t) = {
+            let (s0, s1, t0, t1) = mesh.domain();
+            (
+                distinct(&mesh.s_lines, s0, s1),
+                distinct(&mesh.t_lines, t0, t1),
+            )
+        };
+        let cols = cell_s.len() - 1;
+        let mut cell_points = vec![Vec::new(); cols * (cell_t.len() - 1)];
+        // The cells a support reaches: between its first and last knot (at most four
+        // columns and four rows of distinct values).
+        let range = |edges: &[f64], k: &[f64; 5]| {
+            edges.partition_point(|x| *x < k[0])..edges.partition_point(|x| *x < k[4])
+        };
+        for (k, p) in points.iter().enumerate() {
+            let (rs, rt) = (range(&cell_s, &p.s_knots), range(&cell_t, &p.t_knots));
+            for row in rt.start..rt.end.min(cell_t.len() - 1) {
+                for col in rs.start..rs.end.min(cols) {
+                    cell_points[row * cols + col].push(k as u32);
+                }
+            }
+        }
+        let ts = TSpline {
+            mesh,
+            points,
+            cell_s,
+            cell_t,
+            cell_points,
+        };
+        if !ts.covered().iter().flatten().any(|c| *c) {
+            return Err(vec![terr(
+                "t-mesh",
+                None,
+                "the t_image_holes leave nothing of the T-image to machine",
+            )]);
+        }
         if let Some((a, b, c, d)) = ts.uncovered_cell() {
             return Err(vec![terr(
                 "domain",
@@ -350,53 +432,48 @@ impl TSpline {
 
     /// Distinct line values inside the domain, `s` then `t`: the T-cells' edges.
     pub fn cell_lines(&self) -> (Vec<f64>, Vec<f64>) {
-        let (s0, s1, t0, t1) = self.mesh.domain();
-        let cut = |lines: &[f64], lo: f64, hi: f64| {
-            let mut v: Vec<f64> = lines
-                .iter()
-                .copied()
-                .filter(|x| *x >= lo && *x <= hi)
-                .collect();
-            v.dedup();
-            v
-        };
-        (
-            cut(&self.mesh.s_lines, s0, s1),
-            cut(&self.mesh.t_lines, t0, t1),
-        )
+        (self.cell_s.clone(), self.cell_t.clone())
     }
 
-    fn covers(p: &TPoint, a: f64, b: f64, c: f64, d: f64) -> bool {
-        p.s_knots[0] <= a && b <= p.s_knots[4] && p.t_knots[0] <= c && d <= p.t_knots[4]
+    /// The points whose blending functions reach cell `(col, row)`.
+    fn reaching(&self, col: usize, row: usize) -> impl Iterator<Item = &TPoint> {
+        let cols = self.cell_s.len() - 1;
+        self.cell_points[row * cols + col]
+            .iter()
+            .map(|&k| &self.points[k as usize])
     }
 
+    /// Whether the cell `[a, b] × [c, d]` lies in one of the mesh's holes.
+    fn in_hole(&self, a: f64, b: f64, c: f64, d: f64) -> bool {
+        let (sl, tl) = (&self.mesh.s_lines, &self.mesh.t_lines);
+        self.mesh
+            .holes
+            .iter()
+            .any(|&[i0, j0, i1, j1]| sl[i0] <= a && b <= sl[i1] && tl[j0] <= c && d <= tl[j1])
+    }
+
+    /// A cell of the T-image (not in a hole) that no blending function covers.
     fn uncovered_cell(&self) -> Option<(f64, f64, f64, f64)> {
-        let (sl, tl) = self.cell_lines();
-        for c in tl.windows(2) {
-            for a in sl.windows(2) {
-                if !self
-                    .points
-                    .iter()
-                    .any(|p| Self::covers(p, a[0], a[1], c[0], c[1]))
-                {
-                    return Some((a[0], a[1], c[0], c[1]));
+        let (sl, tl) = (&self.cell_s, &self.cell_t);
+        for row in 0..tl.len() - 1 {
+            for col in 0..sl.len() - 1 {
+                let (a, b, c, d) = (sl[col], sl[col + 1], tl[row], tl[row + 1]);
+                if !self.in_hole(a, b, c, d) && self.reaching(col, row).next().is_none() {
+                    return Some((a, b, c, d));
                 }
             }
         }
         None
     }
 
-    /// Covered T-cells, `[row along t][column along s]`.
+    /// The T-cells of the T-image, `[row along t][column along s]`: false in a hole.
+    /// (Every other cell is covered by some blending function: [`TSpline::new`] checks.)
     pub fn covered(&self) -> Vec<Vec<bool>> {
-        let (sl, tl) = self.cell_lines();
+        let (sl, tl) = (&self.cell_s, &self.cell_t);
         tl.windows(2)
             .map(|c| {
                 sl.windows(2)
-                    .map(|a| {
-                        self.points
-                            .iter()
-                            .any(|p| Self::covers(p, a[0], a[1], c[0], c[1]))
-                    })
+                    .map(|a| !self.in_hole(a[0], a[1], c[0], c[1]))
                     .collect()
             })
             .collect()
@@ -448,11 +525,14 @@ impl TSpline {
         (pt, d_s, d_t)
     }
 
-    /// The rational bicubic Bézier patch of the cell `[a, b] × [c, d]`: 4 × 4 points
-    /// `[x, y, z, w]`, `[r][c]` with `r` along `s`.
-    pub fn cell_patch(&self, a: f64, b: f64, c: f64, d: f64) -> Result<[[[f64; 4]; 4]; 4], TError> {
+    /// The rational bicubic Bézier patch of cell `(col, row)` (`[s_c, s_c+1] ×
+    /// [t_r, t_r+1]` of [`Self::cell_lines`]): 4 × 4 points `[x, y, z, w]`, `[r][c]` with
+    /// `r` along `s`.
+    pub fn cell_patch(&self, col: usize, row: usize) -> Result<[[[f64; 4]; 4]; 4], TError> {
+        let (a, b) = (self.cell_s[col], self.cell_s[col + 1]);
+        let (c, d) = (self.cell_t[row], self.cell_t[row + 1]);
         let mut h = [[[0.0f64; 4]; 4]; 4];
-        for p in self.points.iter().filter(|p| Self::covers(p, a, b, c, d)) {
+        for p in self.reaching(col, row) {
             let bs = bernstein(&p.s_knots, a, b);
             let bt = bernstein(&p.t_knots, c, d);
             let w = p.ctrl[3];
@@ -487,13 +567,13 @@ impl TSpline {
     /// The cells `s_cells × t_cells` (indices into [`Self::cell_lines`]' windows) as one
     /// tensor-product NURBS: the cells' patches joined, knots of multiplicity 3 inside.
     pub fn region_surface(&self, region: &Region) -> Result<OwnedSurface, TError> {
-        let (sl, tl) = self.cell_lines();
+        let (sl, tl) = (&self.cell_s, &self.cell_t);
         let (ks, kt) = (region.s_cells.len(), region.t_cells.len());
         let (n_u, n_v) = (3 * ks + 1, 3 * kt + 1);
         let mut ctrl = vec![[0.0f64; 4]; n_u * n_v];
         for (ci, cs) in region.s_cells.clone().enumerate() {
             for (cj, ct) in region.t_cells.clone().enumerate() {
-                let patch = self.cell_patch(sl[cs], sl[cs + 1], tl[ct], tl[ct + 1])?;
+                let patch = self.cell_patch(cs, ct)?;
                 for (r, row) in patch.iter().enumerate() {
                     for (q, x) in row.iter().enumerate() {
                         ctrl[(3 * ci + r) * n_v + 3 * cj + q] = *x;
@@ -514,11 +594,22 @@ impl TSpline {
             degree_v: DEGREE,
             n_u,
             n_v,
-            knots_u: knots(&sl, &region.s_cells),
-            knots_v: knots(&tl, &region.t_cells),
+            knots_u: knots(sl, &region.s_cells),
+            knots_v: knots(tl, &region.t_cells),
             ctrl,
         })
     }
+}
+
+/// The distinct values of `lines` within `lo..=hi`.
+fn distinct(lines: &[f64], lo: f64, hi: f64) -> Vec<f64> {
+    let mut v: Vec<f64> = lines
+        .iter()
+        .copied()
+        .filter(|x| *x >= lo && *x <= hi)
+        .collect();
+    v.dedup();
+    v
 }
 
 fn check_mesh(mesh: &TMesh) -> Result<(), TError> {
@@ -576,6 +667,39 @@ fn check_mesh(mesh: &TMesh) -> Result<(), TError> {
                 ),
             ));
         }
+        // A value on more than three lines inside (four at an end) makes blending
+        // functions that jump there (a torn surface) or vanish.
+        let mut k = 0;
+        while k < lines.len() {
+            let run = lines[k..].iter().take_while(|x| **x == lines[k]).count();
+            let at_end = k == 0 || k + run == lines.len();
+            if run > if at_end { 4 } else { 3 } {
+                return Err(terr(
+                    "knots",
+                    None,
+                    format!(
+                        "{name}_knot_lines repeat {} on lines {}..={}: at most 3 times inside \
+                         (a cubic's blending functions would tear there) and 4 at an end",
+                        lines[k],
+                        k + 1,
+                        k + run
+                    ),
+                ));
+            }
+            k += run;
+        }
+        let cells = distinct(lines, lines[3], lines[last - 3]).len() - 1;
+        if cells > MAX_CELLS {
+            return Err(terr(
+                "knots",
+                None,
+                format!(
+                    "{name}_knot_lines cut the domain into {cells} spans; at most {MAX_CELLS} \
+                     are machined (a T-region's surface would pass {} control points)",
+                    crate::step::entities::MAX_READ_CTRL
+                ),
+            ));
+        }
     }
     let (m, n) = (mesh.m(), mesh.n());
     for (name, segs, along, across) in [
@@ -599,6 +723,35 @@ fn check_mesh(mesh: &TMesh) -> Result<(), TError> {
                     ),
                 ));
             }
+        }
+    }
+    let (s0, s1, t0, t1) = mesh.domain();
+    for (k, &[i0, j0, i1, j1]) in mesh.holes.iter().enumerate() {
+        let inside = i1 <= m
+            && j1 <= n
+            && i0 < i1
+            && j0 < j1
+            && mesh.s_lines[i0] < mesh.s_lines[i1]
+            && mesh.t_lines[j0] < mesh.t_lines[j1]
+            && mesh.s_lines[i0] >= s0
+            && mesh.s_lines[i1] <= s1
+            && mesh.t_lines[j0] >= t0
+            && mesh.t_lines[j1] <= t1;
+        if !inside {
+            return Err(terr(
+                "t-mesh",
+                None,
+                format!(
+                    "t_image_holes entry {} ({}, {}, {}, {}) is no rectangle of the domain: \
+                     from vertical line i0 to i1 and horizontal line j0 to j1, each pair \
+                     increasing in value and within s {s0}..{s1}, t {t0}..{t1}",
+                    k + 1,
+                    i0 + 1,
+                    j0 + 1,
+                    i1 + 1,
+                    j1 + 1
+                ),
+            ));
         }
     }
     // Segments end on perpendicular lines (no loose ends). Each end as (i, j).

@@ -146,27 +146,25 @@ pub fn tool_rate(block: &CommandBlock, t: f64) -> [f64; 3] {
 /// The second derivative of a surface block's tool reference point `M` with respect to
 /// the contact path's length at `t` of its pass (`d²M/ds²`, 1/mm): the tool point's
 /// acceleration per squared contact speed when the contact speed is steady. One-sided
-/// differences of 1e-3 into the block (second order in `M` and in the contact speed);
-/// zero where the contact point stands still. Where the surface is only C² (every knot
-/// of a cubic) it jumps between two blocks that meet: `M` involves the normal, so its
-/// second derivative involves the surface's third. Reference evaluators: not for the
-/// cycle.
+/// differences into the block, second order (`(2M₀ − 5M₁ + 4M₂ − M₃)/h²`, and
+/// `(−3x₀ + 4x₁ − x₂)/2h` for `M'` and the contact speed), with steps of 0.01 mm of the
+/// contact path (at most a fifth of the pass), so rounding stays near 1e-8/mm; zero
+/// where the contact point stands still. Where the surface is only C² (every knot of a
+/// cubic) it jumps between two blocks that meet: `M` involves the normal, so its second
+/// derivative involves the surface's third. Reference evaluators: not for the cycle.
 pub fn tool_rate2(block: &CommandBlock, t: f64) -> [f64; 3] {
-    let h = if t < 0.5 { 1e-3 } else { -1e-3 };
     let speed = |x: f64| norm(contact(block, x, &surface_at(block, x)).d1);
-    let (c0, c1, c2) = (speed(t), speed(t + h), speed(t + 2.0 * h));
-    let (m0, m1, m2) = (
-        eval(block, t).p,
-        eval(block, t + h).p,
-        eval(block, t + 2.0 * h).p,
-    );
+    let c0 = speed(t);
     if c0 <= 1e-12 {
         return [0.0; 3];
     }
+    let h = (0.01 / c0).min(0.2) * if t < 0.5 { 1.0 } else { -1.0 };
+    let (c1, c2) = (speed(t + h), speed(t + 2.0 * h));
+    let m: [[f64; 3]; 4] = core::array::from_fn(|k| eval(block, t + k as f64 * h).p);
     let dc = (-3.0 * c0 + 4.0 * c1 - c2) / (2.0 * h);
     [0, 1, 2].map(|i| {
-        let d1 = (-3.0 * m0[i] + 4.0 * m1[i] - m2[i]) / (2.0 * h);
-        let d2 = (m0[i] - 2.0 * m1[i] + m2[i]) / (h * h);
+        let d1 = (-3.0 * m[0][i] + 4.0 * m[1][i] - m[2][i]) / (2.0 * h);
+        let d2 = (2.0 * m[0][i] - 5.0 * m[1][i] + 4.0 * m[2][i] - m[3][i]) / (h * h);
         (d2 - d1 * dc / c0) / (c0 * c0)
     })
 }

@@ -108,10 +108,9 @@ pub fn check_part(name: &str, text: &str, machine: &shared::Machine) -> Result<S
         if let Some(t) = &sf.t_spline {
             let _ = writeln!(
                 o,
-                "    surface #{}: {}T-spline, degree 3, {} control points, {} T-junction{}; \
+                "    surface #{}: T-spline, degree 3, {} control points, {} T-junction{}; \
                  T-region {} of {}: {} x {} Bézier patches",
                 sf.id,
-                if sf.rational { "rational " } else { "" },
                 t.points,
                 t.t_junctions,
                 if t.t_junctions == 1 { "" } else { "s" },

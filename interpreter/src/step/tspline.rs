@@ -10,14 +10,17 @@
 //!     control_points,                 -- (#CARTESIAN_POINT, …)
 //!     weights,                        -- (reals), or $ for all 1
 //!     anchors,                        -- ((i, j), …): each point's vertex
-//!     s_local_knots, t_local_knots)   -- ((5 reals), …) each, or $ to derive them
+//!     s_local_knots, t_local_knots,   -- ((5 reals), …) each, or $ to derive them
+//!     t_image_holes)                  -- ((i0, j0, i1, j1), …), or $ or left out
 //! ```
 //!
 //! Line indices count from 1, as EXPRESS lists do: `s_segments` entry `(5, 3, 7)` is the
 //! piece of vertical line 5 (the fifth value of `s_knot_lines`) from horizontal line 3 to
 //! 7; an anchor `(i, j)` is the crossing of vertical line `i` and horizontal line `j`.
 //! The two outermost lines on each side are whole without being listed and carry no
-//! points. Degrees must be 3. The local knots, when given, must be the ones the T-mesh's
+//! points. A hole `(i0, j0, i1, j1)` leaves the rectangle between vertical lines `i0`
+//! and `i1` and horizontal lines `j0` and `j1` out of the T-image: not machined, and the
+//! UV passes go round it in T-regions. Degrees must be 3. The local knots, when given, must be the ones the T-mesh's
 //! rays give; each problem names the control point (its place in the list and its
 //! instance).
 
@@ -36,6 +39,7 @@ const WEIGHTS: usize = 8;
 const ANCHORS: usize = 9;
 const S_KNOTS: usize = 10;
 const T_KNOTS: usize = 11;
+const HOLES: usize = 12;
 
 impl Ctx<'_> {
     fn reals(&self, inst: &Instance, p: &Param, what: &str) -> R<Vec<f64>> {
@@ -216,11 +220,21 @@ impl Ctx<'_> {
                 knots: sk.as_ref().zip(tk.as_ref()).map(|(s, t)| (s[k], t[k])),
             })
             .collect();
+        // Optional (a file without it has no holes).
+        let holes = match rec.params.get(HOLES).map(untyped) {
+            None | Some(Param::Unset) => Vec::new(),
+            Some(_) => self
+                .index_tuples(inst, rec, HOLES, "t_image_holes", 4)?
+                .into_iter()
+                .map(|t| [t[0], t[1], t[2], t[3]])
+                .collect(),
+        };
         let mesh = TMesh {
             s_lines,
             t_lines,
             s_segments,
             t_segments,
+            holes,
         };
         Ok((mesh, given, ids))
     }
@@ -237,7 +251,6 @@ impl Ctx<'_> {
     ) -> Result<Vec<StepSurface>, Vec<StepError>> {
         let ts = self.t_spline(inst, to_machine)?;
         let regions = crate::tspline::regions(&ts.covered(), along_s);
-        let rational = ts.points.iter().any(|p| p.ctrl[3] != 1.0);
         let t_junctions = ts.t_junctions();
         let count = regions.len();
         regions
@@ -247,6 +260,9 @@ impl Ctx<'_> {
                 let geometry = ts
                     .region_surface(r)
                     .map_err(|e| vec![err(inst, e.rule, e.message)])?;
+                // Rational where the patches' weights are not all 1: the file's weights,
+                // or blending functions that do not sum to 1 (a T-spline's may not).
+                let rational = geometry.ctrl.iter().any(|c| c[3] != 1.0);
                 let s = StepSurface {
                     id: inst.id,
                     line: inst.line,

@@ -24,6 +24,7 @@ fn tensor(
         t_lines: t_lines.to_vec(),
         s_segments: (2..=m - 2).map(|i| [i, 2, n - 2]).collect(),
         t_segments: (2..=n - 2).map(|j| [j, 2, m - 2]).collect(),
+        holes: Vec::new(),
     };
     let mut pts = Vec::new();
     for i in 2..=m - 2 {
@@ -129,9 +130,7 @@ fn the_extracted_patches_are_the_t_spline() {
     let (mesh, pts) = with_t_junctions();
     let ts = TSpline::new(mesh, pts).unwrap();
     assert_eq!(ts.t_junctions(), 2);
-    let covered = ts.covered();
-    assert!(covered.iter().flatten().all(|c| *c));
-    let regions = regions(&covered, true);
+    let regions = regions(&ts.covered(), true);
     assert_eq!(regions.len(), 1);
     let surf = ts.region_surface(&regions[0]).unwrap();
     surf.data().validate(1024).unwrap();
@@ -161,7 +160,8 @@ fn the_extracted_patches_are_the_t_spline() {
 
 #[test]
 fn the_rays_give_the_knots_beside_a_t_junction() {
-    let (mesh, _) = with_t_junctions();
+    let (mut mesh, _) = with_t_junctions();
+    mesh.sort();
     // The point at s = 40, t = 25 sees the short line at s = 50; the one at t = 0 does not.
     let (s, t) = mesh.ray_knots([5, 4]);
     assert_eq!(s, [0.0, 20.0, 40.0, 50.0, 60.0]);
@@ -310,4 +310,111 @@ fn t_regions_follow_the_seed_with_gaps_and_holes() {
             }
         }
     }
+}
+
+#[test]
+fn holes_leave_the_t_image_in_regions_and_bad_ones_are_named() {
+    // A hole in the mesh with T-junctions: lines s 40..60 (0-based 5..7), t 25..50 (4..5).
+    // Passes along s: the row below, two strips beside the hole, the row above.
+    let (mut mesh, pts) = with_t_junctions();
+    mesh.holes.push([5, 4, 7, 5]);
+    let ts = TSpline::new(mesh, pts.clone()).unwrap();
+    let (sl, tl) = ts.cell_lines();
+    assert_eq!(sl, [0.0, 20.0, 40.0, 50.0, 60.0, 80.0]);
+    assert_eq!(tl, [0.0, 25.0, 50.0, 75.0]);
+    let r = regions(&ts.covered(), true);
+    let want = [
+        Region {
+            s_cells: 0..5,
+            t_cells: 0..1,
+        },
+        Region {
+            s_cells: 0..2,
+            t_cells: 1..2,
+        },
+        Region {
+            s_cells: 4..5,
+            t_cells: 1..2,
+        },
+        Region {
+            s_cells: 0..5,
+            t_cells: 2..3,
+        },
+    ];
+    assert_eq!(r, want);
+    // Each region's surface is the T-spline there (1e-12 of the size, 80 mm).
+    let mut rng = Rng(5);
+    for reg in &r {
+        let surf = ts.region_surface(reg).unwrap();
+        let (u0, u1) = (sl[reg.s_cells.start], sl[reg.s_cells.end]);
+        let (v0, v1) = (tl[reg.t_cells.start], tl[reg.t_cells.end]);
+        for _ in 0..200 {
+            let (s, t) = (u0 + rng.next() * (u1 - u0), v0 + rng.next() * (v1 - v0));
+            let (p, _, _) = ts.eval(s, t);
+            let q = piegl_tiller_surface(&surf.data(), s, t).p;
+            assert!(close(p, q, 8e-11), "{reg:?} at ({s}, {t})");
+        }
+    }
+    // A hole past the last line, and one that leaves nothing.
+    let (mut mesh, _) = with_t_junctions();
+    mesh.holes.push([5, 4, 20, 5]);
+    let m = messages(TSpline::new(mesh, pts.clone()));
+    assert!(
+        m[0].contains("t_image_holes entry 1 (6, 5, 21, 6) is no rectangle of the domain"),
+        "{m:?}"
+    );
+    let (mut mesh, _) = with_t_junctions();
+    mesh.holes.push([3, 3, 8, 6]);
+    let m = messages(TSpline::new(mesh, pts));
+    assert!(m[0].contains("leave nothing of the T-image"), "{m:?}");
+}
+
+#[test]
+fn torn_lines_corners_and_too_many_spans_are_refused() {
+    // A value on four inner lines: blending functions that jump (a tear).
+    let s = [
+        0.0, 0.0, 0.0, 0.0, 10.0, 20.0, 20.0, 20.0, 20.0, 30.0, 40.0, 40.0, 40.0, 40.0,
+    ];
+    let (mesh, pts) = tensor(&s, &T_LINES, |_, _| 0.0);
+    let m = messages(TSpline::new(mesh, pts));
+    assert!(
+        m[0].contains("s_knot_lines repeat 20 on lines 6..=9: at most 3 times inside"),
+        "{m:?}"
+    );
+    // Three are a crease, and allowed.
+    let s = [
+        0.0, 0.0, 0.0, 0.0, 10.0, 20.0, 20.0, 20.0, 30.0, 40.0, 40.0, 40.0, 40.0,
+    ];
+    let (mesh, pts) = tensor(&s, &T_LINES, |_, _| 0.0);
+    TSpline::new(mesh, pts).unwrap();
+    // A corner inside: the row t = 50 (line 5) cut short where it meets the short line
+    // s = 50 (line 6), so the vertex there has only the edges left and down.
+    let (mut mesh, mut pts) = with_t_junctions();
+    mesh.t_segments.retain(|x| x[0] != 5);
+    mesh.t_segments.push([5, 2, 6]);
+    pts.retain(|p| p.anchor[1] != 5 || p.anchor[0] <= 6);
+    let m = messages(TSpline::new(mesh, pts));
+    assert!(
+        m.iter().any(|e| e.contains("vertex (7, 6) has 2 edges")),
+        "{m:?}"
+    );
+    // More spans than a region's surface can hold.
+    let s: Vec<f64> = [
+        vec![0.0; 3],
+        (0..=400).map(f64::from).collect(),
+        vec![400.0; 3],
+    ]
+    .concat();
+    let mesh = TMesh {
+        s_lines: s,
+        t_lines: T_LINES.to_vec(),
+        s_segments: Vec::new(),
+        t_segments: Vec::new(),
+        holes: Vec::new(),
+    };
+    let m = messages(TSpline::new(mesh, Vec::new()));
+    assert!(
+        m[0].contains("cut the domain into 400 spans; at most 341"),
+        "{m:?}"
+    );
 }
