@@ -501,12 +501,14 @@ impl TSpline {
     }
 
     /// `S`, `S_s` and `S_t` by the sum over the blending functions (module page): the
-    /// reference the Bézier patches are tested against. Spans are half-open, `[k, k')`.
+    /// reference the Bézier patches are tested against. Spans are half-open, `[k, k')`,
+    /// but on the domain's far edges the limit from inside.
     pub fn eval(&self, s: f64, t: f64) -> ([f64; 3], [f64; 3], [f64; 3]) {
+        let (_, s1, _, t1) = self.mesh.domain();
         let (mut a, mut a_s, mut a_t) = ([0.0f64; 4], [0.0f64; 4], [0.0f64; 4]);
         for p in &self.points {
-            let (ns, ds) = blend(&p.s_knots, s);
-            let (nt, dt) = blend(&p.t_knots, t);
+            let (ns, ds) = blend(&p.s_knots, s, s >= s1);
+            let (nt, dt) = blend(&p.t_knots, t, t >= t1);
             if ns == 0.0 && ds == 0.0 || nt == 0.0 && dt == 0.0 {
                 continue;
             }
@@ -793,14 +795,22 @@ fn check_mesh(mesh: &TMesh) -> Result<(), TError> {
 }
 
 /// The cubic B-spline on the five knots `k` and its derivative at `x` (the triangular
-/// scheme; half-open spans, `0/0 = 0`).
-pub fn blend(k: &[f64; 5], x: f64) -> (f64, f64) {
-    if x < k[0] || x >= k[4] {
+/// scheme, `0/0 = 0`), on spans `[k_r, k_r+1)`, or `(k_r, k_r+1]` when `left` (the limit
+/// from below, for the domain's far edge).
+pub fn blend(k: &[f64; 5], x: f64, left: bool) -> (f64, f64) {
+    let inside = |a: f64, b: f64| {
+        if left {
+            a < x && x <= b
+        } else {
+            a <= x && x < b
+        }
+    };
+    if !inside(k[0], k[4]) {
         return (0.0, 0.0);
     }
     let mut n = [0.0f64; 4];
     for r in 0..4 {
-        n[r] = if k[r] <= x && x < k[r + 1] { 1.0 } else { 0.0 };
+        n[r] = if inside(k[r], k[r + 1]) { 1.0 } else { 0.0 };
     }
     let frac = |num: f64, den: f64| if den > 0.0 { num / den } else { 0.0 };
     let mut quad = [0.0f64; 2];

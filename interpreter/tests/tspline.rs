@@ -265,3 +265,43 @@ fn element(text: &str, open: usize, n: usize) -> (usize, usize) {
     }
     panic!("no element {n}")
 }
+
+#[test]
+fn plane_cc_passes_cut_each_t_region_in_planes() {
+    // The example with PLANE_CC_STRATEGY: planes normal to y (its sideward direction,
+    // the third ratio read as 0). Each T-region's patches are intersected with the
+    // planes; every contact point of every pass lies in its plane within the chordal
+    // tolerance (1 µm) and on the T-spline itself.
+    let text = example("tspline-bump.stp");
+    let uv = "#81=UV_STRATEGY(.ZIGZAG.,.CLIMB.,#78,$,#79,#80);";
+    assert!(text.contains(uv));
+    let plane = text.replace(uv, "#81=PLANE_CC_STRATEGY(.ZIGZAG.,.CLIMB.,#78,$,#80);");
+    let planned = step::check::plan_part(&plane).unwrap();
+    assert_eq!(planned.len(), 2, "one pass set per T-region");
+    let (id, _) = instance_of(&plane, "T_SPLINE_SURFACE");
+    let ts = step::tspline::read(&step::parse(&plane).unwrap(), id).unwrap();
+    let mut points = 0;
+    for (st, path) in &planned {
+        let path = path.plane().expect("a plane path");
+        assert!(!path.passes.is_empty());
+        let surf = st.surface.data();
+        for pass in &path.passes {
+            for &(u, v) in &pass.uv {
+                let p = piegl_tiller_surface(&surf, u, v).p;
+                let n = path.normal;
+                let off = n[0] * p[0] + n[1] * p[1] + n[2] * p[2] - pass.level_mm;
+                assert!(off.abs() <= 1e-3, "{off} mm off its plane");
+                // The T-spline in the file's coordinates; the feature sits at (10, 10, 0).
+                let (q, _, _) = ts.eval(u, v);
+                let d = [p[0] - 10.0 - q[0], p[1] - 10.0 - q[1], p[2] - q[2]];
+                assert!(d.iter().all(|x| x.abs() < 1e-9), "{d:?} at ({u}, {v})");
+                points += 1;
+            }
+        }
+    }
+    assert!(points > 1000, "{points}");
+    // And it plans into blocks, both regions joined with lifts.
+    let (blocks, _) =
+        interpreter::surface_blocks::part_blocks(&plane, &Machine::default(), PERIOD_NS).unwrap();
+    assert!(blocks.iter().filter(|b| b.is_surface()).count() > 100);
+}
