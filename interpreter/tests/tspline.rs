@@ -61,6 +61,9 @@ fn the_example_parts_patches_are_its_t_spline() {
         })
         .collect();
     assert_eq!(regions, [(1, 2, (6, 5)), (2, 2, (5, 1))]);
+    // Every weight in the file is 1, but the blending functions need not sum to 1: the
+    // joined patches are rational, and `cnc check` says so.
+    assert!(steps.iter().all(|st| st.surface.rational));
     // The feature is placed 10 mm along x and y.
     let offset = [10.0, 10.0, 0.0];
     let mut rng = Rng(0x7e57);
