@@ -99,6 +99,16 @@ pub struct Contour {
     pub chord: Option<Worst>,
     /// The roundness, or why the path has none.
     pub roundness: Result<Roundness, String>,
+    /// Where the last set-point with a feedback row lies on the path: what follows it
+    /// never ran when the run stopped early.
+    pub reached: Option<Reached>,
+}
+
+/// A point of the commanded path: a block (by its `seq`) and a parameter on it.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Reached {
+    pub seq: u64,
+    pub u: f64,
 }
 
 /// One motion block with what the search needs, precomputed.
@@ -470,12 +480,17 @@ pub fn analyse(blocks: &[CommandBlock], t: &Traces) -> Contour {
         }
     });
     let roundness = roundness(&segs, &seg_of, t);
+    let reached = prev.map(|(sp_i, at)| Reached {
+        seq: segs[at].b.seq,
+        u: segs[at].closest(t.sp_pos_mm[sp_i]).1,
+    });
     Contour {
         error_um,
         max: worst,
         rms_um: (count > 0).then(|| (sum_sq / count as f64).sqrt()),
         chord,
         roundness,
+        reached,
     }
 }
 

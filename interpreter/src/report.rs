@@ -484,8 +484,14 @@ impl Report {
             ),
             _ => String::new(),
         };
+        // A surface part's speeds are those of the tool's reference point.
+        let centre = if self.max_scallop_mm.is_some() {
+            " (tool centre)"
+        } else {
+            ""
+        };
         let mut s = format!(
-            "{}: {}\n  program      {}\n  period       {} µs, {} cycles, {:.3} s machining ({} clock)\n  path         {:.3} mm, average feed {:.1} mm/min, peak {:.1} mm/min\n{chord}  servo        max following error {:.2} µm, {contour}\n  timing       {timing}\n  run dir      {}\n",
+            "{}: {}\n  program      {}\n  period       {} µs, {} cycles, {:.3} s machining ({} clock)\n  path         {:.3} mm, average feed {:.1} mm/min, peak {:.1} mm/min{centre}\n{chord}  servo        max following error {:.2} µm, {contour}\n  timing       {timing}\n  run dir      {}\n",
             self.outcome,
             match (self.fault.as_deref(), self.salvaged.as_deref()) {
                 (Some(f), _) => f,

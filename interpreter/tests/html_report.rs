@@ -744,3 +744,213 @@ fn the_feed_moves_set_the_feed_plot_s_scale() {
     let page = fs::read_to_string(html::write(&run, None).unwrap()).unwrap();
     assert!(page.contains("rapids, up to 10000 mm/min, run off the top"));
 }
+
+/// The SVG of the chart `id` in `page`.
+fn chart<'a>(page: &'a str, id: &str) -> &'a str {
+    let at = page
+        .find(&format!("id=\"{id}\""))
+        .unwrap_or_else(|| panic!("no {id}"));
+    &page[at..at + page[at..].find("</svg>").unwrap()]
+}
+
+/// The drawn length (px) of the polylines of `class` in `svg`.
+fn drawn_px(svg: &str, class: &str) -> f64 {
+    let tag = format!("class=\"{class}\" points=\"");
+    let mut total = 0.0;
+    for part in svg.split(&tag).skip(1) {
+        let pts: Vec<(f64, f64)> = part[..part.find('"').unwrap()]
+            .split(' ')
+            .map(|p| {
+                let (x, y) = p.split_once(',').unwrap();
+                (x.parse().unwrap(), y.parse().unwrap())
+            })
+            .collect();
+        total += pts
+            .windows(2)
+            .map(|w| (w[1].0 - w[0].0).hypot(w[1].1 - w[0].1))
+            .sum::<f64>();
+    }
+    total
+}
+
+/// A run stopped by a fault draws the rest of its path, which never ran, apart from
+/// what was cut, split where the last set-point lies; a run that completes has none.
+#[test]
+fn a_faulted_run_draws_the_path_that_never_ran_apart() {
+    let d = scratch("never-ran");
+    let machine = String::from_utf8(
+        Command::new(env!("CARGO_BIN_EXE_cnc"))
+            .arg("machine")
+            .output()
+            .unwrap()
+            .stdout,
+    )
+    .unwrap();
+    // A following-error limit of 5 µm: the polygon at F3000 trips it a quarter of the
+    // way round.
+    let tight: String = machine
+        .lines()
+        .map(|l| {
+            if l.starts_with("max_following_error_mm") {
+                "max_following_error_mm = 0.005\n".to_string()
+            } else {
+                format!("{l}\n")
+            }
+        })
+        .collect();
+    let mfile = d.join("tight.toml");
+    fs::write(&mfile, tight).unwrap();
+    let part = Path::new(env!("CARGO_MANIFEST_DIR")).join("../examples/cam-polygon.ngc");
+    let run = d.join("run");
+    let o = Command::new(env!("CARGO_BIN_EXE_cnc"))
+        .args(["run", "--clock", "sim", "--machine"])
+        .arg(&mfile)
+        .arg("--out")
+        .arg(&run)
+        .arg(&part)
+        .output()
+        .unwrap();
+    assert_eq!(
+        o.status.code(),
+        Some(1),
+        "{}",
+        String::from_utf8_lossy(&o.stdout)
+    );
+    let rep = report(&run);
+    assert_eq!(rep["outcome"], "fault");
+    let page = fs::read_to_string(html::write(&run, None).unwrap()).unwrap();
+    let plot = chart(&page, "path-plot");
+    assert!(plot.contains("never ran (after the stop)"));
+    // The share of the path drawn as cut is the share that ran: the run's path length
+    // over the polygon's (60 chords of a 100 mm circle), within 1 %.
+    let whole = 60.0 * 100.0 * (3.0f64).to_radians().sin();
+    let ran = rep["path_length_mm"].as_f64().unwrap() / whole;
+    let (cut, not_run) = (drawn_px(plot, "feed"), drawn_px(plot, "notrun"));
+    assert!(not_run > 0.0, "nothing drawn as never ran");
+    let drawn = cut / (cut + not_run);
+    assert!(
+        (drawn - ran).abs() < 0.01,
+        "drawn as cut {drawn:.4} of the path, ran {ran:.4}"
+    );
+    assert!(page.contains("the light grey rest of the path never ran"));
+
+    let done = circle_run("never-ran-done");
+    let page = fs::read_to_string(html::write(&done, None).unwrap()).unwrap();
+    assert!(!page.contains("class=\"notrun\""));
+}
+
+/// The path coloured by contour error: a second plot behind a switch that needs no
+/// script, its colour scale reaching the largest error of the summary, and drawn once
+/// per area of the path, however often the path goes over it.
+#[test]
+fn the_path_is_coloured_by_contour_error_behind_a_switch() {
+    let run = circle_run("by-error");
+    let page = fs::read_to_string(html::write(&run, None).unwrap()).unwrap();
+    assert!(page.contains("<input type=\"radio\" name=\"path-colour\" id=\"path-by-error\">"));
+    assert!(page.contains("#path-by-error:checked~.by-error{display:flex}"));
+    let plot = chart(&page, "path-error-plot");
+    assert!(drawn_px(plot, "feed") > 100.0, "no error path drawn");
+    // The scale's top label is at least the largest contour error.
+    let max = report(&run)["max_contour_error_um"].as_f64().unwrap();
+    let bar = &page[page
+        .find("aria-label=\"contour error (µm) colour scale\"")
+        .unwrap()..];
+    let bar = &bar[..bar.find("</svg>").unwrap()];
+    let top: f64 = bar
+        .rsplit("class=\"lg\">")
+        .next()
+        .unwrap()
+        .split('<')
+        .next()
+        .unwrap()
+        .parse()
+        .unwrap();
+    assert!(
+        top >= max && top <= 2.0 * max.max(1e-3),
+        "scale to {top}, max {max}"
+    );
+    // Each area of the path is drawn once: the circle run 19 times over (the synthetic
+    // long run) draws less than twice the length of once (19 times without the rule;
+    // a loop a fraction of a pixel off the others still finds a few cells new).
+    let d = run.parent().unwrap().join("long");
+    synthetic(&d, &run, 30_000);
+    let long = html::render(&d).unwrap();
+    let once = drawn_px(chart(&page, "path-error-plot"), "feed");
+    let many = drawn_px(chart(&long, "path-error-plot"), "feed");
+    assert!(many < 2.0 * once, "{many} px against {once} px");
+}
+
+/// A path that moves in three axes, and a STEP-NC part, get the isometric view and the
+/// three planes; the part its surface as a wireframe, the tool's tip on it, and the
+/// peak feed named as the tool centre's. A flat path gets none.
+#[test]
+fn paths_in_three_axes_and_surface_parts_get_a_3d_view() {
+    let d = scratch("view3d");
+    let prog = d.join("helix.ngc");
+    fs::write(
+        &prog,
+        "G21 G17 G90\nG0 X10 Y0 Z5\nG1 Z0 F600\nG3 X10 Y0 Z-3 I-10 J0 F1200\nG0 Z5\nM2\n",
+    )
+    .unwrap();
+    let run = d.join("helix");
+    run_sim(Some(&prog), &run);
+    let page = fs::read_to_string(html::write(&run, None).unwrap()).unwrap();
+    for id in ["iso-plot", "plane-xy", "plane-xz", "plane-yz"] {
+        assert!(drawn_px(chart(&page, id), "feed") > 50.0, "{id}: no path");
+    }
+    assert!(!page.contains("class=\"wire\""));
+    assert!(cell(&page, "peak_feed_mm_per_min").ends_with(" mm/min"));
+
+    let part = Path::new(env!("CARGO_MANIFEST_DIR")).join("../examples/torus-patch.stp");
+    let run = d.join("torus");
+    run_sim(Some(&part), &run);
+    let page = fs::read_to_string(html::write(&run, None).unwrap()).unwrap();
+    let iso = chart(&page, "iso-plot");
+    assert!(iso.contains("<g class=\"wire\">"), "no surface wireframe");
+    assert!(page.contains("The path is the tool's tip"));
+    // The passes lie on the surface: in the front view (XZ), the cut's lowest and
+    // highest drawn points are within the wireframe's Z range, widened by the ball's
+    // radius (3 mm) and a pixel.
+    let front = chart(&page, "plane-xz");
+    let ys = |class: &str| -> Vec<f64> {
+        let tag = format!("class=\"{class}\" points=\"");
+        let mut v = Vec::new();
+        for part in front.split(&tag).skip(1) {
+            for p in part[..part.find('"').unwrap()].split(' ') {
+                v.push(p.split_once(',').unwrap().1.parse().unwrap());
+            }
+        }
+        v
+    };
+    let wire_part = &front[front.find("<g class=\"wire\">").unwrap()..];
+    let wire_part = &wire_part[..wire_part.find("</g>").unwrap()];
+    let wire_y: Vec<f64> = wire_part
+        .split("points=\"")
+        .skip(1)
+        .flat_map(|p| {
+            p[..p.find('"').unwrap()]
+                .split(' ')
+                .map(|q| q.split_once(',').unwrap().1.parse::<f64>().unwrap())
+                .collect::<Vec<_>>()
+        })
+        .collect();
+    let cut = ys("feed");
+    let range = |v: &[f64]| {
+        v.iter()
+            .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), y| {
+                (a.min(*y), b.max(*y))
+            })
+    };
+    let (w, c) = (range(&wire_y), range(&cut));
+    // px per mm of the front view, from its Z tick labels is not at hand: the part is
+    // about 6 mm high and the view about 220 px for about 90 mm, so 3 mm is under 10 px.
+    assert!(
+        c.0 >= w.0 - 10.0 && c.1 <= w.1 + 10.0,
+        "cut at y {c:?} px, surface at {w:?} px"
+    );
+    assert!(cell(&page, "peak_feed_mm_per_min").contains("the tool's reference point"));
+
+    let flat = circle_run("view3d-flat");
+    let page = fs::read_to_string(html::write(&flat, None).unwrap()).unwrap();
+    assert!(!page.contains("id=\"view3d\""));
+}

@@ -32,6 +32,7 @@ pub mod polar;
 pub mod series;
 pub mod svg;
 pub mod timing;
+pub mod view3d;
 
 use std::fmt;
 use std::path::{Path, PathBuf};

@@ -4,7 +4,7 @@
 
 use super::data::{Report, Run};
 use super::svg::{esc, num};
-use super::{path, polar, series, timing};
+use super::{path, polar, series, timing, view3d};
 use std::fmt::Write;
 
 const CSS: &str = r#"
@@ -29,7 +29,11 @@ svg text{font-family:system-ui,sans-serif;fill:#111}
 .area{fill:#fff;stroke:#444}.grid{stroke:#d8d8d8;stroke-width:.6}.ring0{stroke:#000;stroke-width:1.4}
 .feed{fill:none;stroke-width:2;stroke-linejoin:round;stroke-linecap:round}
 .rapid{fill:none;stroke:#8a8a8a;stroke-width:1;stroke-dasharray:5 4}
+.notrun{fill:none;stroke:#c4c4c4;stroke-width:2;stroke-linejoin:round}
+.wire{fill:none;stroke:#8fa3b8;stroke-width:.8}
 .blk:hover .feed,.blk:hover .rapid{stroke-width:4}
+.switch{margin:6px 0;font-size:14px}.switch label{margin:0 14px 0 4px}
+.by-error{display:none}#path-by-error:checked~.by-error{display:flex}#path-by-error:checked~.by-feed{display:none}
 .mark text{font-size:12px;font-weight:600}
 @media print{body{background:#fff}main{padding:0}}
 "#;
@@ -37,9 +41,10 @@ svg text{font-family:system-ui,sans-serif;fill:#111}
 /// The whole page for `run`.
 pub fn page(run: &Run) -> String {
     let mut body = String::new();
-    path::section(run, &mut body);
-    series::motion(run, &mut body);
     let contour = contour_of(run);
+    path::section(run, contour.as_ref(), &mut body);
+    view3d::section(run, contour.as_ref(), &mut body);
+    series::motion(run, &mut body);
     let max_contour = series::errors(run, contour.as_ref(), &mut body);
     polar::section(contour.as_ref(), &mut body);
     timing::section(run, &mut body);
@@ -190,11 +195,24 @@ fn summary(run: &Run, max_contour: Option<f64>, out: &mut String) {
         "average feed",
         &or_missing(r.avg_feed_mm_per_min, |v| format!("{v:.1} mm/min")),
     );
+    // A STEP-NC part's blocks command the tool's reference point, whose speed is the
+    // feed's only where the surface is level: over a convex part it runs faster than F.
+    let surface = run.motion().any(|b| b.is_surface());
     row(
         out,
         "peak_feed_mm_per_min",
-        "peak feed",
-        &or_missing(r.peak_feed_mm_per_min, |v| format!("{v:.1} mm/min")),
+        if surface {
+            "peak feed (of the tool's centre)"
+        } else {
+            "peak feed"
+        },
+        &or_missing(r.peak_feed_mm_per_min, |v| {
+            if surface {
+                format!("{v:.1} mm/min (the tool's reference point; the programmed feed is the contact point's, so over a convex surface the centre runs faster)")
+            } else {
+                format!("{v:.1} mm/min")
+            }
+        }),
     );
     row(
         out,

@@ -19,14 +19,17 @@ pub const FEED_COLOURS: [&str; 10] = [
     "#440154", "#482878", "#3e4989", "#31688e", "#26828e", "#1f9e89", "#35b779", "#6ece58",
     "#9fd838", "#c9e020",
 ];
-const AXIS: [&str; 3] = ["X", "Y", "Z"];
+pub const AXIS: [&str; 3] = ["X", "Y", "Z"];
 /// Most points the path may hold: about 1.5 MB of coordinates at most.
 const POINT_BUDGET: f64 = 120_000.0;
 /// Most `<title>` groups: more blocks are grouped, each group naming its line range.
 const GROUP_BUDGET: usize = 3_000;
 
-/// The plane to draw: the two axes with the largest extent (X, Y for a flat XY job), and
-/// whether the path leaves that plane (then the plot is a projection).
+/// How a point of the path is drawn: its two chart coordinates.
+pub type Proj<'a> = &'a dyn Fn([f64; 3]) -> (f64, f64);
+
+/// The plane to draw: the two axes with the largest extent of `pts` (X, Y for a flat XY
+/// job), and whether `pts` leave that plane (then the plot is a projection).
 pub fn plane(pts: &[[f64; 3]]) -> (usize, usize, bool) {
     let ext = extent(pts);
     let e = |i: usize| ext[i].1 - ext[i].0;
@@ -45,7 +48,7 @@ pub fn plane(pts: &[[f64; 3]]) -> (usize, usize, bool) {
     (a, b, e(third) > 1e-6)
 }
 
-fn extent(pts: &[[f64; 3]]) -> [(f64, f64); 3] {
+pub fn extent(pts: &[[f64; 3]]) -> [(f64, f64); 3] {
     let mut ext = [(f64::INFINITY, f64::NEG_INFINITY); 3];
     for p in pts {
         for i in 0..3 {
@@ -58,17 +61,22 @@ fn extent(pts: &[[f64; 3]]) -> [(f64, f64); 3] {
 /// Points on a block's curve at `n + 1` parameters evenly spaced over its domain.
 pub fn sample(b: &CommandBlock, n: usize) -> Vec<[f64; 3]> {
     let (u0, u1) = shared::path::domain(b);
+    sample_range(b, u0, u1, n)
+}
+
+/// Points on a block's curve at `n + 1` parameters evenly spaced over `[ua, ub]`.
+fn sample_range(b: &CommandBlock, ua: f64, ub: f64, n: usize) -> Vec<[f64; 3]> {
     (0..=n)
-        .map(|i| shared::path::eval(b, u0 + (u1 - u0) * i as f64 / n as f64).p)
+        .map(|i| shared::path::eval(b, ua + (ub - ua) * i as f64 / n as f64).p)
         .collect()
 }
 
-fn is_rapid(b: &CommandBlock) -> bool {
+pub fn is_rapid(b: &CommandBlock) -> bool {
     b.flags & FLAG_RAPID != 0
 }
 
 /// The highest feed limit of the cutting (non-rapid) blocks, for the colour scale.
-fn top_feed(run: &Run) -> f64 {
+pub fn top_feed(run: &Run) -> f64 {
     let f = run
         .motion()
         .filter(|b| !is_rapid(b))
@@ -93,8 +101,61 @@ fn planned(b: &CommandBlock, s: f64, l: f64, acc: f64) -> f64 {
     vf.min(up).min(down)
 }
 
-/// The path section: plot, colour scale and caption.
-pub fn section(run: &Run, out: &mut String) {
+/// Whether the run stopped before the end of its program (a fault, or a salvaged log).
+pub fn stopped_early(run: &Run) -> bool {
+    run.report
+        .as_ref()
+        .and_then(|r| r.outcome.as_deref())
+        .is_some_and(|o| o != "done")
+}
+
+/// Where a run that stopped early stopped on its motion blocks `blocks`: the index of
+/// the block and the parameter on it. What follows never ran. `None` for a run that ran
+/// to its end, or when the traces cannot tell.
+pub fn stop_point(
+    run: &Run,
+    contour: Option<&crate::contour::Contour>,
+    blocks: &[&CommandBlock],
+) -> Option<(usize, f64)> {
+    if !stopped_early(run) {
+        return None;
+    }
+    let r = contour?.reached?;
+    let i = blocks.iter().position(|b| b.seq == r.seq)?;
+    Some((i, r.u))
+}
+
+/// The path's styles.
+pub const RAPID: Style = Style {
+    color: "#8a8a8a",
+    width: 1.0,
+    dash: "5 4",
+};
+pub const NOT_RUN: Style = Style {
+    color: "#c4c4c4",
+    width: 2.0,
+    dash: "",
+};
+const PROGRAMMED: Style = Style {
+    color: "#000000",
+    width: 1.0,
+    dash: "2 3",
+};
+pub const FEED: Style = Style {
+    color: FEED_COLOURS[6],
+    width: 2.0,
+    dash: "",
+};
+
+/// Contour-error colours, from blue (small) to dark red (large).
+pub const ERROR_COLOURS: [&str; 10] = [
+    "#313695", "#4575b4", "#74add1", "#8fc3dc", "#d9c245", "#fdae61", "#f46d43", "#d73027",
+    "#a50026", "#67001f",
+];
+
+/// The path section: the path coloured by planned feed and, where the traces allow, by
+/// contour error (a switch without script), the colour scales and caption.
+pub fn section(run: &Run, contour: Option<&crate::contour::Contour>, out: &mut String) {
     out.push_str("<section id=\"path\"><h2>Path</h2>");
     let blocks: Vec<&CommandBlock> = run.motion().collect();
     let coarse: Vec<[f64; 3]> = blocks.iter().flat_map(|b| sample(b, 16)).collect();
@@ -110,73 +171,66 @@ pub fn section(run: &Run, out: &mut String) {
     } else {
         coarse
     };
-    let (a, b, projected) = plane(&pts);
-    let ext = extent(&pts);
-    let (mut xr, mut yr) = (
-        pad_range(ext[a].0, ext[a].1, false),
-        pad_range(ext[b].0, ext[b].1, false),
-    );
-    // Equal scale on both axes, plot area at most 760 × 700 px and at least 160 px high.
-    let (ex, ey) = (xr.1 - xr.0, yr.1 - yr.0);
-    let scale = (760.0 / ex).min(700.0 / ey);
-    let (pw, ph) = (ex * scale, (ey * scale).max(160.0));
-    let (pw, ph) = (pw.max(420.0), ph);
-    let (cx, cy) = ((xr.0 + xr.1) / 2.0, (yr.0 + yr.1) / 2.0);
-    let half = (pw / scale / 2.0, ph / scale / 2.0);
-    xr = (cx - half.0, cx + half.0);
-    yr = (cy - half.1, cy + half.1);
-    let title = format!(
-        "Path in the {}{} plane{}, colour = planned feed",
-        AXIS[a],
-        AXIS[b],
-        if projected { " (projection)" } else { "" }
-    );
-    let mut c = Chart::new(
+    // The plane is the feed moves' (a rapid up to a safe height does not make a flat
+    // part's plot a side view); their extent and the rapids' set the scale.
+    let feed_pts: Vec<[f64; 3]> = blocks
+        .iter()
+        .filter(|b| !is_rapid(b))
+        .flat_map(|b| sample(b, 16))
+        .collect();
+    let (a, b, _) = plane(if feed_pts.is_empty() { &pts } else { &feed_pts });
+    let third = extent(&pts)[3 - a - b];
+    let projected = third.1 - third.0 > 1e-6;
+    let (c, scale) = plane_chart(
         "path-plot",
-        &title,
-        &format!("{} (mm)", AXIS[a]),
-        &format!("{} (mm)", AXIS[b]),
-        xr,
-        yr,
+        &format!(
+            "Path in the {}{} plane{}, colour = planned feed",
+            AXIS[a],
+            AXIS[b],
+            if projected { " (projection)" } else { "" }
+        ),
+        (a, b),
+        &pts,
+        (760.0, 700.0),
     );
-    c.w = pw + c.ml + c.mr;
-    c.h = ph + c.mt + c.mb;
-    out.push_str("<div class=\"row\">");
-    c.open(out);
+    let proj = move |p: [f64; 3]| (p[a], p[b]);
+    let stop = stop_point(run, contour, &blocks);
     let top = top_feed(run);
-    if from_setpoints {
-        draw_setpoints(&c, &pts, (a, b), out);
-    } else {
-        draw_blocks(run, &c, &blocks, (a, b), scale, top, out);
+    let errors = (!from_setpoints)
+        .then(|| error_plot(run, contour, (a, b), &pts))
+        .flatten();
+    if errors.is_some() {
+        out.push_str("<div class=\"switch\"><input type=\"radio\" name=\"path-colour\" id=\"path-by-feed\" checked><label for=\"path-by-feed\">colour = planned feed</label> <input type=\"radio\" name=\"path-colour\" id=\"path-by-error\"><label for=\"path-by-error\">colour = contour error</label>");
     }
-    let programmed = Style {
-        color: "#000000",
-        width: 1.0,
-        dash: "2 3",
-    };
+    out.push_str("<div class=\"row by-feed\">");
+    c.open(out);
+    if from_setpoints {
+        draw_setpoints(&c, &pts, &proj, out);
+    } else {
+        draw_blocks(run, &c, &blocks, &proj, scale, top, stop, out);
+    }
     let compensated = !from_setpoints && !run.programmed.is_empty();
     if compensated {
-        draw_programmed(run, &c, (a, b), scale, out);
+        draw_programmed(run, &c, &proj, scale, out);
     }
     let mut marks = String::new();
-    markers(run, &c, (a, b), &pts, &mut marks);
-    let rapid = Style {
-        color: "#8a8a8a",
-        width: 1.0,
-        dash: "5 4",
-    };
-    let feed = Style {
-        color: FEED_COLOURS[6],
-        width: 2.0,
-        dash: "",
-    };
-    let mut legend = vec![("feed move (colour = feed)", feed), ("rapid (G0)", rapid)];
+    markers(run, &c, &proj, &pts, &mut marks);
+    let mut legend = vec![("feed move (colour = feed)", FEED), ("rapid (G0)", RAPID)];
     if compensated {
-        legend.push(("as programmed (before cutter compensation)", programmed));
+        legend.push(("as programmed (before cutter compensation)", PROGRAMMED));
+    }
+    if stop.is_some() {
+        legend.push(("never ran (after the stop)", NOT_RUN));
     }
     c.close_with(out, &legend, &marks);
-    colour_bar(top, out);
-    out.push_str("</div><p class=\"note\">");
+    colour_bar("feed (mm/min)", &FEED_COLOURS, top, out);
+    out.push_str("</div>");
+    let by_error = errors.is_some();
+    if let Some(e) = errors {
+        out.push_str(&e);
+        out.push_str("</div>");
+    }
+    out.push_str("<p class=\"note\">");
     if from_setpoints {
         out.push_str("commands.log is unusable, so the path is drawn through the set-points, without feed colours or source-line tooltips. ");
     } else {
@@ -189,10 +243,15 @@ pub fn section(run: &Run, out: &mut String) {
     if compensated {
         out.push_str("The program uses cutter radius compensation (G41/G42): the coloured path is the tool's centre, offset from the path as programmed, which the dotted black line shows. ");
     }
+    if stop.is_some() {
+        out.push_str("The run stopped before the end of its program: the light grey rest of the path never ran. ");
+    } else if stopped_early(run) && !from_setpoints {
+        out.push_str("The run stopped before the end of its program, but the traces cannot tell where on the path: the whole program is drawn. ");
+    }
     if projected {
         let _ = write!(
             out,
-            "The path also moves in {}: this is its projection onto the {}{} plane, the plane with the largest extent. ",
+            "The path also moves in {}: this is its projection onto the {}{} plane (see the 3D view below). ",
             AXIS[3 - a - b],
             AXIS[a],
             AXIS[b]
@@ -200,25 +259,187 @@ pub fn section(run: &Run, out: &mut String) {
     }
     let _ = write!(
         out,
-        "Feed colours are the planned speed along each block (feed limit, look-ahead start and end feeds, ramps at {} mm/s²).</p></section>",
+        "Feed colours are the planned speed along each block (feed limit, look-ahead start and end feeds, ramps at {} mm/s²).",
         num(run.machine.path_acc_mm_per_s2)
     );
+    if by_error {
+        out.push_str(" The contour-error colours are each cycle's measured position's distance to the commanded path (the figure of the summary), drawn at the measured position; a run of one colour spans at least a pixel and takes the largest error along it, so no single-cycle peak is lost.");
+    }
+    out.push_str("</p></section>");
 }
 
-fn draw_blocks(
+/// A chart of the plane `(a, b)` at equal scale on both axes, its plot area at most
+/// `max` px (and at least 160 px high, 420 px wide), framing `pts`; and its scale in
+/// px per mm.
+pub fn plane_chart(
+    id: &str,
+    title: &str,
+    (a, b): (usize, usize),
+    pts: &[[f64; 3]],
+    max: (f64, f64),
+) -> (Chart, f64) {
+    let ext = extent(pts);
+    fit_chart(
+        id,
+        title,
+        (&format!("{} (mm)", AXIS[a]), &format!("{} (mm)", AXIS[b])),
+        (ext[a], ext[b]),
+        max,
+    )
+}
+
+/// A chart at equal scale on both axes framing the ranges `xr`, `yr`, its plot area at
+/// most `max` px.
+pub fn fit_chart(
+    id: &str,
+    title: &str,
+    (xl, yl): (&str, &str),
+    (xr, yr): ((f64, f64), (f64, f64)),
+    max: (f64, f64),
+) -> (Chart, f64) {
+    let (mut xr, mut yr) = (pad_range(xr.0, xr.1, false), pad_range(yr.0, yr.1, false));
+    let (ex, ey) = (xr.1 - xr.0, yr.1 - yr.0);
+    let scale = (max.0 / ex).min(max.1 / ey);
+    let (pw, ph) = ((ex * scale).max(max.0.min(420.0)), (ey * scale).max(160.0));
+    let (cx, cy) = ((xr.0 + xr.1) / 2.0, (yr.0 + yr.1) / 2.0);
+    let half = (pw / scale / 2.0, ph / scale / 2.0);
+    xr = (cx - half.0, cx + half.0);
+    yr = (cy - half.1, cy + half.1);
+    let mut c = Chart::new(id, title, xl, yl, xr, yr);
+    c.w = pw + c.ml + c.mr;
+    c.h = ph + c.mt + c.mb;
+    (c, scale)
+}
+
+/// The path coloured by contour error: the measured positions of the cycles counted,
+/// with its own colour scale; `None` without a contour analysis or any counted cycle.
+fn error_plot(
+    run: &Run,
+    contour: Option<&crate::contour::Contour>,
+    (a, b): (usize, usize),
+    pts: &[[f64; 3]],
+) -> Option<String> {
+    let contour = contour?;
+    let fb = run.feedback.as_ref()?;
+    let top = contour.max.map(|w| w.um)?;
+    let top = super::svg::nice_ceil(top.max(1e-3));
+    let (c, _) = plane_chart(
+        "path-error-plot",
+        &format!(
+            "Path in the {}{} plane, colour = contour error (measured positions)",
+            AXIS[a], AXIS[b]
+        ),
+        (a, b),
+        pts,
+        (760.0, 700.0),
+    );
+    let mut out = String::from("<div class=\"row by-error\">");
+    c.open(&mut out);
+    // Cells of 1.5 px: each takes the largest error of the cycles in it (so no
+    // single-cycle peak is lost), and is drawn once, at its first cycle's position, in
+    // order of travel. The page grows with the area the path covers, not the run's
+    // length: a circle run a thousand times draws as once.
+    const CELL_PX: f64 = 1.5;
+    let bin = |um: f64| ((um / top * 10.0).floor().max(0.0) as usize).min(9);
+    let cell_of = |p: &[f64; 3]| {
+        (
+            (c.px(p[a]) / CELL_PX).floor() as i64,
+            (c.py(p[b]) / CELL_PX).floor() as i64,
+        )
+    };
+    let mut worst: std::collections::HashMap<(i64, i64), usize> = Default::default();
+    for (p, e) in fb.pos_mm.iter().zip(&contour.error_um) {
+        if let Some(um) = *e {
+            let w = worst.entry(cell_of(p)).or_insert(0);
+            *w = (*w).max(bin(um));
+        }
+    }
+    let mut drawn: std::collections::HashSet<(i64, i64)> = Default::default();
+    let mut line: Vec<(f64, f64)> = Vec::new();
+    let (mut line_bin, mut last_cell) = (0usize, None::<(i64, i64)>);
+    let mut last_px = (0.0, 0.0);
+    let flush = |line: &mut Vec<(f64, f64)>, bin: usize, out: &mut String| {
+        if line.len() >= 2 {
+            let _ = write!(
+                out,
+                "<polyline stroke=\"{}\" class=\"feed\" points=\"",
+                ERROR_COLOURS[bin]
+            );
+            for (x, y) in line.iter() {
+                let _ = write!(out, "{x:.1},{y:.1} ");
+            }
+            out.pop();
+            out.push_str("\"/>");
+        }
+        line.clear();
+    };
+    for (p, e) in fb.pos_mm.iter().zip(&contour.error_um) {
+        let cell = cell_of(p);
+        if e.is_none() || last_cell == Some(cell) {
+            if e.is_none() {
+                flush(&mut line, line_bin, &mut out);
+                last_cell = None;
+            }
+            continue;
+        }
+        let near =
+            last_cell.is_some_and(|l| (cell.0 - l.0).abs() <= 1 && (cell.1 - l.1).abs() <= 1);
+        let px = (c.px(p[a]), c.py(p[b]));
+        let from = last_px;
+        (last_cell, last_px) = (Some(cell), px);
+        if !drawn.insert(cell) {
+            flush(&mut line, line_bin, &mut out);
+            continue;
+        }
+        let k = worst[&cell];
+        if line.is_empty() || !near || k != line_bin {
+            // A new line starts at the point before, so the path stays joined.
+            flush(&mut line, line_bin, &mut out);
+            if near {
+                line.push(from);
+            }
+            line_bin = k;
+        }
+        line.push(px);
+    }
+    flush(&mut line, line_bin, &mut out);
+    let mut marks = String::new();
+    markers(run, &c, &move |p: [f64; 3]| (p[a], p[b]), pts, &mut marks);
+    c.close_with(
+        &mut out,
+        &[(
+            "measured position (colour = contour error)",
+            Style {
+                color: ERROR_COLOURS[7],
+                width: 2.0,
+                dash: "",
+            },
+        )],
+        &marks,
+    );
+    colour_bar("contour error (µm)", &ERROR_COLOURS, top, &mut out);
+    out.push_str("</div>");
+    Some(out)
+}
+
+/// Draws `blocks` in feed colours through `proj`; from `stop` on (a block and its
+/// parameter), in the never-ran style.
+#[allow(clippy::too_many_arguments)]
+pub fn draw_blocks(
     run: &Run,
     c: &Chart,
     blocks: &[&CommandBlock],
-    (a, b): (usize, usize),
+    proj: Proj,
     scale: f64,
     top: f64,
+    stop: Option<(usize, f64)>,
     out: &mut String,
 ) {
     let total_px: f64 = blocks.iter().map(|b| b.length_mm * scale).sum();
     let step_px = (total_px / POINT_BUDGET).max(3.0);
     let group = blocks.len().div_ceil(GROUP_BUDGET).max(1);
     let acc = run.machine.path_acc_mm_per_s2;
-    for chunk in blocks.chunks(group) {
+    for (g, chunk) in blocks.chunks(group).enumerate() {
         let (first, last) = (chunk[0], chunk[chunk.len() - 1]);
         out.push_str("<g class=\"blk\"><title>");
         if chunk.len() == 1 {
@@ -243,83 +464,127 @@ fn draw_blocks(
             );
         }
         out.push_str("</title>");
-        for blk in chunk {
-            draw_block(c, blk, (a, b), scale, step_px, top, acc, out);
+        for (k, blk) in chunk.iter().enumerate() {
+            let i = g * group + k;
+            let ran = match stop {
+                Some((at, _)) if i > at => Ran::Not,
+                Some((at, u)) if i == at => Ran::Until(u),
+                _ => Ran::All,
+            };
+            let d = Draw {
+                c,
+                proj,
+                scale,
+                step_px,
+                top,
+                acc,
+            };
+            d.block(blk, ran, out);
         }
         out.push_str("</g>");
     }
 }
 
-#[allow(clippy::too_many_arguments)]
-fn draw_block(
-    c: &Chart,
-    blk: &CommandBlock,
-    (a, b): (usize, usize),
+/// How much of a block ran.
+#[derive(Clone, Copy)]
+enum Ran {
+    All,
+    Until(f64),
+    Not,
+}
+
+/// What drawing a block needs.
+struct Draw<'a> {
+    c: &'a Chart,
+    proj: Proj<'a>,
     scale: f64,
     step_px: f64,
     top: f64,
     acc: f64,
-    out: &mut String,
-) {
-    let len_px = blk.length_mm * scale;
-    let n = ((len_px / step_px).ceil() as usize).clamp(1, 600);
-    let n = if blk.degree > 1 || len_px > 12.0 {
-        n.max(4)
-    } else {
-        n
-    };
-    let pts = sample(blk, n);
-    if is_rapid(blk) {
-        let xy: Vec<(f64, f64)> = pts.iter().map(|p| (p[a], p[b])).collect();
-        out.push_str("<polyline class=\"rapid\" points=\"");
-        push_points(c, &xy, out);
-        out.push_str("\"/>");
-        return;
-    }
-    // Arc length at each sample, scaled to the block's exact length.
-    let mut s = vec![0.0; pts.len()];
-    for i in 1..pts.len() {
-        let d = [0, 1, 2].map(|k| pts[i][k] - pts[i - 1][k]);
-        s[i] = s[i - 1] + shared::path::norm(d);
-    }
-    let chord = s.last().copied().unwrap_or(0.0);
-    let k = if chord > 0.0 {
-        blk.length_mm / chord
-    } else {
-        0.0
-    };
-    let bin = |i: usize| {
-        let v = planned(blk, s[i] * k, blk.length_mm, acc) * 60.0;
-        ((v / top * 10.0).floor().max(0.0) as usize).min(9)
-    };
-    let mut run_start = 0;
-    let mut cur = bin(0).max(bin(1.min(pts.len() - 1)));
-    for i in 1..pts.len() {
-        // The colour of a segment is that of its faster end.
-        let seg = bin(i - 1).max(bin(i));
-        if seg != cur {
-            emit(c, &pts[run_start..i], (a, b), cur, out);
-            run_start = i - 1;
-            cur = seg;
-        }
-    }
-    emit(c, &pts[run_start..], (a, b), cur, out);
 }
 
-fn emit(c: &Chart, pts: &[[f64; 3]], (a, b): (usize, usize), bin: usize, out: &mut String) {
-    let xy: Vec<(f64, f64)> = pts.iter().map(|p| (p[a], p[b])).collect();
-    let _ = write!(
-        out,
-        "<polyline stroke=\"{}\" class=\"feed\" points=\"",
-        FEED_COLOURS[bin]
-    );
-    push_points(c, &xy, out);
-    out.push_str("\"/>");
+impl Draw<'_> {
+    fn block(&self, blk: &CommandBlock, ran: Ran, out: &mut String) {
+        let (u0, u1) = shared::path::domain(blk);
+        let len_px = blk.length_mm * self.scale;
+        let n_for = |share: f64| {
+            let n = ((len_px * share / self.step_px).ceil() as usize).clamp(1, 600);
+            if blk.degree > 1 || len_px * share > 12.0 {
+                n.max(4)
+            } else {
+                n
+            }
+        };
+        let (done, rest) = match ran {
+            Ran::All => (Some((u0, u1)), None),
+            Ran::Not => (None, Some((u0, u1))),
+            Ran::Until(u) => (Some((u0, u)), Some((u, u1))),
+        };
+        let share = |(a, b): (f64, f64)| if u1 > u0 { (b - a) / (u1 - u0) } else { 1.0 };
+        if let Some(r) = rest {
+            let pts = sample_range(blk, r.0, r.1, n_for(share(r)));
+            let xy: Vec<(f64, f64)> = pts.iter().map(|p| (self.proj)(*p)).collect();
+            out.push_str("<polyline class=\"notrun\" points=\"");
+            push_points(self.c, &xy, out);
+            out.push_str("\"/>");
+        }
+        let Some(d) = done else {
+            return;
+        };
+        let pts = sample_range(blk, d.0, d.1, n_for(share(d)));
+        if is_rapid(blk) {
+            let xy: Vec<(f64, f64)> = pts.iter().map(|p| (self.proj)(*p)).collect();
+            out.push_str("<polyline class=\"rapid\" points=\"");
+            push_points(self.c, &xy, out);
+            out.push_str("\"/>");
+            return;
+        }
+        // Arc length at each sample, scaled to the block's exact length (for a block cut
+        // short, by its share of the parameter: near enough for a colour).
+        let mut s = vec![0.0; pts.len()];
+        for i in 1..pts.len() {
+            let d = [0, 1, 2].map(|k| pts[i][k] - pts[i - 1][k]);
+            s[i] = s[i - 1] + shared::path::norm(d);
+        }
+        let chord = s.last().copied().unwrap_or(0.0);
+        let k = if chord > 0.0 {
+            blk.length_mm * share(d) / chord
+        } else {
+            0.0
+        };
+        let bin = |i: usize| {
+            let v = planned(blk, s[i] * k, blk.length_mm, self.acc) * 60.0;
+            ((v / self.top * 10.0).floor().max(0.0) as usize).min(9)
+        };
+        let mut run_start = 0;
+        let mut cur = bin(0).max(bin(1.min(pts.len() - 1)));
+        for i in 1..pts.len() {
+            // The colour of a segment is that of its faster end.
+            let seg = bin(i - 1).max(bin(i));
+            if seg != cur {
+                self.emit(&pts[run_start..i], cur, out);
+                run_start = i - 1;
+                cur = seg;
+            }
+        }
+        self.emit(&pts[run_start..], cur, out);
+    }
+
+    fn emit(&self, pts: &[[f64; 3]], bin: usize, out: &mut String) {
+        let xy: Vec<(f64, f64)> = pts.iter().map(|p| (self.proj)(*p)).collect();
+        let _ = write!(
+            out,
+            "<polyline stroke=\"{}\" class=\"feed\" points=\"",
+            FEED_COLOURS[bin]
+        );
+        push_points(self.c, &xy, out);
+        out.push_str("\"/>");
+    }
 }
 
 /// Writes pixel coordinates, dropping points within half a pixel of the last one kept
 /// (the last point is always kept so blocks join).
-fn push_points(c: &Chart, xy: &[(f64, f64)], out: &mut String) {
+pub fn push_points(c: &Chart, xy: &[(f64, f64)], out: &mut String) {
     let mut last = (f64::NAN, f64::NAN);
     for (i, &(x, y)) in xy.iter().enumerate() {
         let p = (c.px(x), c.py(y));
@@ -337,7 +602,7 @@ fn push_points(c: &Chart, xy: &[(f64, f64)], out: &mut String) {
 
 /// The programmed path of a compensated program ([`Run::programmed`]): its feed moves,
 /// thin, black and dotted, over the tool's.
-fn draw_programmed(run: &Run, c: &Chart, (a, b): (usize, usize), scale: f64, out: &mut String) {
+fn draw_programmed(run: &Run, c: &Chart, proj: Proj, scale: f64, out: &mut String) {
     let total_px: f64 = run.programmed.iter().map(|b| b.length_mm * scale).sum();
     let step_px = (total_px / POINT_BUDGET).max(3.0);
     out.push_str(
@@ -350,7 +615,7 @@ fn draw_programmed(run: &Run, c: &Chart, (a, b): (usize, usize), scale: f64, out
     {
         let least = if blk.degree > 1 { 32 } else { 1 };
         let n = ((blk.length_mm * scale / step_px).ceil() as usize).clamp(least, 600);
-        let xy: Vec<(f64, f64)> = sample(blk, n).iter().map(|p| (p[a], p[b])).collect();
+        let xy: Vec<(f64, f64)> = sample(blk, n).iter().map(|p| proj(*p)).collect();
         out.push_str("<polyline fill=\"none\" stroke=\"#000\" stroke-width=\"1\" stroke-dasharray=\"2 3\" points=\"");
         push_points(c, &xy, out);
         out.push_str("\"/>");
@@ -358,15 +623,38 @@ fn draw_programmed(run: &Run, c: &Chart, (a, b): (usize, usize), scale: f64, out
     out.push_str("</g>");
 }
 
-fn draw_setpoints(c: &Chart, pts: &[[f64; 3]], (a, b): (usize, usize), out: &mut String) {
-    let xy: Vec<(f64, f64)> = pts.iter().map(|p| (p[a], p[b])).collect();
+fn draw_setpoints(c: &Chart, pts: &[[f64; 3]], proj: Proj, out: &mut String) {
+    let xy: Vec<(f64, f64)> = pts.iter().map(|p| proj(*p)).collect();
     out.push_str("<polyline class=\"feed\" stroke=\"#1f3b73\" points=\"");
     push_points(c, &xy, out);
     out.push_str("\"/>");
 }
 
-/// Start (open circle), end (filled square), or where a faulted run stopped (a cross).
-fn markers(run: &Run, c: &Chart, (a, b): (usize, usize), pts: &[[f64; 3]], out: &mut String) {
+/// A label beside the point `(x, y)` (px) that stays inside the chart: to its right, or
+/// to its left (anchored at its end) when the right half of the chart has no room.
+fn label(c: &Chart, (x, y): (f64, f64), dy: f64, text: &str, out: &mut String) {
+    let room = c.w - c.mr - x;
+    let wide = 7.5 * text.chars().count() as f64 + 12.0;
+    if room >= wide {
+        let _ = write!(
+            out,
+            "<text x=\"{:.1}\" y=\"{:.1}\">{text}</text>",
+            x + 9.0,
+            y + dy
+        );
+    } else {
+        let _ = write!(
+            out,
+            "<text x=\"{:.1}\" y=\"{:.1}\" text-anchor=\"end\">{text}</text>",
+            x - 9.0,
+            y + dy
+        );
+    }
+}
+
+/// Start (open circle), end (filled square), or where a run that stopped early stopped
+/// (a cross).
+pub fn markers(run: &Run, c: &Chart, proj: Proj, pts: &[[f64; 3]], out: &mut String) {
     let sp = run
         .setpoints
         .as_ref()
@@ -375,48 +663,54 @@ fn markers(run: &Run, c: &Chart, (a, b): (usize, usize), pts: &[[f64; 3]], out: 
     let (Some(start), Some(end)) = (sp.first().or(pts.first()), sp.last().or(pts.last())) else {
         return;
     };
-    let fault = run
-        .report
-        .as_ref()
-        .and_then(|r| r.outcome.as_deref())
-        .is_some_and(|o| o != "done");
-    let (sx, sy) = (c.px(start[a]), c.py(start[b]));
-    let (ex, ey) = (c.px(end[a]), c.py(end[b]));
-    let _ = write!(
-        out,
-        r##"<g class="mark"><title>start</title><circle cx="{sx:.1}" cy="{sy:.1}" r="6" fill="none" stroke="#000" stroke-width="2"/><text x="{:.1}" y="{:.1}">start</text></g>"##,
-        sx + 9.0,
-        sy - 8.0
-    );
+    let fault = stopped_early(run);
+    let (s, e) = (proj(*start), proj(*end));
+    let (sx, sy) = (c.px(s.0), c.py(s.1));
+    let (ex, ey) = (c.px(e.0), c.py(e.1));
+    // A mark outside the plot area (a view framed on the cut) is left out.
+    let inside = |x: f64, y: f64| {
+        (c.ml - 1.0..=c.w - c.mr + 1.0).contains(&x) && (c.mt - 1.0..=c.h - c.mb + 1.0).contains(&y)
+    };
+    if inside(sx, sy) {
+        let _ = write!(
+            out,
+            r##"<g class="mark"><title>start</title><circle cx="{sx:.1}" cy="{sy:.1}" r="6" fill="none" stroke="#000" stroke-width="2"/>"##
+        );
+        label(c, (sx, sy), -8.0, "start", out);
+        out.push_str("</g>");
+    }
+    if !inside(ex, ey) {
+        return;
+    }
     if fault {
         let _ = write!(
             out,
-            r##"<g class="mark"><title>stopped here (fault)</title><path d="M{:.1} {:.1}l12 12m0 -12l-12 12" stroke="#b00020" stroke-width="3"/><text x="{:.1}" y="{:.1}">stopped (fault)</text></g>"##,
+            r##"<g class="mark"><title>stopped here (fault)</title><path d="M{:.1} {:.1}l12 12m0 -12l-12 12" stroke="#b00020" stroke-width="3"/>"##,
             ex - 6.0,
             ey - 6.0,
-            ex + 9.0,
-            ey + 16.0
         );
+        label(c, (ex, ey), 16.0, "stopped (fault)", out);
+        out.push_str("</g>");
     } else {
         let _ = write!(
             out,
-            r##"<g class="mark"><title>end</title><rect x="{:.1}" y="{:.1}" width="9" height="9" fill="#000"/><text x="{:.1}" y="{:.1}">end</text></g>"##,
+            r##"<g class="mark"><title>end</title><rect x="{:.1}" y="{:.1}" width="9" height="9" fill="#000"/>"##,
             ex - 4.5,
             ey - 4.5,
-            ex + 9.0,
-            ey + 16.0
         );
+        label(c, (ex, ey), 16.0, "end", out);
+        out.push_str("</g>");
     }
 }
 
-/// A vertical colour scale labelled in mm/min.
-fn colour_bar(top: f64, out: &mut String) {
+/// A vertical colour scale of `colours` from 0 to `top`, named `name` (with its unit).
+pub fn colour_bar(name: &str, colours: &[&str; 10], top: f64, out: &mut String) {
     let (h, y0) = (300.0, 46.0);
     let _ = write!(
         out,
-        r#"<svg class="chart" viewBox="0 0 130 380" width="130" height="380" role="img" aria-label="feed colour scale"><text x="4" y="30" class="lg">feed (mm/min)</text>"#
+        r#"<svg class="chart" viewBox="0 0 130 380" width="130" height="380" role="img" aria-label="{name} colour scale"><text x="4" y="30" class="lg">{name}</text>"#
     );
-    for (i, col) in FEED_COLOURS.iter().enumerate() {
+    for (i, col) in colours.iter().enumerate() {
         let y = y0 + h - (i as f64 + 1.0) * h / 10.0;
         let _ = write!(
             out,
@@ -431,7 +725,7 @@ fn colour_bar(top: f64, out: &mut String) {
             out,
             r##"<line x1="34" y1="{y:.1}" x2="40" y2="{y:.1}" stroke="#000"/><text x="44" y="{:.1}" class="lg">{}</text>"##,
             y + 4.0,
-            num(v.round())
+            if top >= 50.0 { num(v.round()) } else { num(v) }
         );
     }
     out.push_str("</svg>");

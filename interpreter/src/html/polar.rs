@@ -56,10 +56,10 @@ pub fn section(contour: Option<&Contour>, out: &mut String) {
         .fold(0.0, f64::max)
         .max(1e-3);
     let per_div = nice_ceil(maxabs / 3.0);
-    let (cx, cy, base, div) = (280.0, 326.0, 150.0, 36.0);
+    let (cx, cy, base, div) = (310.0, 326.0, 150.0, 36.0);
     let _ = write!(
         out,
-        r#"<section id="roundness"><h2>Roundness</h2><div class="row"><svg class="chart" id="polar-plot" viewBox="0 0 560 640" width="560" height="640" role="img" aria-labelledby="polar-t"><title id="polar-t">Radial deviation about the best-fit centre, magnified ({} µm per division)</title><text x="8" y="16" class="ttl">Radial deviation about the best-fit centre ({}{} plane)</text>"#,
+        r#"<section id="roundness"><h2>Roundness</h2><div class="row"><svg class="chart" id="polar-plot" viewBox="0 0 620 640" width="620" height="640" role="img" aria-labelledby="polar-t"><title id="polar-t">Radial deviation about the best-fit centre, magnified ({} µm per division)</title><text x="8" y="16" class="ttl">Radial deviation about the best-fit centre ({}{} plane)</text>"#,
         num(per_div),
         name[a],
         name[b]
@@ -79,15 +79,21 @@ pub fn section(contour: Option<&Contour>, out: &mut String) {
     for deg in (0..360).step_by(30) {
         let t = (deg as f64).to_radians();
         let (r0, r1) = (base - 3.0 * div, base + 3.0 * div + 6.0);
+        // Labels on the left and right run away from the circle, so they stay inside.
+        let anchor = match t.cos() {
+            c if c > 0.3 => "start",
+            c if c < -0.3 => "end",
+            _ => "middle",
+        };
         let _ = write!(
             out,
-            r#"<line x1="{:.1}" y1="{:.1}" x2="{:.1}" y2="{:.1}" class="grid"/><text x="{:.1}" y="{:.1}" class="tx">{deg}°</text>"#,
+            r#"<line x1="{:.1}" y1="{:.1}" x2="{:.1}" y2="{:.1}" class="grid"/><text x="{:.1}" y="{:.1}" class="tx" style="text-anchor:{anchor}">{deg}°</text>"#,
             cx + r0 * t.cos(),
             cy - r0 * t.sin(),
             cx + r1 * t.cos(),
             cy - r1 * t.sin(),
-            cx + (r1 + 12.0) * t.cos(),
-            cy - (r1 + 12.0) * t.sin() + 4.0
+            cx + (r1 + 4.0) * t.cos(),
+            cy - (r1 + 10.0) * t.sin() + 4.0
         );
     }
     let plot = |v: &[(f64, f64)], st: &super::svg::Style, out: &mut String| {

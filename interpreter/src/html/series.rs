@@ -152,8 +152,13 @@ pub fn motion(run: &Run, out: &mut String) {
             String::new()
         },
         peak.map_or(String::new(), |p| format!(
-            " Peak feed reported by the interpolator: {} mm/min.",
-            num(p.round())
+            " Peak feed reported by the interpolator: {} mm/min{}.",
+            num(p.round()),
+            if run.motion().any(|b| b.is_surface()) {
+                ", the speed of the tool's reference point (the programmed feed is the contact point's: over a convex surface the centre runs faster)"
+            } else {
+                ""
+            }
         ))
     );
 

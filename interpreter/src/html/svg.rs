@@ -163,6 +163,8 @@ pub struct Chart {
     /// Category names for a bar chart: category `i` is centred on `y = i + 0.5` and these
     /// names replace the numeric y ticks.
     pub y_cats: Vec<String>,
+    /// Grid, ticks and axis labels (off for a projection whose axes are not the chart's).
+    pub ticks: bool,
     pub w: f64,
     pub h: f64,
     pub ml: f64,
@@ -191,6 +193,7 @@ impl Chart {
             x_log: false,
             y_log: false,
             y_cats: Vec::new(),
+            ticks: true,
             w: 980.0,
             h: 300.0,
             ml: 78.0,
@@ -243,6 +246,10 @@ impl Chart {
             id = self.id,
             t = esc(&self.title)
         );
+        if !self.ticks {
+            let _ = write!(out, r#"<g clip-path="url(#{}-c)">"#, self.id);
+            return;
+        }
         let yb = mt + ph;
         for t in self.x_ticks() {
             let x = self.px(t);
