@@ -151,65 +151,108 @@ fn surrounded(p: [f64; 3], n: [f64; 3], r: f64, near: &[[f64; 3]]) -> bool {
     widest < std::f64::consts::PI
 }
 
-/// The measured scallop of a run whose command log holds `blocks`, from the machine's
-/// positions (tool reference points) every cycle; `None` for a run without surface
-/// blocks, or with more than one tool.
-pub fn measure(blocks: &[CommandBlock], positions: &[[f64; 3]]) -> Option<Scallop> {
-    let surface: Vec<&CommandBlock> = blocks.iter().filter(|b| b.is_surface()).collect();
-    let first = surface.first()?;
-    let (r, h) = (first.surface.tool_radius_mm, first.surface.tool_length_mm);
-    if surface
-        .iter()
-        .any(|b| b.surface.tool_radius_mm != r || b.surface.tool_length_mm != h)
-        || r <= 0.0
-    {
-        return None;
-    }
-    let lift = h - r;
-    let ball = |m: [f64; 3]| [m[0], m[1], m[2] - lift];
-    let centres = Centres::new(positions.iter().map(|m| ball(*m)));
-    // Each patch once (its control points and the side the tool is on).
-    let mut patches: Vec<&CommandBlock> = Vec::new();
-    let mut seen = std::collections::HashSet::new();
-    for b in &surface {
-        let key: Vec<u64> = b
-            .ctrl()
+/// What the measurement needs: the tool, the ball centres and the distinct patches.
+struct Setup<'a> {
+    r: f64,
+    centres: Centres,
+    patches: Vec<&'a CommandBlock>,
+}
+
+impl<'a> Setup<'a> {
+    /// `None` for a run without surface blocks, or with more than one tool.
+    fn new(blocks: &'a [CommandBlock], positions: &[[f64; 3]]) -> Option<Self> {
+        let surface: Vec<&CommandBlock> = blocks.iter().filter(|b| b.is_surface()).collect();
+        let first = surface.first()?;
+        let (r, h) = (first.surface.tool_radius_mm, first.surface.tool_length_mm);
+        if surface
             .iter()
-            .flatten()
-            .map(|x| x.to_bits())
-            .chain([b.degree as u64, b.surface.degree_v as u64])
-            .chain([b.surface.normal_sign as u64])
-            .collect();
-        if seen.insert(key) {
-            patches.push(b);
+            .any(|b| b.surface.tool_radius_mm != r || b.surface.tool_length_mm != h)
+            || r <= 0.0
+        {
+            return None;
         }
+        let lift = h - r;
+        let ball = |m: [f64; 3]| [m[0], m[1], m[2] - lift];
+        let centres = Centres::new(positions.iter().map(|m| ball(*m)));
+        // Each patch once (its control points and the side the tool is on).
+        let mut patches: Vec<&CommandBlock> = Vec::new();
+        let mut seen = std::collections::HashSet::new();
+        for b in &surface {
+            let key: Vec<u64> = b
+                .ctrl()
+                .iter()
+                .flatten()
+                .map(|x| x.to_bits())
+                .chain([b.degree as u64, b.surface.degree_v as u64])
+                .chain([b.surface.normal_sign as u64])
+                .collect();
+            if seen.insert(key) {
+                patches.push(b);
+            }
+        }
+        Some(Setup {
+            r,
+            centres,
+            patches,
+        })
     }
-    let mut near = Vec::new();
-    // The height at (u, v) of patch `b` and the point, where a ball reaches along the
-    // normal; with `judge`, only where the cut surrounds the point.
-    let mut height = |b: &CommandBlock, u: f64, v: f64, judge: bool| {
+
+    /// The height at `(u, v)` of patch `b` and the point, where a ball reaches along the
+    /// normal; with `judge`, only where the cut surrounds the point.
+    fn height(
+        &self,
+        b: &CommandBlock,
+        uv: (f64, f64),
+        judge: bool,
+        near: &mut Vec<[f64; 3]>,
+    ) -> Option<(f64, [f64; 3])> {
+        let (t, p, n) = self.probe(b, uv, near)?;
+        (!judge || surrounded(p, n, self.r, near)).then_some((t, p))
+    }
+
+    /// The height at `(u, v)` of patch `b`, the point and its normal (to the tool's
+    /// side), where a ball reaches along the normal; `near` is left holding the centres
+    /// near the point.
+    fn probe(
+        &self,
+        b: &CommandBlock,
+        (u, v): (f64, f64),
+        near: &mut Vec<[f64; 3]>,
+    ) -> Option<(f64, [f64; 3], [f64; 3])> {
+        let r = self.r;
         let e = piegl_tiller_surface(&path::patch(b), u, v);
         let sign = f64::from(b.surface.normal_sign);
         let n = e.normal.map(|x| x * sign);
         if path::norm(n) < 0.5 {
             return None;
         }
-        centres.near(
+        self.centres.near(
             [e.p[0] + r * n[0], e.p[1] + r * n[1], e.p[2] + r * n[2]],
-            &mut near,
+            near,
         );
-        let t = left_at(e.p, n, r, &near)?;
-        (!judge || surrounded(e.p, n, r, &near)).then_some((t, e.p))
-    };
+        Some((left_at(e.p, n, r, near)?, e.p, n))
+    }
+
+    /// The grid: `(u, v)` of each of its points on a patch.
+    fn grid() -> impl Iterator<Item = (f64, f64)> {
+        (0..=GRID)
+            .flat_map(|i| (0..=GRID).map(move |j| (i as f64 / GRID as f64, j as f64 / GRID as f64)))
+    }
+}
+
+/// The measured scallop of a run whose command log holds `blocks`, from the machine's
+/// positions (tool reference points) every cycle; `None` for a run without surface
+/// blocks, or with more than one tool.
+pub fn measure(blocks: &[CommandBlock], positions: &[[f64; 3]]) -> Option<Scallop> {
+    let setup = Setup::new(blocks, positions)?;
+    let patches = &setup.patches;
+    let mut near = Vec::new();
     // The grid: (height, patch, u, v) of every point a ball reaches.
     let mut found: Vec<(f64, usize, f64, f64)> = Vec::new();
     for (k, b) in patches.iter().enumerate() {
-        for i in 0..=GRID {
-            for j in 0..=GRID {
-                let (u, v) = (i as f64 / GRID as f64, j as f64 / GRID as f64);
-                if let Some((t, _)) = height(b, u, v, false) {
-                    found.push((t, k, u, v));
-                }
+        for (u, v) in Setup::grid() {
+            if let Some((t, _)) = setup.height(b, (u, v), false, &mut near) {
+                found.push((t, k, u, v));
             }
         }
     }
@@ -225,7 +268,7 @@ pub fn measure(blocks: &[CommandBlock], positions: &[[f64; 3]]) -> Option<Scallo
             break;
         }
         let b = patches[k];
-        let Some((t0, p0)) = height(b, u0, v0, true) else {
+        let Some((t0, p0)) = setup.height(b, (u0, v0), true, &mut near) else {
             continue;
         };
         refined += 1;
@@ -238,7 +281,7 @@ pub fn measure(blocks: &[CommandBlock], positions: &[[f64; 3]]) -> Option<Scallo
                 if !(0.0..=1.0).contains(&uu) || !(0.0..=1.0).contains(&vv) {
                     continue;
                 }
-                if let Some((t, p)) = height(b, uu, vv, true) {
+                if let Some((t, p)) = setup.height(b, (uu, vv), true, &mut near) {
                     if t > best {
                         (best, at, u, v) = (t, p, uu, vv);
                         moved = true;
@@ -258,6 +301,48 @@ pub fn measure(blocks: &[CommandBlock], positions: &[[f64; 3]]) -> Option<Scallo
         }
     }
     worst
+}
+
+/// One point of the scallop map: a grid point of the surface and the material left
+/// there (mm), `None` where the cut does not surround the point (the surface's edges
+/// outside the first and last passes), which is not judged.
+pub type MapPoint = ([f64; 3], Option<f64>);
+
+/// The scallop over the whole surface ([`map`]).
+#[derive(Debug, Clone)]
+pub struct ScallopMap {
+    /// Points a patch's grid has along each parameter.
+    pub grid: usize,
+    /// For each distinct patch, its `grid × grid` points row by row in `u` (`None` where
+    /// no ball reached along the normal).
+    pub patches: Vec<Vec<Option<MapPoint>>>,
+}
+
+/// The scallop over the whole surface, on a grid of about `budget` points in all (at
+/// least [`measure`]'s 33 × 33 a patch, at most 129 × 129): what the page draws as a
+/// map. The same measure as [`measure`]'s, not refined, so its largest value on the
+/// same grid is at most [`measure`]'s.
+pub fn map(blocks: &[CommandBlock], positions: &[[f64; 3]], budget: usize) -> Option<ScallopMap> {
+    let setup = Setup::new(blocks, positions)?;
+    let per_patch = budget / setup.patches.len().max(1);
+    let grid = ((per_patch as f64).sqrt() as usize).clamp(GRID + 1, 129);
+    let mut near = Vec::new();
+    let mut patches = Vec::new();
+    for b in &setup.patches {
+        patches.push(
+            (0..grid * grid)
+                .map(|k| {
+                    let uv = (
+                        (k / grid) as f64 / (grid - 1) as f64,
+                        (k % grid) as f64 / (grid - 1) as f64,
+                    );
+                    let (t, p, n) = setup.probe(b, uv, &mut near)?;
+                    Some((p, surrounded(p, n, setup.r, &near).then_some(t)))
+                })
+                .collect(),
+        );
+    }
+    Some(ScallopMap { grid, patches })
 }
 
 #[cfg(test)]
@@ -314,6 +399,50 @@ mod tests {
             got.at_mm[0] > 4.0 && got.at_mm[0] < 4.0 + 19.0 * w,
             "{got:?}"
         );
+    }
+
+    /// The map of the same passes: its judged heights reach the closed form between
+    /// passes without passing the measured maximum, and the surface outside the first
+    /// and last passes is not judged.
+    #[test]
+    fn the_map_of_parallel_passes_judges_only_between_them() {
+        let (r, h, w) = (3.0, 40.0, 0.6);
+        let b = flat_patch(r, h);
+        let mut positions = Vec::new();
+        for k in 0..20 {
+            let x = 4.0 + k as f64 * w;
+            for s in 0..=500 {
+                positions.push([x, s as f64 * 0.04, h]);
+            }
+        }
+        let blocks = [b];
+        let worst = measure(&blocks, &positions).unwrap();
+        let map = map(&blocks, &positions, 40_000).unwrap();
+        assert_eq!(map.patches.len(), 1);
+        assert_eq!(map.grid, 129);
+        let exact = r - (r * r - (w / 2.0).powi(2)).sqrt();
+        let points: Vec<MapPoint> = map.patches[0].iter().flatten().copied().collect();
+        let judged: Vec<(f64, f64)> = points
+            .iter()
+            .filter_map(|(p, t)| t.map(|t| (p[0], t)))
+            .collect();
+        let highest = judged.iter().map(|j| j.1).fold(0.0, f64::max);
+        assert!(
+            highest <= worst.max_mm + 1e-12,
+            "{highest} above {}",
+            worst.max_mm
+        );
+        // The grid (20/128 mm) falls within 0.08 mm of a crest: the height there is at
+        // least the crest's less that step's drop on the ball, (0.08)²/(2·3) mm.
+        assert!(highest > exact - 0.0011, "{highest} against {exact}");
+        for (x, _) in &judged {
+            assert!(*x > 4.0 && *x < 4.0 + 19.0 * w, "judged at x {x}");
+        }
+        // Beyond the outer passes (x < 3.5 or x > 15.9) the balls reach the plane along
+        // its normal only within their radius: reached, but not judged.
+        assert!(points
+            .iter()
+            .any(|(p, t)| t.is_none() && (p[0] < 3.9 || p[0] > 15.5)));
     }
 
     /// Without positions near the surface nothing is surrounded: no figure.

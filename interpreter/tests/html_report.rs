@@ -881,8 +881,8 @@ fn the_path_is_coloured_by_contour_error_behind_a_switch() {
 }
 
 /// A path that moves in three axes, and a STEP-NC part, get the isometric view and the
-/// three planes; the part its surface as a wireframe, the tool's tip on it, and the
-/// peak feed named as the tool centre's. A flat path gets none.
+/// three planes; the part its surface as a wireframe, the tool's tip on it, the peak
+/// feed named as the tool centre's, and a scallop map. A flat path gets none of them.
 #[test]
 fn paths_in_three_axes_and_surface_parts_get_a_3d_view() {
     let d = scratch("view3d");
@@ -949,8 +949,14 @@ fn paths_in_three_axes_and_surface_parts_get_a_3d_view() {
         "cut at y {c:?} px, surface at {w:?} px"
     );
     assert!(cell(&page, "peak_feed_mm_per_min").contains("the tool's reference point"));
+    // The scallop map: cells over the part, the summary's largest scallop marked.
+    let map = chart(&page, "scallop-map");
+    assert!(map.matches("<rect ").count() > 100, "no scallop cells");
+    let measured = report(&run)["measured_max_scallop_mm"].as_f64().unwrap();
+    assert!(map.contains(&format!("max {:.2} µm", measured * 1e3)));
 
     let flat = circle_run("view3d-flat");
     let page = fs::read_to_string(html::write(&flat, None).unwrap()).unwrap();
     assert!(!page.contains("id=\"view3d\""));
+    assert!(!page.contains("id=\"scallop\""));
 }

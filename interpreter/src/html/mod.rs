@@ -29,6 +29,7 @@ pub mod data;
 pub mod page;
 pub mod path;
 pub mod polar;
+pub mod scallop;
 pub mod series;
 pub mod svg;
 pub mod timing;

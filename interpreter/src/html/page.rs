@@ -4,7 +4,7 @@
 
 use super::data::{Report, Run};
 use super::svg::{esc, num};
-use super::{path, polar, series, timing, view3d};
+use super::{path, polar, scallop, series, timing, view3d};
 use std::fmt::Write;
 
 const CSS: &str = r#"
@@ -44,6 +44,7 @@ pub fn page(run: &Run) -> String {
     let contour = contour_of(run);
     path::section(run, contour.as_ref(), &mut body);
     view3d::section(run, contour.as_ref(), &mut body);
+    scallop::section(run, &mut body);
     series::motion(run, &mut body);
     let max_contour = series::errors(run, contour.as_ref(), &mut body);
     polar::section(contour.as_ref(), &mut body);
