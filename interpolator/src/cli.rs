@@ -109,11 +109,13 @@ pub fn latency_test(args: &LatencyArgs) -> anyhow::Result<()> {
 /// Runs the interpolator process; the error names what went wrong.
 pub fn run(args: &Args) -> anyhow::Result<()> {
     shared::stop::install_handler();
+    let machine = shared::machine::load(args.machine.as_deref()).map_err(anyhow::Error::msg)?;
+    shared::machine::log_in_force("interpolator", args.machine.as_deref(), &machine);
     let cfg = Config {
         prefix: args.prefix.clone(),
         out_dir: args.out.clone(),
         period_ns: args.period_us * 1000,
-        machine: shared::machine::load(args.machine.as_deref()).map_err(anyhow::Error::msg)?,
+        machine,
         sched: args.sched,
         rt_priority: args.rt_priority,
         clock: args.clock,

@@ -3,7 +3,7 @@
 //! latency-test and cyclictest do. The result is written where later runs find it
 //! ([`default_path`]) and their deadline report compares its lateness with this floor.
 
-use crate::rt::sched::{self, SchedMode, SchedReport};
+use crate::rt::sched::{self, words as sched_words, SchedMode, SchedReport};
 use crate::timing::{Bucket, Histogram, Percentiles};
 use serde::{Deserialize, Serialize};
 use shared::clock::{now_ns, sleep_until_ns};
@@ -120,24 +120,6 @@ pub fn us(ns: u64) -> String {
     } else {
         format!("{:.1} ms", ns as f64 / 1e6)
     }
-}
-
-/// The scheduling in force, in words.
-pub fn sched_words(s: &SchedReport) -> String {
-    let mut t = match s.policy.as_str() {
-        "fifo" => format!("SCHED_FIFO priority {}", s.priority),
-        "other" => "SCHED_OTHER (not real-time)".to_string(),
-        p => p.to_string(),
-    };
-    t.push_str(if s.memory_locked {
-        ", memory locked"
-    } else {
-        ", memory not locked"
-    });
-    if let Some(cpu) = s.cpu {
-        t.push_str(&format!(", pinned to CPU {cpu}"));
-    }
-    t
 }
 
 /// Measures wake-up lateness for `seconds` at `period_ns` on a thread of its own, with the
