@@ -5,6 +5,7 @@
 //! drain thread and the preemptor test aid allocate freely, off the cycle).
 
 use interpolator::engine::{BlockSource, Engine, Fault, Limits, TickState};
+use interpolator::rt::latency::{Live, Tally, LIVE_BINS};
 use interpolator::rt::preempt::Preemptor;
 use interpolator::rt::received::{self, Receipts};
 use interpolator::summary::{FaultRecord, FeedStats};
@@ -198,6 +199,27 @@ fn cycle_work_does_not_allocate() {
         ][((m.cycle / 100) % 5) as usize];
         assert_eq!((m.cycle % 100, m.cause), (0, want));
     }
+}
+
+/// `cnc latency-test`'s measuring loop keeps the result's histogram and the live figures
+/// the display reads, per wake-up, without allocating.
+#[test]
+fn latency_test_wake_ups_do_not_allocate() {
+    let live = std::sync::Arc::new(Live::default());
+    let mut tally = Tally::new(1_000_000, live.clone());
+    arm(true);
+    for k in 0..100_000u64 {
+        // Lateness across every live bin, up to 10 ms.
+        tally.record((k * 7_919) % 10_000_000);
+    }
+    arm(false);
+    let allocs = count();
+    let f = live.snapshot();
+    assert_eq!(f.wakeups, 100_000);
+    assert_eq!(f.bins.iter().sum::<u64>(), 100_000);
+    assert!(f.bins.iter().all(|n| *n > 0), "{:?}", f.bins);
+    assert_eq!(f.bins.len(), LIVE_BINS);
+    assert_eq!(allocs, 0, "{allocs} allocations in 100 000 wake-ups");
 }
 
 #[test]

@@ -2,7 +2,8 @@
 //! `cnc run --clock sim`, read back as an integrator would. `info` has each process's
 //! start-up (with its scheduling), the machine file in force with its hash, and how
 //! each ended; `debug` adds the shared-memory services each opened and every block, as the
-//! interpreter published it and as the interpolator received it.
+//! interpreter published it and as the interpolator received it. `cnc latency-test` into a
+//! pipe prints plain progress lines while it measures.
 
 use std::fs;
 use std::path::{Path, PathBuf};
@@ -165,4 +166,45 @@ fn a_fault_is_an_error_that_names_its_cause() {
         1,
         "{log}"
     );
+}
+
+/// Into a pipe, `cnc latency-test` prints plain progress lines while it measures (here
+/// only the last, with the final figures, as the test is shorter than a second) and then
+/// its result, with no terminal escape codes.
+#[test]
+fn latency_test_into_a_pipe_prints_plain_progress_lines() {
+    let d = scratch("latency");
+    let out = d.join("latency.json");
+    let o = Command::new(env!("CARGO_BIN_EXE_cnc"))
+        .args([
+            "latency-test",
+            "--seconds",
+            "0.3",
+            "--sched",
+            "other",
+            "--out",
+        ])
+        .arg(&out)
+        .output()
+        .unwrap();
+    let text = String::from_utf8_lossy(&o.stdout);
+    assert!(
+        o.status.success(),
+        "{text}\n{}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    assert!(!text.contains('\u{1b}'), "escape codes in a pipe: {text:?}");
+    let progress = lines_with(
+        &text,
+        &["latency-test ", " s of 0.3 s: ", "wake-ups", "max"],
+    );
+    assert!(!progress.is_empty(), "{text}");
+    let last = progress.last().unwrap();
+    assert!(
+        last.starts_with("latency-test 0.3 s of 0.3 s: 300 wake-ups"),
+        "{text}"
+    );
+    // The result follows, as before, and is written.
+    assert!(text.contains("verdict"), "{text}");
+    assert!(out.exists());
 }
