@@ -74,7 +74,8 @@ pub struct LatencyArgs {
     pub out: Option<PathBuf>,
 }
 
-/// Runs the latency test, prints the result and writes it where runs find it.
+/// Runs the latency test, showing the running figures while it measures
+/// ([`crate::latency_screen`]), prints the result and writes it where runs find it.
 pub fn latency_test(args: &LatencyArgs) -> anyhow::Result<()> {
     if !(args.seconds > 0.0 && args.seconds <= 86_400.0) {
         anyhow::bail!(
@@ -86,12 +87,26 @@ pub fn latency_test(args: &LatencyArgs) -> anyhow::Result<()> {
         "cnc latency-test: measuring wake-up lateness for {} s at a {} µs period (no work per cycle)...",
         args.seconds, args.period_us
     );
-    let r = crate::rt::latency::measure(
+    // The running figures while it measures: redrawn in place on a terminal, a plain
+    // line a second into a pipe or a file.
+    use std::io::IsTerminal;
+    let stdout = std::io::stdout();
+    let terminal = stdout.is_terminal();
+    let mut screen = crate::latency_screen::Screen::new(
+        stdout.lock(),
+        terminal,
+        args.period_us * 1000,
+        args.seconds,
+    );
+    let r = crate::rt::latency::measure_live(
         args.period_us * 1000,
         args.seconds,
         args.sched,
         args.rt_priority,
+        screen.every(),
+        |f| screen.show(f),
     )?;
+    drop(screen);
     print!("{}", r.text());
     let path = args
         .out
@@ -109,11 +124,13 @@ pub fn latency_test(args: &LatencyArgs) -> anyhow::Result<()> {
 /// Runs the interpolator process; the error names what went wrong.
 pub fn run(args: &Args) -> anyhow::Result<()> {
     shared::stop::install_handler();
+    let machine = shared::machine::load(args.machine.as_deref()).map_err(anyhow::Error::msg)?;
+    shared::machine::log_in_force("interpolator", args.machine.as_deref(), &machine);
     let cfg = Config {
         prefix: args.prefix.clone(),
         out_dir: args.out.clone(),
         period_ns: args.period_us * 1000,
-        machine: shared::machine::load(args.machine.as_deref()).map_err(anyhow::Error::msg)?,
+        machine,
         sched: args.sched,
         rt_priority: args.rt_priority,
         clock: args.clock,

@@ -8,7 +8,8 @@
 //! compares with this machine's floor as `cnc latency-test` measured it. Under the
 //! simulated clock nothing was measured and both files say so.
 
-use crate::rt::latency::{self, sched_words, us, LatencyResult};
+use crate::rt::latency::{self, us, LatencyResult};
+use crate::rt::sched::words as sched_words;
 use crate::rt::sched::SchedReport;
 use crate::summary::MissEntry;
 use crate::timing::{Bucket, Histogram, Miss, MissCause, Percentiles, Timing};

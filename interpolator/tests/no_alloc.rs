@@ -5,7 +5,9 @@
 //! drain thread and the preemptor test aid allocate freely, off the cycle).
 
 use interpolator::engine::{BlockSource, Engine, Fault, Limits, TickState};
+use interpolator::rt::latency::{Live, Tally, LIVE_BINS};
 use interpolator::rt::preempt::Preemptor;
+use interpolator::rt::received::{self, Receipts};
 use interpolator::summary::{FaultRecord, FeedStats};
 use interpolator::timing::{CycleTimes, MissCause, Timing, MISS_RING};
 use shared::alloc_count::{arm, count, Counting};
@@ -24,6 +26,9 @@ struct Loop {
     block: CommandBlock,
     next_seq: u64,
     count: u64,
+    /// Each block handed out is noted for the received-block log, as the cycle's source
+    /// does.
+    receipts: Receipts,
 }
 
 impl BlockSource for Loop {
@@ -34,7 +39,9 @@ impl BlockSource for Loop {
         }
         self.next_seq += 1;
         if seq == self.count {
-            return Some(CommandBlock::empty(BlockKind::ProgramEnd, seq, 99));
+            let end = CommandBlock::empty(BlockKind::ProgramEnd, seq, 99);
+            self.receipts.note(&end, seq);
+            return Some(end);
         }
         let mut b = self.block;
         b.seq = seq;
@@ -43,6 +50,7 @@ impl BlockSource for Loop {
             (sp.uv_start, sp.uv_end) = (sp.uv_end, sp.uv_start);
             sp.uv_inner = [sp.uv_inner[1], sp.uv_inner[0]];
         }
+        self.receipts.note(&b, seq);
         Some(b)
     }
 }
@@ -85,10 +93,12 @@ fn cycle_work_does_not_allocate() {
         ..Limits::new(&shared::Machine::default(), 1_000_000)
     };
     let mut engine = Engine::new(lim, [0.0; 3]);
+    let (receipts, receipt_log) = received::start().unwrap();
     let mut src = Loop {
         block: closed_curve(),
         next_seq: 0,
         count: 400,
+        receipts,
     };
     let (mut timing, mut miss_log) = Timing::new(1_000_000, MISS_RING);
     miss_log.start().unwrap();
@@ -170,6 +180,9 @@ fn cycle_work_does_not_allocate() {
     trace.finish().unwrap();
     let _ = std::fs::remove_file(&path);
     let misses = miss_log.finish();
+    // Every block taken reached the received-block log's thread.
+    assert_eq!(receipt_log.finish(&src.receipts), src.next_seq);
+    assert_eq!(src.receipts.lost(), 0);
     assert!(cycles >= 100_000, "only {cycles} cycles");
     assert_eq!(allocs, 0, "{allocs} allocations in {cycles} cycles");
     // Every miss was kept, each with its cause.
@@ -188,6 +201,27 @@ fn cycle_work_does_not_allocate() {
     }
 }
 
+/// `cnc latency-test`'s measuring loop keeps the result's histogram and the live figures
+/// the display reads, per wake-up, without allocating.
+#[test]
+fn latency_test_wake_ups_do_not_allocate() {
+    let live = std::sync::Arc::new(Live::default());
+    let mut tally = Tally::new(1_000_000, live.clone());
+    arm(true);
+    for k in 0..100_000u64 {
+        // Lateness across every live bin, up to 10 ms.
+        tally.record((k * 7_919) % 10_000_000);
+    }
+    arm(false);
+    let allocs = count();
+    let f = live.snapshot();
+    assert_eq!(f.wakeups, 100_000);
+    assert_eq!(f.bins.iter().sum::<u64>(), 100_000);
+    assert!(f.bins.iter().all(|n| *n > 0), "{:?}", f.bins);
+    assert_eq!(f.bins.len(), LIVE_BINS);
+    assert_eq!(allocs, 0, "{allocs} allocations in 100 000 wake-ups");
+}
+
 #[test]
 fn controlled_stop_does_not_allocate() {
     let lim = Limits {
@@ -200,6 +234,7 @@ fn controlled_stop_does_not_allocate() {
         block: closed_curve(),
         next_seq: 0,
         count: 40,
+        receipts: Receipts::off(),
     };
     // The peer watch the cycle reads (its thread allocates freely, off the cycle).
     let prefix = format!("noalloc{}", std::process::id());
@@ -293,6 +328,7 @@ fn surface_cycles_of(block: CommandBlock) {
         block,
         next_seq: 0,
         count: 70,
+        receipts: Receipts::off(),
     };
     arm(true);
     let mut cycles = 0u64;

@@ -285,6 +285,7 @@ pub fn run_interpreter_streaming(
         Ok(m) => m,
         Err(e) => return fail(e),
     };
+    shared::machine::log_in_force("interpreter", common.machine.as_deref(), &machine);
     shared::stop::install_handler();
     let cfg = process::Config {
         prefix: common.prefix.clone(),

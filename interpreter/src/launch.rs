@@ -338,6 +338,7 @@ fn run_inner(args: &RunArgs) -> Result<bool, String> {
         );
     }
     let machine = shared::machine::load(args.machine.as_deref())?;
+    shared::machine::log_in_force("cnc run", args.machine.as_deref(), &machine);
     machine.check_period(args.period_us)?;
     let src = Source::load(args.program.as_deref())?;
     let period_ns = args.period_us * 1000;
@@ -578,6 +579,7 @@ impl Stack {
             let mut a = common.clone();
             a.extend(extra);
             let child = spawn(&exe, name, &a).map_err(|e| format!("starting the {name}: {e}"))?;
+            tracing::debug!(process = %name, pid = child.id(), "process started");
             roles.push(Role::new(name, child));
             Ok(())
         };
@@ -662,6 +664,11 @@ impl Stack {
         rep.memory = roles.iter().filter_map(|r| r.memory.clone()).collect();
         rep.write(&dir.join("report.json"))
             .map_err(|e| format!("writing report.json: {e}"))?;
+        match (&rep.fault, interrupted()) {
+            (None, _) => tracing::info!(outcome = %rep.outcome, "run over"),
+            (Some(f), Some(_)) => tracing::info!(outcome = %rep.outcome, "run stopped: {f}"),
+            (Some(f), None) => tracing::error!(outcome = %rep.outcome, "run failed: {f}"),
+        }
         say(&rep.summary_text(dir));
         if let Some(line) = interpolator::deadline::summary_line(dir) {
             say(&format!("  deadlines    {line}\n"));
@@ -832,6 +839,10 @@ fn stop_all(roles: &mut [Role]) {
         std::thread::sleep(Duration::from_millis(5));
     }
     for r in roles.iter_mut().filter(|r| r.exit.is_none()) {
+        tracing::error!(
+            process = %r.name,
+            "process did not stop within 3 s of SIGTERM: killed"
+        );
         let _ = r.child.kill();
         r.exit = r.child.wait().ok();
     }
@@ -862,6 +873,15 @@ fn supervise(roles: &mut [Role], mut progress: Option<&mut Progress>) -> Option<
             if let Ok(Some(status)) = r.child.try_wait() {
                 r.exit = Some(status);
                 last_exit = Some(Instant::now());
+                if status.success() {
+                    tracing::debug!(process = %r.name, "process finished");
+                } else {
+                    tracing::warn!(
+                        process = %r.name,
+                        exit = %exit_text(Some(status)),
+                        "process failed; the others stop by themselves"
+                    );
+                }
                 if !status.success() && fault.is_none() {
                     fault = Some(format!("{} failed ({})", r.name, exit_text(Some(status))));
                     failed_at = Some(Instant::now());
@@ -876,6 +896,10 @@ fn supervise(roles: &mut [Role], mut progress: Option<&mut Progress>) -> Option<
         // exit by themselves. Without an interpolator there is nothing moving to brake.
         if let (Some(sig), None) = (interrupted(), operator_stop) {
             operator_stop = Some(Instant::now());
+            tracing::info!(
+                signal = sig,
+                "operator stop (signal {sig}): passed to the interpolator, which brakes on the path"
+            );
             match roles
                 .iter()
                 .find(|r| r.name == "interpolator" && r.exit.is_none())
@@ -902,6 +926,25 @@ fn supervise(roles: &mut [Role], mut progress: Option<&mut Progress>) -> Option<
             if fault.is_none() {
                 fault = Some("a process did not finish after its peers had".into());
             }
+            tracing::error!(
+                "{} still running {} s after {}: stopping it",
+                roles
+                    .iter()
+                    .filter(|r| r.exit.is_none())
+                    .map(|r| r.name)
+                    .collect::<Vec<_>>()
+                    .join(" and "),
+                if grace_over {
+                    SURVIVOR_GRACE.as_secs()
+                } else {
+                    10
+                },
+                if grace_over {
+                    "a peer failed"
+                } else {
+                    "a peer finished"
+                }
+            );
             stop_all(roles);
             return fault;
         }

@@ -414,6 +414,13 @@ pub fn run_streaming<S: Service>(
             (name, c.blocks, c.messages)
         }
     };
+    tracing::info!(
+        program = %name,
+        blocks = blocks.len(),
+        repeat = streaming.repeat,
+        period_us = cfg.period_ns / 1000,
+        "interpreter started"
+    );
     for (line, m) in &messages {
         tracing::info!("{name}:{line}: MSG {m}");
     }
@@ -435,11 +442,27 @@ pub fn run_streaming<S: Service>(
     );
     log.finish()
         .map_err(|e| format!("writing commands.log: {e}"))?;
+    let interpolator_stopped = matches!(result, Ok((Finish::Fault, _)));
     let (fault, sent) = match result {
         Ok((Finish::Done, n)) => (None, n),
         Ok((Finish::Fault, n)) => (Some("the interpolator stopped with a fault".to_string()), n),
         Err(e) => (Some(e.to_string()), 0),
     };
+    match &fault {
+        None => tracing::info!(
+            blocks_sent = sent,
+            "interpreter stopped: program end, the interpolator reported done"
+        ),
+        // The interpolator's own log names the cause (an operator's stop, a fault).
+        Some(_) if interpolator_stopped => tracing::warn!(
+            blocks_sent = sent,
+            "interpreter stopped: the interpolator stopped before the program end"
+        ),
+        Some(f) if shared::stop::terminate_requested() => {
+            tracing::info!(blocks_sent = sent, "interpreter stopped: {f}")
+        }
+        Some(f) => tracing::error!(blocks_sent = sent, "interpreter fault: {f}"),
+    }
     let summary = InterpreterSummary {
         outcome: if fault.is_some() { "fault" } else { "done" }.into(),
         fault,

@@ -1,7 +1,7 @@
 //! Publishing command blocks to the interpolator with back-pressure: a block counts as
 //! sent only when it reached the interpolator's queue; a full queue (or a subscriber not
 //! yet attached) means wait and retry, never drop. Each block is appended to the command
-//! log as it is sent.
+//! log as it is sent, and logged at `debug` (`block published`).
 //!
 //! A dead interpolator is noticed here too: while waiting, the publisher asks iceoryx2 every
 //! few milliseconds to remove dead nodes from the block service, so the interpolator's
@@ -10,7 +10,7 @@
 use iceoryx2::prelude::*;
 use shared::cmdlog::CommandLog;
 use shared::ipc::{self, err, IpcError};
-use shared::protocol::{CommandBlock, RunState, Services};
+use shared::protocol::{BlockKind, CommandBlock, RunState, Services};
 use std::time::{Duration, Instant};
 
 /// How the interpolator finished, as its status reported it.
@@ -28,6 +28,19 @@ const LIVENESS_EVERY: Duration = Duration::from_millis(5);
 #[derive(Debug, Clone, Copy, Default)]
 pub struct Pace {
     pub throttle: Option<Duration>,
+}
+
+/// One `debug` line per block the interpolator's queue took.
+fn log_sent(b: &CommandBlock) {
+    let kind = BlockKind::from_code(b.kind).map_or("unknown", BlockKind::name);
+    tracing::debug!(
+        seq = b.seq,
+        kind = %kind,
+        line = b.source_line,
+        length_mm = b.length_mm,
+        feed_mm_per_min = b.feed_mm_per_min,
+        "block published"
+    );
 }
 
 /// Sends every block in order, then waits for the interpolator to report done or fault.
@@ -51,6 +64,11 @@ pub fn publish<S: Service>(
         .subscriber_builder()
         .create()
         .map_err(|e| err("status subscriber", e))?;
+    tracing::debug!(
+        blocks = %svc.blocks(),
+        status = %svc.status(),
+        "interpreter: shared-memory services open (blocks out, the interpolator's status in)"
+    );
     let mut last_state = RunState::Idle;
     let mut last_cycle: Option<u64> = None;
     let poll_status = |last: &mut RunState, cycle: &mut Option<u64>| -> Result<(), IpcError> {
@@ -117,6 +135,7 @@ pub fn publish<S: Service>(
             std::thread::sleep(Duration::from_micros(500));
         }
         sent += 1;
+        log_sent(&b);
         if let Some(l) = log.as_deref_mut() {
             l.append(&b)
                 .map_err(|e| IpcError(format!("writing commands.log: {e}")))?;

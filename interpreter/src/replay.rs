@@ -77,6 +77,7 @@ fn replay_inner(args: &ReplayArgs) -> Result<bool, String> {
         .filter(|p| p.exists());
     let machine_file = args.machine.clone().or(beside);
     let machine = shared::machine::load(machine_file.as_deref())?;
+    shared::machine::log_in_force("cnc replay", machine_file.as_deref(), &machine);
     if machine.hash() != header.machine_hash {
         return Err(format!(
             "{}: written with another machine file (hash {:016x}, this one is {:016x}{}); pass --machine with the original run's machine.toml",

@@ -39,6 +39,7 @@ pub struct Args {
 
 pub fn run(args: &Args, machine: shared::Machine) -> anyhow::Result<()> {
     shared::stop::install_handler();
+    shared::machine::log_in_force("servo-sim", args.machine.as_deref(), &machine);
     let cfg = Config {
         prefix: args.prefix.clone(),
         out_dir: args.out.clone(),

@@ -220,6 +220,11 @@ pub fn run<S: Service>(cfg: &Config) -> Result<Summary, IpcError> {
         .subscriber_builder()
         .create()
         .map_err(|e| err("set-point subscriber", e))?;
+    tracing::debug!(
+        setpoints = %svc.setpoints(),
+        feedback = %svc.feedback(),
+        "servo-sim: shared-memory services open (set-points and their wake-up in, feedback and its wake-up out)"
+    );
 
     let mut trace = TraceWriter::create(
         &cfg.out_dir.join("feedback.csv"),
@@ -241,7 +246,16 @@ pub fn run<S: Service>(cfg: &Config) -> Result<Summary, IpcError> {
     for w in &sched.warnings {
         tracing::warn!("servo-sim: {w}");
     }
+    tracing::info!(
+        period_us = cfg.period_ns / 1000,
+        clock = %cfg.clock.name(),
+        servo_clock = %cfg.servo_clock,
+        "servo-sim started: drive loop {}",
+        interpolator::rt::sched::words(&sched)
+    );
     let mut fault: Option<String> = None;
+    // The fault is a stop someone asked for (SIGTERM), not a failure.
+    let mut asked_to_stop = false;
     let mut count = 0u64;
     let mut last_seen = Instant::now();
     let mut last_cycle: Option<u64> = None;
@@ -358,6 +372,7 @@ pub fn run<S: Service>(cfg: &Config) -> Result<Summary, IpcError> {
         // every process) or the launcher's death the interpolator brakes on the path, and
         // the drives follow it to its last set-point.
         if !done && shared::stop::terminate_requested() {
+            asked_to_stop = true;
             fault = Some(format!(
                 "stopped on request (SIGTERM) after {count} set-points; drives hold position"
             ));
@@ -399,13 +414,24 @@ pub fn run<S: Service>(cfg: &Config) -> Result<Summary, IpcError> {
     let trace_dropped = trace.dropped();
     trace.finish().map_err(io)?;
     let max_axis = drives.max_ferr_mm.map(|e| e * 1e3);
+    let max_um = max_axis.iter().fold(0.0, |a: f64, b| a.max(*b));
+    match &fault {
+        None => tracing::info!(
+            setpoints = count,
+            lost_setpoints = drives.lost,
+            max_following_error_um = %format_args!("{max_um:.1}"),
+            "servo-sim stopped: the last set-point is answered"
+        ),
+        Some(f) if asked_to_stop => tracing::info!(setpoints = count, "servo-sim {f}"),
+        Some(f) => tracing::error!(setpoints = count, "servo-sim fault: {f}"),
+    }
     let summary = Summary {
         outcome: if fault.is_some() { "fault" } else { "done" }.into(),
         fault,
         pid: std::process::id(),
         setpoints: count,
         lost_setpoints: drives.lost,
-        max_following_error_um: max_axis.iter().fold(0.0, |a: f64, b| a.max(*b)),
+        max_following_error_um: max_um,
         max_following_error_axis_um: max_axis,
         rms_following_error_axis_um: drives.rms_ferr_mm().map(|e| e * 1e3),
         saturated_cycles: drives.saturated_cycles,

@@ -1,6 +1,13 @@
 //! The log every process of the stack writes: `tracing` to stderr, `warn` and worse
 //! unless `RUST_LOG` says otherwise (`RUST_LOG=info`, `debug`, or per module), and
 //! colour only where stderr is a terminal, so that a file or a pipe gets plain text.
+//!
+//! What each level holds (the README's section on `RUST_LOG`): `info` each process's
+//! start-up with the scheduling it got, the machine file in force
+//! ([`crate::machine::log_in_force`]) and how it ended; `warn`/`error` faults, each naming
+//! its cause; `debug` the services opened and every block published and received. None
+//! of it from inside a real-time loop: the interpolator's received blocks reach the log
+//! through a ring and a thread of their own.
 
 use std::io::IsTerminal;
 

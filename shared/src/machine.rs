@@ -748,6 +748,19 @@ pub fn load(path: Option<&std::path::Path>) -> Result<Machine, String> {
     }
 }
 
+/// Logs (info) the machine file `process` runs with: its path, or `built-in`, and its
+/// hash, the fingerprint a command log records and a replay checks. Every process says it,
+/// so a log shows at once whether the three agreed on one machine.
+pub fn log_in_force(process: &str, path: Option<&std::path::Path>, machine: &Machine) {
+    let file = path.map_or_else(|| "built-in".to_string(), |p| p.display().to_string());
+    tracing::info!(
+        process = %process,
+        machine = %file,
+        hash = %format_args!("{:016x}", machine.hash()),
+        "machine file in force"
+    );
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -2,7 +2,10 @@
 //! CLOCK_MONOTONIC, never accumulated), and in each cycle it runs the fixed sequence
 //! inputs (feedback) → faults → command (engine tick) → outputs (set-point, wake-up,
 //! status) → measurement. Nothing in the loop allocates, locks, logs or formats; the
-//! set-point trace goes to a wait-free ring drained by a writer thread. Besides the wall
+//! set-point trace goes to a wait-free ring drained by a writer thread, and so, when the
+//! debug log is on, does a note of each block received ([`crate::rt::received`]): the log
+//! line is written by a thread of its own. Start-up, services and the end of the run are
+//! logged before and after the loop. Besides the wall
 //! clock it reads the thread's own CPU time once a cycle, at the end of the compute phase,
 //! so that a compute phase the OS interrupted is told from a slow one (see
 //! [`crate::timing::MissCause`]).
@@ -21,6 +24,7 @@
 use crate::deadline::DeadlineReport;
 use crate::engine::{BlockSource, Engine, Fault, Limits, TickState};
 use crate::rt::preempt::Preemptor;
+use crate::rt::received::{self, Receipts};
 use crate::rt::sched::{self, SchedMode, SchedReport};
 use crate::rt::watch::PeerWatch;
 use crate::summary::{FaultInfo, FaultRecord, FeedStats, Summary};
@@ -168,10 +172,24 @@ struct Source<'a, S: Service> {
     wait: bool,
     /// A dead interpreter sends nothing more: stop waiting for it.
     watch: &'a PeerWatch,
+    /// Each block taken is noted here for the debug log, off the cycle.
+    receipts: Receipts,
+    /// The cycle running, for the notes.
+    cycle: u64,
 }
 
 impl<S: Service> BlockSource for Source<'_, S> {
     fn next_block(&mut self) -> Option<CommandBlock> {
+        let got = self.receive();
+        if let Some(b) = &got {
+            self.receipts.note(b, self.cycle);
+        }
+        got
+    }
+}
+
+impl<S: Service> Source<'_, S> {
+    fn receive(&mut self) -> Option<CommandBlock> {
         if let Some(b) = self.first.take() {
             return Some(b);
         }
@@ -293,6 +311,13 @@ pub fn run_with<S: Service>(cfg: &Config, hooks: Hooks) -> Result<Summary, RunEr
         .publisher_builder()
         .create()
         .map_err(|e| err("status publisher", e))?;
+    tracing::debug!(
+        blocks = %svc.blocks(),
+        setpoints = %svc.setpoints(),
+        feedback = %svc.feedback(),
+        status = %svc.status(),
+        "interpolator: shared-memory services open (blocks and feedback in, set-points, their wake-up and status out)"
+    );
 
     // Every port exists before the loop: iceoryx2 connects new ports lazily inside send()
     // and receive(), which must not happen for the first time in a hard cycle.
@@ -312,11 +337,15 @@ pub fn run_with<S: Service>(cfg: &Config, hooks: Hooks) -> Result<Summary, RunEr
     // Both peers are connected now (the servo subscribed, the interpreter sent a block):
     // from here on, a port that leaves or a node that dies is a fault.
     let watch = PeerWatch::start::<S>(&cfg.prefix, WATCH_INTERVAL)?;
+    // The received-block log: a ring and a thread of its own, only when it is wanted.
+    let (receipts, receipt_log) = received::start_if_logged();
     let mut src = Source {
         sub: &block_sub,
         first,
         wait: sim,
         watch: &watch,
+        receipts,
+        cycle: 0,
     };
     let mut trace = TraceWriter::create(
         &cfg.out_dir.join("setpoints.csv"),
@@ -353,6 +382,12 @@ pub fn run_with<S: Service>(cfg: &Config, hooks: Hooks) -> Result<Summary, RunEr
     for w in &sched_report.warnings {
         tracing::warn!("{w}");
     }
+    tracing::info!(
+        period_us = cfg.period_ns / 1000,
+        clock = %cfg.clock.name(),
+        "interpolator started: cycle thread {}",
+        crate::rt::sched::words(&sched_report)
+    );
 
     let mut fault: Option<Fault> = None;
     let mut info: Option<FaultRecord> = None;
@@ -371,6 +406,7 @@ pub fn run_with<S: Service>(cfg: &Config, hooks: Hooks) -> Result<Summary, RunEr
     let mut cycle: u64 = 0;
     loop {
         let release = t0 + cycle * cfg.period_ns;
+        src.cycle = cycle;
         if sim {
             if cycle > 0 && !servo_lost {
                 let answered = spin_then_block(
@@ -551,6 +587,7 @@ pub fn run_with<S: Service>(cfg: &Config, hooks: Hooks) -> Result<Summary, RunEr
     let _ = wait_for("the interpreter to leave", Duration::from_secs(2), || {
         blocks.dynamic_config().number_of_publishers() == 0
     });
+    let blocks_logged = receipt_log.map(|l| l.finish(&src.receipts));
     drop(watch);
     drop(preemptor);
     let dropped = trace.dropped();
@@ -591,6 +628,19 @@ pub fn run_with<S: Service>(cfg: &Config, hooks: Hooks) -> Result<Summary, RunEr
             cfg.period_ns,
         )
     });
+    crate::rt::words::log_end(&crate::rt::words::End {
+        fault: fault.as_ref(),
+        kind: fault_info.as_ref().map(|i| i.kind.as_str()),
+        text: fault_text.as_deref(),
+        cycles: cycle + 1,
+        period_ns: cfg.period_ns,
+        blocks: engine.blocks_received(),
+        misses: (!sim).then_some(timing.misses),
+        starvations: engine.starvations(),
+    });
+    if let Some(n) = blocks_logged {
+        tracing::debug!("{n} received blocks logged");
+    }
     let summary = Summary::new(
         cfg,
         cycle + 1,

@@ -17,6 +17,24 @@ pub struct SchedReport {
     pub warnings: Vec<String>,
 }
 
+/// The scheduling in force, in words.
+pub fn words(s: &SchedReport) -> String {
+    let mut t = match s.policy.as_str() {
+        "fifo" => format!("SCHED_FIFO priority {}", s.priority),
+        "other" => "SCHED_OTHER (not real-time)".to_string(),
+        p => p.to_string(),
+    };
+    t.push_str(if s.memory_locked {
+        ", memory locked"
+    } else {
+        ", memory not locked"
+    });
+    if let Some(cpu) = s.cpu {
+        t.push_str(&format!(", pinned to CPU {cpu}"));
+    }
+    t
+}
+
 /// Which scheduling to ask for.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum, Default)]
 pub enum SchedMode {

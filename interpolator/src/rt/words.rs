@@ -66,3 +66,53 @@ pub fn fault_text(
         other => other.to_string(),
     }
 }
+
+/// How a run ended, for [`log_end`].
+pub struct End<'a> {
+    pub fault: Option<&'a Fault>,
+    /// The fault's kind as reported ([`kind`]).
+    pub kind: Option<&'a str>,
+    /// The fault in words ([`fault_text`]).
+    pub text: Option<&'a str>,
+    pub cycles: u64,
+    pub period_ns: u64,
+    pub blocks: u64,
+    /// Deadline misses; `None` under the simulated clock, which measures none.
+    pub misses: Option<u64>,
+    pub starvations: u64,
+}
+
+/// The end of the run in the log, after the loop: the program end and a stop someone
+/// asked for (operator, launcher) at `info`, any other fault at `error`, each naming its
+/// cause; running out of blocks on the way at `warn`.
+pub fn log_end(e: &End) {
+    let machining_s = (e.cycles * e.period_ns) as f64 * 1e-9;
+    let text = e.text.unwrap_or("");
+    match e.fault {
+        None => tracing::info!(
+            cycles = e.cycles,
+            machining_time_s = %format_args!("{machining_s:.3}"),
+            blocks = e.blocks,
+            misses = e.misses,
+            "interpolator stopped: program end reached"
+        ),
+        Some(Fault::StopRequested) => tracing::info!(
+            kind = e.kind.map(tracing::field::display),
+            cycles = e.cycles,
+            blocks = e.blocks,
+            "interpolator stopped: {text}"
+        ),
+        Some(_) => tracing::error!(
+            kind = e.kind.map(tracing::field::display),
+            cycles = e.cycles,
+            blocks = e.blocks,
+            "interpolator fault: {text}"
+        ),
+    }
+    if e.starvations > 0 {
+        tracing::warn!(
+            starvations = e.starvations,
+            "the interpolator ran out of blocks: it stopped on the path and waited for the interpreter"
+        );
+    }
+}
