@@ -74,6 +74,47 @@ pub struct Roundness {
     pub measured: Vec<(f64, f64)>,
     /// The same for the commanded set-points of those cycles.
     pub commanded: Vec<(f64, f64)>,
+    /// Counter-clockwise in the plane `axes` (seen from the positive third axis).
+    pub ccw: bool,
+    /// Cycles at the start and the end of the circle that are its ramps from and to
+    /// rest, below 98 % of its steady speed: counted in the figures, left out of the
+    /// plot (as a ballbar test leaves out its feed-in and feed-out arcs).
+    pub ramps_left_out: (usize, usize),
+    /// The same circle run the other way round, when the program has one: its
+    /// deviations about this run's measured centre and radius, so the two traces
+    /// overlay as on a ballbar report.
+    pub reverse: Option<ReverseRun>,
+}
+
+/// A run of the same circle in the other direction ([`Roundness::reverse`]).
+#[derive(Debug, Clone, PartialEq)]
+pub struct ReverseRun {
+    pub lines: (u32, u32),
+    /// Max − min radius of its measured positions about their own best-fit centre.
+    pub roundness_um: f64,
+    /// Its measured best-fit radius less the first run's, µm.
+    pub radius_offset_um: f64,
+    /// `(angle, radius − the first run's radius_mm in µm)` about the first run's centre.
+    pub measured: Vec<(f64, f64)>,
+    pub ramps_left_out: (usize, usize),
+}
+
+/// `v` without its first `head` and last `tail` entries (all of it if that leaves
+/// nothing).
+pub fn steady<T>(v: &[T], (head, tail): (usize, usize)) -> &[T] {
+    if head + tail < v.len() {
+        &v[head..v.len() - tail]
+    } else {
+        v
+    }
+}
+
+impl Roundness {
+    /// Max − min radius of the measured positions without the ramps, µm: the roundness a
+    /// ballbar at constant feed would show.
+    pub fn steady_roundness_um(&self) -> f64 {
+        spread(steady(&self.measured, self.ramps_left_out))
+    }
 }
 
 impl Roundness {
@@ -613,10 +654,19 @@ fn distance(segs: &[Seg], at: usize, p: [f64; 3], ferr_mm: f64) -> f64 {
 }
 
 /// The roundness of the longest closed circular run of feed blocks, or why there is none.
-fn roundness(segs: &[Seg], seg_of: &[Option<usize>], t: &Traces) -> Result<Roundness, String> {
-    let (first, last) = closed_run(segs).ok_or_else(|| {
-        "no run of feed moves ends where it starts (a closed curve between rapids)".to_string()
-    })?;
+/// A closed run of feed moves that is one turn of a circle: its blocks, working plane,
+/// commanded centre and radius, and direction.
+struct CircleRun {
+    first: usize,
+    last: usize,
+    axes: (usize, usize),
+    centre: [f64; 2],
+    radius: f64,
+    ccw: bool,
+}
+
+/// Whether the closed run `first..=last` is one turn of a circle.
+fn circle_run(segs: &[Seg], (first, last): (usize, usize)) -> Result<CircleRun, String> {
     let mut pts: Vec<[f64; 3]> = Vec::new();
     for g in &segs[first..=last] {
         let n = 64;
@@ -636,26 +686,79 @@ fn roundness(segs: &[Seg], seg_of: &[Option<usize>], t: &Traces) -> Result<Round
             "the closed path is not a circle (it leaves the best-fit circle by {off:.3} mm)"
         ));
     }
-    if turned(&flat, cc).abs() < 2.0 * PI * 0.98 {
+    let turn = turned(&flat, cc);
+    if turn.abs() < 2.0 * PI * 0.98 {
         return Err("the closed path does not go once around a centre".into());
     }
-    let mut meas: Vec<[f64; 2]> = Vec::new();
-    let mut cmd: Vec<[f64; 2]> = Vec::new();
+    Ok(CircleRun {
+        first,
+        last,
+        axes,
+        centre: cc,
+        radius: cr,
+        ccw: turn > 0.0,
+    })
+}
+
+/// The measured and commanded positions (in the run's plane) of the cycles on the
+/// circle run `c`, and how many of them at each end are its ramps from and to rest.
+fn circle_cycles(
+    c: &CircleRun,
+    seg_of: &[Option<usize>],
+    t: &Traces,
+) -> (Vec<[f64; 2]>, Vec<[f64; 2]>, (usize, usize)) {
+    let (mut meas, mut cmd) = (Vec::new(), Vec::new());
     let mut sp_i = 0usize;
     for (i, s) in seg_of.iter().enumerate() {
-        if !s.is_some_and(|j| (first..=last).contains(&j)) {
+        if !s.is_some_and(|j| (c.first..=c.last).contains(&j)) {
             continue;
         }
         let cyc = t.fb_cycle[i];
         while sp_i < t.sp_cycle.len() && t.sp_cycle[sp_i] < cyc {
             sp_i += 1;
         }
+        let Some(s) = t.sp_pos_mm.get(sp_i) else {
+            continue;
+        };
         let p = t.fb_pos_mm[i];
-        meas.push([p[axes.0], p[axes.1]]);
-        if let Some(s) = t.sp_pos_mm.get(sp_i) {
-            cmd.push([s[axes.0], s[axes.1]]);
-        }
+        meas.push([p[c.axes.0], p[c.axes.1]]);
+        cmd.push([s[c.axes.0], s[c.axes.1]]);
     }
+    // The ramps: the commanded steps below 98 % of the circle's steady step (its
+    // median), from each end. A circle without a steady stretch keeps every cycle.
+    let steps: Vec<f64> = cmd
+        .windows(2)
+        .map(|w| (w[1][0] - w[0][0]).hypot(w[1][1] - w[0][1]))
+        .collect();
+    let mut sorted = steps.clone();
+    sorted.sort_by(f64::total_cmp);
+    let steady = sorted.get(sorted.len() / 2).copied().unwrap_or(0.0);
+    let slow = |d: &f64| *d < 0.98 * steady;
+    let head = steps.iter().take_while(|d| slow(d)).count();
+    let tail = steps.iter().rev().take_while(|d| slow(d)).count();
+    if steady > 0.0 && head + tail + 16 < meas.len() {
+        (meas, cmd, (head, tail))
+    } else {
+        (meas, cmd, (0, 0))
+    }
+}
+
+fn roundness(segs: &[Seg], seg_of: &[Option<usize>], t: &Traces) -> Result<Roundness, String> {
+    let runs = closed_runs(segs);
+    let longest = *runs.first().ok_or_else(|| {
+        "no run of feed moves ends where it starts (a closed curve between rapids)".to_string()
+    })?;
+    // The longest closed run that is a circle; when none is, why the longest is not.
+    let Some((k, c)) = runs
+        .iter()
+        .enumerate()
+        .find_map(|(k, run)| circle_run(segs, *run).ok().map(|c| (k, c)))
+    else {
+        return Err(circle_run(segs, longest).err().unwrap_or_default());
+    };
+    let (first, last) = (c.first, c.last);
+    let (axes, cc, cr) = (c.axes, c.centre, c.radius);
+    let (meas, cmd, ramps_left_out) = circle_cycles(&c, seg_of, t);
     if meas.len() < 16 {
         return Err(format!(
             "only {} measured positions on the circle",
@@ -663,12 +766,40 @@ fn roundness(segs: &[Seg], seg_of: &[Option<usize>], t: &Traces) -> Result<Round
         ));
     }
     let (centre, r) = fit_circle(&meas).ok_or("no circle fits the measured positions")?;
+    // A run stopped part of the way round has no roundness: an arc's fit is not the
+    // circle's.
+    if turned(&meas, centre).abs() < 2.0 * PI * 0.98 {
+        return Err("the run stopped before it went round the circle".into());
+    }
     let dev = |p: &[f64; 2]| {
         (
             (p[1] - centre[1]).atan2(p[0] - centre[0]),
             (radius(*p, centre) - r) * 1e3,
         )
     };
+    // The same circle the other way round, the first such run.
+    let reverse = runs[k + 1..].iter().find_map(|&run| {
+        let o = circle_run(segs, run).ok()?;
+        let apart = o.last < first || o.first > last;
+        let same = apart
+            && o.axes == axes
+            && o.ccw != c.ccw
+            && radius(o.centre, cc) <= 1e-3 + 1e-3 * cr
+            && (o.radius - cr).abs() <= 1e-3 + 1e-3 * cr;
+        if !same {
+            return None;
+        }
+        let (m, _, ramps) = circle_cycles(&o, seg_of, t);
+        let (oc, or) = fit_circle(&m)?;
+        let own: Vec<(f64, f64)> = m.iter().map(|p| (0.0, radius(*p, oc) - or)).collect();
+        Some(ReverseRun {
+            lines: (segs[o.first].b.source_line, segs[o.last].b.source_line),
+            roundness_um: spread(&own) * 1e3,
+            radius_offset_um: (or - r) * 1e3,
+            measured: m.iter().map(dev).collect(),
+            ramps_left_out: ramps,
+        })
+    });
     // The set-points' deviation about the commanded circle only for its spread; then each
     // position list becomes its deviations in place (`into_iter().map().collect()` reuses
     // the buffer): on a one-hour circle these are millions of points each.
@@ -696,6 +827,9 @@ fn roundness(segs: &[Seg], seg_of: &[Option<usize>], t: &Traces) -> Result<Round
         lines: (segs[first].b.source_line, segs[last].b.source_line),
         measured,
         commanded,
+        ccw: c.ccw,
+        ramps_left_out,
+        reverse,
     })
 }
 
@@ -820,15 +954,27 @@ pub fn spread(v: &[(f64, f64)]) -> f64 {
     }
 }
 
-/// The longest (by path length) run of consecutive feed blocks, with no rapid inside, that
-/// ends within 1 µm of where it starts: `(first, last)` indices into `segs`.
-fn closed_run(segs: &[Seg]) -> Option<(usize, usize)> {
+/// The runs of consecutive feed blocks, with no rapid inside, that end within 1 µm of
+/// where they start, as `(first, last)` indices into `segs`, longest (by path length)
+/// first; at most [`CLOSED_RUNS`].
+fn closed_runs(segs: &[Seg]) -> Vec<(usize, usize)> {
     const CLOSED_MM: f64 = 0.001;
     // Beyond this many blocks only whole runs between rapids are tried (the search is
     // quadratic in the run length).
     const EXHAUSTIVE: usize = 4000;
     let ends: Vec<([f64; 3], [f64; 3])> = segs.iter().map(|g| (g.start(), g.end())).collect();
-    let mut best: Option<(f64, usize, usize)> = None;
+    // Path length before each block.
+    let mut before = vec![0.0; segs.len() + 1];
+    for (k, g) in segs.iter().enumerate() {
+        before[k + 1] = before[k] + g.len_mm;
+    }
+    let mut found: Vec<(f64, usize, usize)> = Vec::new();
+    let mut consider = |s: usize, e: usize| {
+        let len = before[e + 1] - before[s];
+        if len > 0.0 && dist3(ends[e].1, ends[s].0) <= CLOSED_MM {
+            found.push((len, s, e));
+        }
+    };
     let mut i = 0;
     while i < segs.len() {
         if segs[i].rapid {
@@ -840,21 +986,9 @@ fn closed_run(segs: &[Seg]) -> Option<(usize, usize)> {
             j += 1;
         }
         let (a, b) = (i, j);
-        let mut consider = |s: usize, e: usize| {
-            let len: f64 = segs[s..=e].iter().map(|g| g.len_mm).sum();
-            if len > 0.0
-                && dist3(ends[e].1, ends[s].0) <= CLOSED_MM
-                && best.is_none_or(|(l, _, _)| len > l)
-            {
-                best = Some((len, s, e));
-            }
-        };
         if b - a < EXHAUSTIVE {
             for s in a..=b {
-                if let Some(e) = (s..=b)
-                    .rev()
-                    .find(|&e| dist3(ends[e].1, ends[s].0) <= CLOSED_MM)
-                {
+                for e in s..=b {
                     consider(s, e);
                 }
             }
@@ -863,8 +997,13 @@ fn closed_run(segs: &[Seg]) -> Option<(usize, usize)> {
         }
         i = j + 1;
     }
-    best.map(|(_, s, e)| (s, e))
+    found.sort_by(|x, y| y.0.total_cmp(&x.0).then(x.1.cmp(&y.1)));
+    found.truncate(CLOSED_RUNS);
+    found.into_iter().map(|(_, s, e)| (s, e)).collect()
 }
+
+/// Most closed runs tried as circles.
+const CLOSED_RUNS: usize = 64;
 
 /// The two axes with the largest extent (in axis order): the working plane.
 fn plane(pts: &[[f64; 3]]) -> (usize, usize) {

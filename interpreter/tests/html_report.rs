@@ -818,7 +818,11 @@ fn a_faulted_run_draws_the_path_that_never_ran_apart() {
     );
     let rep = report(&run);
     assert_eq!(rep["outcome"], "fault");
+    // A quarter of the way round, the polygon has no roundness (it had 67.65 µm, the
+    // fit of a quarter arc).
+    assert!(rep["roundness"].is_null(), "{}", rep["roundness"]);
     let page = fs::read_to_string(html::write(&run, None).unwrap()).unwrap();
+    assert!(page.contains("the run stopped before it went round the circle"));
     let plot = chart(&page, "path-plot");
     assert!(plot.contains("never ran (after the stop)"));
     // The share of the path drawn as cut is the share that ran: the run's path length
@@ -959,4 +963,61 @@ fn paths_in_three_axes_and_surface_parts_get_a_3d_view() {
     let page = fs::read_to_string(html::write(&flat, None).unwrap()).unwrap();
     assert!(!page.contains("id=\"view3d\""));
     assert!(!page.contains("id=\"scallop\""));
+}
+
+/// A circle run both ways overlays the second direction's measured trace on the polar
+/// plot, about the first's centre and radius, as on a ballbar report; the ramps from
+/// and to rest at each circle's ends are left out of the plot (the figures keep them,
+/// beside a roundness at steady speed).
+#[test]
+fn a_circle_run_both_ways_overlays_on_the_polar_plot_without_its_ramps() {
+    let d = scratch("both-ways");
+    let prog = d.join("both.ngc");
+    fs::write(
+        &prog,
+        "G21 G17 G90\nG0 X10 Y0\nG3 X10 Y0 I-10 J0 F3000\nG0 X12 Y0\nG0 X10 Y0\nG2 X10 Y0 I-10 J0 F3000\nM2\n",
+    )
+    .unwrap();
+    let run = d.join("run");
+    run_sim(Some(&prog), &run);
+    let c = interpreter::contour::analyse_dir(&run).unwrap();
+    let r = c.roundness.as_ref().unwrap();
+    assert!(r.ccw, "the first circle is G3");
+    let rev = r
+        .reverse
+        .as_ref()
+        .expect("the G2 circle as the reverse run");
+    assert_eq!(rev.lines, (6, 6));
+    // Both start and stop at rest: each leaves out its ramps, about 3000 mm/min over
+    // 2000 mm/s² with the jerk, some 30 to 100 cycles each end.
+    for (head, tail) in [r.ramps_left_out, rev.ramps_left_out] {
+        assert!(
+            (20..200).contains(&head) && (20..200).contains(&tail),
+            "{head}, {tail}"
+        );
+    }
+    // The figures count every cycle on the circle (62.83 mm at 50 mm/s, 1257 cycles
+    // and its ramps); the roundness at steady speed, without the ramps, is at most it.
+    let on_circle = r.measured.len();
+    assert!((1250..1500).contains(&on_circle), "{on_circle} cycles");
+    assert!(r.steady_roundness_um() <= r.roundness_um);
+    // The two traces lie about one centre: the reverse run's radius is the first's
+    // within a micrometre (the same servo, the same circle).
+    assert!(rev.radius_offset_um.abs() < 1.0, "{rev:?}");
+    let page = fs::read_to_string(html::write(&run, None).unwrap()).unwrap();
+    let polar = chart(&page, "polar-plot");
+    assert!(polar.contains("measured, counter-clockwise"));
+    assert!(polar.contains("measured, clockwise"));
+    assert_eq!(
+        polar.matches("<polyline").count(),
+        3,
+        "commanded and both measured"
+    );
+    assert!(page.contains("id=\"reverse-run\""));
+    assert!(page.contains("as a ballbar test leaves out its feed-in and feed-out arcs"));
+    assert!(page.contains("id=\"steady-roundness\""));
+    // One circle alone has no overlay.
+    let one = circle_run("one-way");
+    let c = interpreter::contour::analyse_dir(&one).unwrap();
+    assert!(c.roundness.unwrap().reverse.is_none());
 }

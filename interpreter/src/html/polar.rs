@@ -10,7 +10,7 @@
 //! shows as the commanded line lying outside by that much.
 
 use super::svg::{esc, fixed, nice_ceil, num, style_attrs, AXES};
-use crate::contour::Contour;
+use crate::contour::{steady, Contour};
 use std::fmt::Write;
 
 /// Keeps at most the smallest and largest deviation per quarter degree, in order.
@@ -49,9 +49,14 @@ pub fn section(contour: Option<&Contour>, out: &mut String) {
     let name = ["X", "Y", "Z"];
     let (a, b) = r.axes;
     let src = &r.measured;
-    let maxabs = src
+    let maxabs = steady(src, r.ramps_left_out)
         .iter()
-        .chain(&r.commanded)
+        .chain(steady(&r.commanded, r.ramps_left_out))
+        .chain(
+            r.reverse
+                .iter()
+                .flat_map(|v| steady(&v.measured, v.ramps_left_out)),
+        )
         .map(|p| p.1.abs())
         .fold(0.0, f64::max)
         .max(1e-3);
@@ -111,15 +116,53 @@ pub fn section(contour: Option<&Contour>, out: &mut String) {
         out.push_str("/>");
     };
     let commanded_style = AXES[1];
-    plot(&r.commanded, &commanded_style, out);
-    plot(&r.measured, &AXES[0], out);
-    let _ = write!(out, r#"<line x1="10" y1="33" x2="38" y2="33""#);
-    style_attrs(out, &AXES[0]);
-    out.push_str(r#"/><text x="43" y="37" class="lg">measured (feedback.csv)</text><line x1="220" y1="33" x2="248" y2="33""#);
-    style_attrs(out, &commanded_style);
+    let reverse_style = super::svg::Style {
+        color: "#c0392b",
+        width: 1.3,
+        dash: "",
+    };
+    let ramps = r.ramps_left_out;
+    plot(steady(&r.commanded, ramps), &commanded_style, out);
+    if let Some(rev) = &r.reverse {
+        plot(
+            steady(&rev.measured, rev.ramps_left_out),
+            &reverse_style,
+            out,
+        );
+    }
+    plot(steady(&r.measured, ramps), &AXES[0], out);
+    let way = |ccw: bool| {
+        if ccw {
+            "counter-clockwise"
+        } else {
+            "clockwise"
+        }
+    };
+    let first = if r.reverse.is_some() {
+        format!("measured, {}", way(r.ccw))
+    } else {
+        "measured (feedback.csv)".into()
+    };
+    let mut legend = vec![(first, AXES[0])];
+    if r.reverse.is_some() {
+        legend.push((format!("measured, {}", way(!r.ccw)), reverse_style));
+    }
+    legend.push(("commanded (setpoints.csv)".into(), commanded_style));
+    let mut x = 10.0;
+    for (name, st) in &legend {
+        let _ = write!(out, r#"<line x1="{x}" y1="33" x2="{}" y2="33""#, x + 28.0);
+        style_attrs(out, st);
+        let _ = write!(
+            out,
+            r#"/><text x="{}" y="37" class="lg">{}</text>"#,
+            x + 33.0,
+            esc(name)
+        );
+        x += 45.0 + 6.2 * name.chars().count() as f64;
+    }
     let _ = write!(
         out,
-        r#"/><text x="253" y="37" class="lg">commanded (setpoints.csv)</text><text x="{cx}" y="{:.1}" class="xl">deviation (µm), {} µm per division; angle about the centre (°)</text></svg>"#,
+        r#"<text x="{cx}" y="{:.1}" class="xl">deviation (µm), {} µm per division; angle about the centre (°)</text></svg>"#,
         632.0,
         num(per_div)
     );
@@ -130,8 +173,9 @@ pub fn section(contour: Option<&Contour>, out: &mut String) {
         });
     let _ = write!(
         out,
-        r#"<table class="figs"><tr><th>roundness (max − min radius of the measured positions about their best-fit centre)</th><td id="circularity">{:.2} µm</td></tr><tr><th>largest deviation outward / inward</th><td>{:+.2} µm / {:+.2} µm</td></tr><tr><th>best-fit centre (measured)</th><td>{} {} mm, {} {} mm</td></tr><tr><th>best-fit radius (measured)</th><td>{:.4} mm</td></tr><tr><th>commanded circle</th><td>centre {} {} mm, {} {} mm, radius {:.4} mm</td></tr><tr><th>radius error (measured − commanded)</th><td id="radius-error">{:+.2} µm</td></tr><tr><th>commanded set-points' roundness about the commanded centre (chord error)</th><td>{:.3} µm</td></tr><tr><th>lines</th><td>{}–{}</td></tr><tr><th>magnification</th><td>{} µm per division (rings); best-fit circle bold</td></tr></table></div>"#,
+        r#"<table class="figs"><tr><th>roundness (max − min radius of the measured positions about their best-fit centre)</th><td id="circularity">{:.2} µm</td></tr><tr><th>roundness at steady speed (the ramps from and to rest left out, as drawn)</th><td id="steady-roundness">{:.2} µm</td></tr><tr><th>largest deviation outward / inward</th><td>{:+.2} µm / {:+.2} µm</td></tr><tr><th>best-fit centre (measured)</th><td>{} {} mm, {} {} mm</td></tr><tr><th>best-fit radius (measured)</th><td>{:.4} mm</td></tr><tr><th>commanded circle</th><td>centre {} {} mm, {} {} mm, radius {:.4} mm</td></tr><tr><th>radius error (measured − commanded)</th><td id="radius-error">{:+.2} µm</td></tr><tr><th>commanded set-points' roundness about the commanded centre (chord error)</th><td>{:.3} µm</td></tr><tr><th>lines</th><td>{}–{}</td></tr><tr><th>magnification</th><td>{} µm per division (rings); best-fit circle bold</td></tr></table>"#,
         r.roundness_um,
+        r.steady_roundness_um(),
         hi,
         lo,
         name[a],
@@ -150,5 +194,28 @@ pub fn section(contour: Option<&Contour>, out: &mut String) {
         r.lines.1,
         num(per_div)
     );
-    out.push_str("<p class=\"note\">The circle is fitted (least squares) to the measured positions of the cycles on it; each measured position's radius minus the fitted radius is drawn magnified around the bold best-fit circle, as on a ballbar or roundness plot, and the commanded set-points dashed about the same circle (outside it by the radius error when the circle came out small). It includes the acceleration from rest at the start of the circle and the stop at its end. These are the <code>roundness</code> figures of report.json.</p></section>");
+    if let Some(rev) = &r.reverse {
+        let _ = write!(
+            out,
+            r#"<table class="figs" id="reverse-run"><tr><th>the same circle {}, lines {}–{}: roundness about its own best-fit centre</th><td>{:.2} µm</td></tr><tr><th>its best-fit radius less the {} run's</th><td>{:+.2} µm</td></tr></table>"#,
+            way(!r.ccw),
+            rev.lines.0,
+            rev.lines.1,
+            rev.roundness_um,
+            way(r.ccw),
+            rev.radius_offset_um
+        );
+    }
+    out.push_str("</div>");
+    let _ = write!(
+        out,
+        "<p class=\"note\">The circle is fitted (least squares) to the measured positions of the cycles on it; each measured position's radius minus the fitted radius is drawn magnified around the bold best-fit circle, as on a ballbar or roundness plot, and the commanded set-points dashed about the same circle (outside it by the radius error when the circle came out small). The plot leaves out the ramps from rest at the start of the circle and to rest at its end (the cycles below 98 % of its steady speed: {} and {} here), as a ballbar test leaves out its feed-in and feed-out arcs; the figures above are report.json's <code>roundness</code>, over every cycle on the circle, ramps included, beside the roundness at steady speed. {}</p></section>",
+        r.ramps_left_out.0,
+        r.ramps_left_out.1,
+        if r.reverse.is_some() {
+            "The program runs the same circle both ways: the other direction's measured positions are drawn about the same centre and radius, so a difference between the two traces (a reversal, backlash or a servo mismatch) shows as on a ballbar report. "
+        } else {
+            ""
+        }
+    );
 }
