@@ -700,13 +700,13 @@ fn circle_run(segs: &[Seg], (first, last): (usize, usize)) -> Result<CircleRun, 
     })
 }
 
+/// Measured and commanded positions in a circle's plane, and how many cycles at each
+/// end are its ramps from and to rest.
+type CircleCycles = (Vec<[f64; 2]>, Vec<[f64; 2]>, (usize, usize));
+
 /// The measured and commanded positions (in the run's plane) of the cycles on the
 /// circle run `c`, and how many of them at each end are its ramps from and to rest.
-fn circle_cycles(
-    c: &CircleRun,
-    seg_of: &[Option<usize>],
-    t: &Traces,
-) -> (Vec<[f64; 2]>, Vec<[f64; 2]>, (usize, usize)) {
+fn circle_cycles(c: &CircleRun, seg_of: &[Option<usize>], t: &Traces) -> CircleCycles {
     let (mut meas, mut cmd) = (Vec::new(), Vec::new());
     let mut sp_i = 0usize;
     for (i, s) in seg_of.iter().enumerate() {
