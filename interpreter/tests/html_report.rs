@@ -184,7 +184,8 @@ fn demo_page_rounds_its_full_circle_and_a_linuxcnc_page_has_none() {
     let page = html::render(&demo).unwrap();
     check_summary(&page, &report(&demo));
     check_plots(&page);
-    // The demo's full circle (line 17, `G3 X30 Y20 I-10 J0`) gets the roundness plot.
+    // The demo's full circle (line 23, `G3 X30 Y20 I-10 J0`, the bore's finishing pass)
+    // gets the roundness plot.
     assert!(page.contains("id=\"polar-plot\""));
     assert!(
         report(&demo)["roundness"].is_object(),
