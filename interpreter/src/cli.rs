@@ -334,7 +334,13 @@ fn check_step(
     json: bool,
 ) -> ExitCode {
     let report = match crate::step::check::check_part(name, text, machine) {
-        Ok(r) => r,
+        Ok(r) => {
+            eprint!(
+                "{}",
+                process::format_notes(name, &crate::step::check::part_notes(text, machine))
+            );
+            r
+        }
         Err(errors) => {
             eprint!("{errors}");
             return ExitCode::FAILURE;

@@ -121,21 +121,31 @@ pub fn check_with(
 /// that asks it: a feed above `max_feed_mm_per_min` runs at that limit (the planner
 /// clamps it). One note for each feed asked for, with how many more moves ask it.
 pub fn notes(prog: &program::Program, machine: &Machine) -> Vec<(u32, String)> {
+    let feeds = prog.moves.iter().filter_map(|m| match m {
+        program::Move::Line {
+            line,
+            feed,
+            rapid: false,
+            ..
+        }
+        | program::Move::Arc { line, feed, .. }
+        | program::Move::Nurbs { line, feed, .. } => Some((*line, *feed)),
+        _ => None,
+    });
+    feed_notes(feeds, machine, "move")
+}
+
+/// [`notes`] of the feeds `(source line, mm/min)` asked for by things a user calls
+/// `what` (a move, a workingstep).
+pub fn feed_notes(
+    feeds: impl IntoIterator<Item = (u32, f64)>,
+    machine: &Machine,
+    what: &str,
+) -> Vec<(u32, String)> {
     let max = machine.max_feed_mm_per_min;
-    // (feed, first line, moves)
+    // (feed, first line, how many ask it)
     let mut over: Vec<(f64, u32, usize)> = Vec::new();
-    for m in &prog.moves {
-        let (line, feed) = match m {
-            program::Move::Line {
-                line,
-                feed,
-                rapid: false,
-                ..
-            }
-            | program::Move::Arc { line, feed, .. }
-            | program::Move::Nurbs { line, feed, .. } => (*line, *feed),
-            _ => continue,
-        };
+    for (line, feed) in feeds {
         // (A rounding above the limit is the limit: an inch F at the limit converts to
         // a hair over it.)
         if feed <= max * (1.0 + 1e-9) {
@@ -150,9 +160,9 @@ pub fn notes(prog: &program::Program, machine: &Machine) -> Vec<(u32, String)> {
     over.into_iter()
         .map(|(feed, line, n)| {
             let who = match n {
-                1 => "the move runs".to_string(),
-                2 => "this move and 1 more at that feed run".to_string(),
-                n => format!("this move and {} more at that feed run", n - 1),
+                1 => format!("the {what} runs"),
+                2 => format!("this {what} and 1 more at that feed run"),
+                n => format!("this {what} and {} more at that feed run", n - 1),
             };
             (
                 line,
@@ -209,7 +219,7 @@ pub fn compile_source(
             blocks,
             dialect: None,
             messages: Vec::new(),
-            notes: Vec::new(),
+            notes: crate::step::check::part_notes(text, machine),
             max_scallop_mm: Some(scallop),
         });
     }

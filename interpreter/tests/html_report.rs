@@ -1022,3 +1022,38 @@ fn a_circle_run_both_ways_overlays_on_the_polar_plot_without_its_ramps() {
     let c = interpreter::contour::analyse_dir(&one).unwrap();
     assert!(c.roundness.unwrap().reverse.is_none());
 }
+
+/// A STEP-NC workingstep whose feed is above the machine's is a note at its line, from
+/// `cnc check` and into the run's figures, as a G-code move's is (it was clamped
+/// without a word).
+#[test]
+fn a_step_part_s_feed_above_the_machine_s_limit_is_a_note_at_its_workingstep() {
+    let d = scratch("step-feed-note");
+    let text = fs::read_to_string(
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("../examples/torus-patch.stp"),
+    )
+    .unwrap()
+    .replace("MILLING_TECHNOLOGY(30.0,", "MILLING_TECHNOLOGY(300.0,");
+    let part = d.join("fast.stp");
+    fs::write(&part, &text).unwrap();
+    let out = Command::new(env!("CARGO_BIN_EXE_cnc"))
+        .arg("check")
+        .arg(&part)
+        .output()
+        .unwrap();
+    assert!(out.status.success());
+    let want = "fast.stp:40: note: feed 18000 mm/min is above the machine's max_feed_mm_per_min: the workingstep runs at 10000 mm/min";
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(stderr.contains(want), "{stderr}");
+    let m = shared::Machine::default();
+    let c = interpreter::process::compile_source(
+        "fast.stp",
+        &text,
+        &interpreter::program::Options::default(),
+        &m,
+        1_000_000,
+    )
+    .unwrap();
+    assert_eq!(c.notes.len(), 1);
+    assert_eq!(c.notes[0].0, 40);
+}

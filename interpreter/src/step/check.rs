@@ -73,6 +73,22 @@ pub fn plan_part(text: &str) -> Result<Vec<(super::FreeformStep, PlannedPath)>, 
     }
 }
 
+/// What the machine changes of what the part asks ([`crate::process::notes`]): a
+/// workingstep's feed above `max_feed_mm_per_min` runs at that limit. None for a part
+/// that cannot be read (its errors are told elsewhere).
+pub fn part_notes(text: &str, machine: &shared::Machine) -> Vec<(u32, String)> {
+    read_part(text).map_or_else(
+        |_| Vec::new(),
+        |steps| {
+            crate::process::feed_notes(
+                steps.iter().map(|s| (s.line, s.technology.feed_mm_per_min)),
+                machine,
+                "workingstep",
+            )
+        },
+    )
+}
+
 /// The report `cnc check` prints for a STEP file, or every error as
 /// `FILE:LINE: #ID: rule: message` lines.
 pub fn check_part(name: &str, text: &str, machine: &shared::Machine) -> Result<String, String> {
