@@ -132,8 +132,18 @@ impl<W: Write> Screen<W> {
         let line = live_line(f, self.period_ns, self.seconds);
         let mut text = String::new();
         if self.terminal {
+            // Two lines of under 80 columns: a wrapped line would throw the redraw off
+            // (the cursor goes back by lines, not screen rows).
+            let (progress, figures) = match line.split_once(", lateness ") {
+                Some((p, f)) => match f.split_once("; ") {
+                    Some((lat, later)) => (format!("{p}, {later}"), format!("  lateness {lat}")),
+                    None => (p.to_string(), format!("  lateness {f}")),
+                },
+                None => (line, String::new()),
+            };
             let mut lines = vec![
-                line,
+                progress,
+                figures,
                 format!(
                     "{:>12} {:>10}  (bars on a log scale)",
                     "lateness", "wake-ups"
@@ -276,8 +286,21 @@ mod tests {
         tty.show(&f);
         tty.show(&f);
         let text = String::from_utf8(tty.into_inner()).unwrap();
-        let height = 2 + LIVE_BINS;
+        // The progress, the figures, the header and the bins.
+        let height = 3 + LIVE_BINS;
         assert_eq!(text.lines().count(), 2 * height);
+        // Each line fits an 80-column terminal (a wrapped one would throw the redraw
+        // off: the cursor goes back by lines, not screen rows).
+        for l in text.lines() {
+            let shown = l
+                .replace("\x1b[2K", "")
+                .replace(&format!("\x1b[{height}F"), "");
+            assert!(
+                shown.chars().count() <= 80,
+                "{} columns: {shown}",
+                shown.chars().count()
+            );
+        }
         // The second view starts by moving up over the first, which did not.
         assert_eq!(text.matches(&format!("\x1b[{height}F")).count(), 1);
         assert!(text.starts_with("\x1b[2K"), "{text:?}");

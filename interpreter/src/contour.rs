@@ -521,9 +521,18 @@ pub fn analyse(blocks: &[CommandBlock], t: &Traces) -> Contour {
         }
     });
     let roundness = roundness(&segs, &seg_of, t);
-    let reached = prev.map(|(sp_i, at)| Reached {
-        seq: segs[at].b.seq,
-        u: segs[at].closest(t.sp_pos_mm[sp_i]).1,
+    // The parameter near the last one found on the block first (a closed or multi-turn
+    // block passes the same point more than once), the nearest point of it else.
+    let reached = prev.map(|(sp_i, at)| {
+        let s = t.sp_pos_mm[sp_i];
+        let mut u = last_u[at];
+        if !segs[at].near_last(s, ON_PATH_MM, &mut u) {
+            u = segs[at].closest(s).1;
+        }
+        Reached {
+            seq: segs[at].b.seq,
+            u,
+        }
     });
     Contour {
         error_um,
@@ -686,9 +695,13 @@ fn circle_run(segs: &[Seg], (first, last): (usize, usize)) -> Result<CircleRun, 
             "the closed path is not a circle (it leaves the best-fit circle by {off:.3} mm)"
         ));
     }
-    let turn = turned(&flat, cc);
+    let (turn, travelled) = turning(&flat, cc);
     if turn.abs() < 2.0 * PI * 0.98 {
         return Err("the closed path does not go once around a centre".into());
+    }
+    // Two turns one way and one back net one turn: not a circle run one way.
+    if travelled > turn.abs() * 1.02 + 1e-6 {
+        return Err("the closed path turns back on itself".into());
     }
     Ok(CircleRun {
         first,
@@ -724,15 +737,17 @@ fn circle_cycles(c: &CircleRun, seg_of: &[Option<usize>], t: &Traces) -> CircleC
         meas.push([p[c.axes.0], p[c.axes.1]]);
         cmd.push([s[c.axes.0], s[c.axes.1]]);
     }
-    // The ramps: the commanded steps below 98 % of the circle's steady step (its
-    // median), from each end. A circle without a steady stretch keeps every cycle.
+    // The ramps: the commanded steps below 98 % of the circle's steady step, from each
+    // end. A circle whose ramps leave fewer than 16 cycles keeps every cycle.
     let steps: Vec<f64> = cmd
         .windows(2)
         .map(|w| (w[1][0] - w[0][0]).hypot(w[1][1] - w[0][1]))
         .collect();
     let mut sorted = steps.clone();
     sorted.sort_by(f64::total_cmp);
-    let steady = sorted.get(sorted.len() / 2).copied().unwrap_or(0.0);
+    // The steady step: the 90th percentile (the median would sit on a ramp where the
+    // ramps are most of a small circle run fast).
+    let steady = sorted.get(sorted.len() * 9 / 10).copied().unwrap_or(0.0);
     let slow = |d: &f64| *d < 0.98 * steady;
     let head = steps.iter().take_while(|d| slow(d)).count();
     let tail = steps.iter().rev().take_while(|d| slow(d)).count();
@@ -768,7 +783,7 @@ fn roundness(segs: &[Seg], seg_of: &[Option<usize>], t: &Traces) -> Result<Round
     let (centre, r) = fit_circle(&meas).ok_or("no circle fits the measured positions")?;
     // A run stopped part of the way round has no roundness: an arc's fit is not the
     // circle's.
-    if turned(&meas, centre).abs() < 2.0 * PI * 0.98 {
+    if turned(&meas, cc).abs() < 2.0 * PI * 0.98 {
         return Err("the run stopped before it went round the circle".into());
     }
     let dev = |p: &[f64; 2]| {
@@ -791,6 +806,10 @@ fn roundness(segs: &[Seg], seg_of: &[Option<usize>], t: &Traces) -> Result<Round
         }
         let (m, _, ramps) = circle_cycles(&o, seg_of, t);
         let (oc, or) = fit_circle(&m)?;
+        // Cut short by a stop: an arc's fit is not the circle's.
+        if m.len() < 16 || turned(&m, o.centre).abs() < 2.0 * PI * 0.98 {
+            return None;
+        }
         let own: Vec<(f64, f64)> = m.iter().map(|p| (0.0, radius(*p, oc) - or)).collect();
         Some(ReverseRun {
             lines: (segs[o.first].b.source_line, segs[o.last].b.source_line),
@@ -969,10 +988,18 @@ fn closed_runs(segs: &[Seg]) -> Vec<(usize, usize)> {
         before[k + 1] = before[k] + g.len_mm;
     }
     let mut found: Vec<(f64, usize, usize)> = Vec::new();
+    let order =
+        |x: &(f64, usize, usize), y: &(f64, usize, usize)| y.0.total_cmp(&x.0).then(x.1.cmp(&y.1));
     let mut consider = |s: usize, e: usize| {
         let len = before[e + 1] - before[s];
         if len > 0.0 && dist3(ends[e].1, ends[s].0) <= CLOSED_MM {
             found.push((len, s, e));
+            // Only the longest are kept: a program of thousands of closed moves in a
+            // row (a circle repeated) has millions of closed runs.
+            if found.len() >= 8 * CLOSED_RUNS {
+                found.sort_by(order);
+                found.truncate(CLOSED_RUNS);
+            }
         }
     };
     let mut i = 0;
@@ -997,7 +1024,7 @@ fn closed_runs(segs: &[Seg]) -> Vec<(usize, usize)> {
         }
         i = j + 1;
     }
-    found.sort_by(|x, y| y.0.total_cmp(&x.0).then(x.1.cmp(&y.1)));
+    found.sort_by(order);
     found.truncate(CLOSED_RUNS);
     found.into_iter().map(|(_, s, e)| (s, e)).collect()
 }
@@ -1036,8 +1063,14 @@ fn radius(p: [f64; 2], c: [f64; 2]) -> f64 {
 
 /// Signed angle swept about `c` along `pts`, rad.
 fn turned(pts: &[[f64; 2]], c: [f64; 2]) -> f64 {
+    turning(pts, c).0
+}
+
+/// The angle `pts` turn about `c` (counter-clockwise positive), and the sum of its
+/// steps' sizes (equal to the turn's size when the points never turn back).
+fn turning(pts: &[[f64; 2]], c: [f64; 2]) -> (f64, f64) {
     let ang = |p: &[f64; 2]| (p[1] - c[1]).atan2(p[0] - c[0]);
-    let mut sum = 0.0;
+    let (mut sum, mut abs) = (0.0, 0.0);
     for w in pts.windows(2) {
         let mut d = ang(&w[1]) - ang(&w[0]);
         if d > PI {
@@ -1046,8 +1079,9 @@ fn turned(pts: &[[f64; 2]], c: [f64; 2]) -> f64 {
             d += 2.0 * PI;
         }
         sum += d;
+        abs += d.abs();
     }
-    sum
+    (sum, abs)
 }
 
 /// The least-squares circle through `pts`: centre and radius minimising Σ (|pᵢ − c| − r)²

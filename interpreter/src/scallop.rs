@@ -319,13 +319,13 @@ pub struct ScallopMap {
 }
 
 /// The scallop over the whole surface, on a grid of about `budget` points in all (at
-/// least [`measure`]'s 33 × 33 a patch, at most 129 × 129): what the page draws as a
-/// map. The same measure as [`measure`]'s, not refined, so its largest value on the
-/// same grid is at most [`measure`]'s.
+/// least 9 × 9 a patch, at most 129 × 129): what the page draws as a map. The same
+/// measure as [`measure`]'s, not refined, so its largest value on [`measure`]'s grid is
+/// at most [`measure`]'s.
 pub fn map(blocks: &[CommandBlock], positions: &[[f64; 3]], budget: usize) -> Option<ScallopMap> {
     let setup = Setup::new(blocks, positions)?;
     let per_patch = budget / setup.patches.len().max(1);
-    let grid = ((per_patch as f64).sqrt() as usize).clamp(GRID + 1, 129);
+    let grid = ((per_patch as f64).sqrt() as usize).clamp(9, 129);
     let mut near = Vec::new();
     let mut patches = Vec::new();
     for b in &setup.patches {

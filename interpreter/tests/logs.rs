@@ -61,13 +61,13 @@ fn debug_logs_say_start_up_machine_services_and_every_block() {
     // The machine file in force, in every process, with the same hash: the launcher's is
     // the built-in one, each process reads the run directory's copy.
     let machine = lines_with(&log, &[" INFO ", "machine file in force"]);
-    let hash = "hash=7b693019000242d7";
+    let hash = format!("hash={:016x}", shared::Machine::default().hash());
     for process in ["cnc run", "interpreter", "interpolator", "servo-sim"] {
         let of = format!("process={process} ");
         assert_eq!(
             machine
                 .iter()
-                .filter(|l| l.contains(&of) && l.contains(hash))
+                .filter(|l| l.contains(&of) && l.contains(&hash))
                 .count(),
             1,
             "{process}:\n{log}"

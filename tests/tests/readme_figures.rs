@@ -77,6 +77,10 @@ fn the_readme_s_figures_are_today_s() {
         + at;
     let now = table();
     if std::env::var("README_FIGURES").as_deref() == Ok("write") {
+        assert!(
+            std::env::var_os("CI").is_none(),
+            "README_FIGURES=write under CI would pass without checking"
+        );
         let mut new = readme[..at].to_string();
         new.push_str(&now);
         new.push_str(&readme[end..]);

@@ -187,7 +187,7 @@ pub struct LiveFigures {
 impl Live {
     /// The figures now.
     pub fn snapshot(&self) -> LiveFigures {
-        let wakeups = self.wakeups.load(Ordering::Relaxed);
+        let wakeups = self.wakeups.load(Ordering::Acquire);
         let sum = self.sum_ns.load(Ordering::Relaxed);
         LiveFigures {
             wakeups,
@@ -250,7 +250,7 @@ impl Tally {
         live.max_ns.store(self.max_ns, Ordering::Relaxed);
         live.sum_ns.store(self.sum_ns, Ordering::Relaxed);
         live.later.store(self.later, Ordering::Relaxed);
-        live.wakeups.store(self.hist.count(), Ordering::Relaxed);
+        live.wakeups.store(self.hist.count(), Ordering::Release);
     }
 }
 

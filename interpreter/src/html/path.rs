@@ -333,31 +333,47 @@ fn error_plot(
         pts,
         (760.0, 700.0),
     );
+    const CELL_PX: f64 = 1.5;
+    const CELL_BUDGET: f64 = 40_000.0;
     let mut out = String::from("<div class=\"row by-error\">");
     c.open(&mut out);
-    // Cells of 1.5 px: each takes the largest error of the cycles in it (so no
-    // single-cycle peak is lost), and is drawn once, at its first cycle's position, in
-    // order of travel. The page grows with the area the path covers, not the run's
-    // length: a circle run a thousand times draws as once.
-    const CELL_PX: f64 = 1.5;
+    // Cells of 1.5 px (coarser on a path that covers much of the plot): each takes the
+    // largest error of the cycles in it (so no single-cycle peak is lost), and is drawn
+    // once, from the cycle before its first, in order of travel. The page grows with the
+    // area the path covers, not the run's length: a circle run a thousand times draws as
+    // once.
     let bin = |um: f64| ((um / top * 10.0).floor().max(0.0) as usize).min(9);
-    let cell_of = |p: &[f64; 3]| {
-        (
-            (c.px(p[a]) / CELL_PX).floor() as i64,
-            (c.py(p[b]) / CELL_PX).floor() as i64,
-        )
+    let counted = || {
+        fb.pos_mm
+            .iter()
+            .zip(&contour.error_um)
+            .map(|(p, e)| e.map(|_| (c.px(p[a]), c.py(p[b]))))
     };
+    // Cells of 1.5 px, coarser where the path covers more than CELL_BUDGET of them (a
+    // raster over the whole part), so the plot stays within its share of the page.
+    let cells_at = |size: f64| {
+        counted()
+            .flatten()
+            .map(|(x, y)| ((x / size).floor() as i64, (y / size).floor() as i64))
+            .collect::<std::collections::HashSet<_>>()
+            .len()
+    };
+    let fine = cells_at(CELL_PX);
+    let cell_px = CELL_PX * (fine as f64 / CELL_BUDGET).sqrt().max(1.0);
+    let cell_of = |(x, y): (f64, f64)| ((x / cell_px).floor() as i64, (y / cell_px).floor() as i64);
     let mut worst: std::collections::HashMap<(i64, i64), usize> = Default::default();
-    for (p, e) in fb.pos_mm.iter().zip(&contour.error_um) {
-        if let Some(um) = *e {
-            let w = worst.entry(cell_of(p)).or_insert(0);
-            *w = (*w).max(bin(um));
+    for (px, e) in counted().zip(&contour.error_um) {
+        if let (Some(px), Some(um)) = (px, e) {
+            let w = worst.entry(cell_of(px)).or_insert(0);
+            *w = (*w).max(bin(*um));
         }
     }
     let mut drawn: std::collections::HashSet<(i64, i64)> = Default::default();
     let mut line: Vec<(f64, f64)> = Vec::new();
-    let (mut line_bin, mut last_cell) = (0usize, None::<(i64, i64)>);
-    let mut last_px = (0.0, 0.0);
+    let mut line_bin = 0usize;
+    // The previous counted cycle's position and cell (None after a cycle not counted:
+    // the path is not joined across a rapid).
+    let mut prev: Option<((f64, f64), (i64, i64))> = None;
     let flush = |line: &mut Vec<(f64, f64)>, bin: usize, out: &mut String| {
         if line.len() >= 2 {
             let _ = write!(
@@ -373,31 +389,28 @@ fn error_plot(
         }
         line.clear();
     };
-    for (p, e) in fb.pos_mm.iter().zip(&contour.error_um) {
-        let cell = cell_of(p);
-        if e.is_none() || last_cell == Some(cell) {
-            if e.is_none() {
-                flush(&mut line, line_bin, &mut out);
-                last_cell = None;
-            }
+    for px in counted() {
+        let Some(px) = px else {
+            flush(&mut line, line_bin, &mut out);
+            prev = None;
+            continue;
+        };
+        let cell = cell_of(px);
+        let before = prev;
+        prev = Some((px, cell));
+        if before.is_some_and(|b| b.1 == cell) {
             continue;
         }
-        let near =
-            last_cell.is_some_and(|l| (cell.0 - l.0).abs() <= 1 && (cell.1 - l.1).abs() <= 1);
-        let px = (c.px(p[a]), c.py(p[b]));
-        let from = last_px;
-        (last_cell, last_px) = (Some(cell), px);
         if !drawn.insert(cell) {
             flush(&mut line, line_bin, &mut out);
             continue;
         }
         let k = worst[&cell];
-        if line.is_empty() || !near || k != line_bin {
-            // A new line starts at the point before, so the path stays joined.
+        if line.is_empty() || k != line_bin {
+            // A new line starts at the cycle before, so the path stays joined however
+            // far apart two cycles are; a cell first reached alone is a short segment.
             flush(&mut line, line_bin, &mut out);
-            if near {
-                line.push(from);
-            }
+            line.push(before.map_or(px, |b| b.0));
             line_bin = k;
         }
         line.push(px);
@@ -435,10 +448,70 @@ pub fn draw_blocks(
     stop: Option<(usize, f64)>,
     out: &mut String,
 ) {
+    draw_blocks_with(
+        run,
+        c,
+        blocks,
+        proj,
+        (scale, top),
+        stop,
+        Detail::Tooltips,
+        out,
+    );
+}
+
+/// How much a drawing of the path holds.
+#[derive(Clone, Copy, PartialEq)]
+pub enum Detail {
+    /// The path plot: a tooltip for each block (or group), [`POINT_BUDGET`] points.
+    Tooltips,
+    /// A smaller view (the 3D section's): no tooltips, a quarter of the points, runs of
+    /// one style across blocks joined into one polyline, so the page does not grow by
+    /// a polyline a block.
+    Compact,
+}
+
+/// [`draw_blocks`] at a [`Detail`].
+#[allow(clippy::too_many_arguments)]
+pub fn draw_blocks_with(
+    run: &Run,
+    c: &Chart,
+    blocks: &[&CommandBlock],
+    proj: Proj,
+    (scale, top): (f64, f64),
+    stop: Option<(usize, f64)>,
+    detail: Detail,
+    out: &mut String,
+) {
     let total_px: f64 = blocks.iter().map(|b| b.length_mm * scale).sum();
-    let step_px = (total_px / POINT_BUDGET).max(3.0);
-    let group = blocks.len().div_ceil(GROUP_BUDGET).max(1);
+    let budget = match detail {
+        Detail::Tooltips => POINT_BUDGET,
+        Detail::Compact => POINT_BUDGET / 4.0,
+    };
+    let step_px = (total_px / budget).max(3.0);
     let acc = run.machine.path_acc_mm_per_s2;
+    let ran = |i: usize| match stop {
+        Some((at, _)) if i > at => Ran::Not,
+        Some((at, u)) if i == at => Ran::Until(u),
+        _ => Ran::All,
+    };
+    let d = Draw {
+        c,
+        proj,
+        scale,
+        step_px,
+        top,
+        acc,
+    };
+    if detail == Detail::Compact {
+        let mut pen = Pen::joining();
+        for (i, blk) in blocks.iter().enumerate() {
+            d.block(blk, ran(i), &mut pen, out);
+        }
+        pen.flush(c, out);
+        return;
+    }
+    let group = blocks.len().div_ceil(GROUP_BUDGET).max(1);
     for (g, chunk) in blocks.chunks(group).enumerate() {
         let (first, last) = (chunk[0], chunk[chunk.len() - 1]);
         out.push_str("<g class=\"blk\"><title>");
@@ -464,22 +537,9 @@ pub fn draw_blocks(
             );
         }
         out.push_str("</title>");
+        let mut pen = Pen::direct();
         for (k, blk) in chunk.iter().enumerate() {
-            let i = g * group + k;
-            let ran = match stop {
-                Some((at, _)) if i > at => Ran::Not,
-                Some((at, u)) if i == at => Ran::Until(u),
-                _ => Ran::All,
-            };
-            let d = Draw {
-                c,
-                proj,
-                scale,
-                step_px,
-                top,
-                acc,
-            };
-            d.block(blk, ran, out);
+            d.block(blk, ran(g * group + k), &mut pen, out);
         }
         out.push_str("</g>");
     }
@@ -493,6 +553,71 @@ enum Ran {
     Not,
 }
 
+/// Where a drawing's polylines go: straight out, or joined while their style stays the
+/// same and each starts where the last ended.
+struct Pen {
+    join: bool,
+    /// The open polyline's head (`<polyline … points="`) and its points, px.
+    head: String,
+    pts: Vec<(f64, f64)>,
+}
+
+impl Pen {
+    fn direct() -> Self {
+        Pen {
+            join: false,
+            head: String::new(),
+            pts: Vec::new(),
+        }
+    }
+
+    fn joining() -> Self {
+        Pen {
+            join: true,
+            ..Pen::direct()
+        }
+    }
+
+    /// A polyline through `xy` (data coordinates) opened by `head`.
+    fn put(&mut self, c: &Chart, head: &str, xy: &[(f64, f64)], out: &mut String) {
+        if !self.join {
+            out.push_str(head);
+            push_points(c, xy, out);
+            out.push_str("\"/>");
+            return;
+        }
+        let px: Vec<(f64, f64)> = xy.iter().map(|&(x, y)| (c.px(x), c.py(y))).collect();
+        let joins = self.head == head
+            && matches!((self.pts.last(), px.first()), (Some(a), Some(b)) if (a.0 - b.0).abs() < 0.5 && (a.1 - b.1).abs() < 0.5);
+        if joins {
+            self.pts.extend_from_slice(&px[1..]);
+        } else {
+            self.flush(c, out);
+            self.head = head.to_string();
+            self.pts = px;
+        }
+    }
+
+    fn flush(&mut self, _c: &Chart, out: &mut String) {
+        if self.pts.is_empty() {
+            return;
+        }
+        out.push_str(&self.head);
+        let mut last = (f64::NAN, f64::NAN);
+        for (i, &p) in self.pts.iter().enumerate() {
+            let near = (p.0 - last.0).abs() < 0.5 && (p.1 - last.1).abs() < 0.5;
+            if near && i + 1 != self.pts.len() {
+                continue;
+            }
+            let _ = write!(out, "{:.1},{:.1} ", p.0, p.1);
+            last = p;
+        }
+        out.pop();
+        out.push_str("\"/>");
+        self.pts.clear();
+    }
+}
+
 /// What drawing a block needs.
 struct Draw<'a> {
     c: &'a Chart,
@@ -504,7 +629,7 @@ struct Draw<'a> {
 }
 
 impl Draw<'_> {
-    fn block(&self, blk: &CommandBlock, ran: Ran, out: &mut String) {
+    fn block(&self, blk: &CommandBlock, ran: Ran, pen: &mut Pen, out: &mut String) {
         let (u0, u1) = shared::path::domain(blk);
         let len_px = blk.length_mm * self.scale;
         let n_for = |share: f64| {
@@ -524,9 +649,7 @@ impl Draw<'_> {
         if let Some(r) = rest {
             let pts = sample_range(blk, r.0, r.1, n_for(share(r)));
             let xy: Vec<(f64, f64)> = pts.iter().map(|p| (self.proj)(*p)).collect();
-            out.push_str("<polyline class=\"notrun\" points=\"");
-            push_points(self.c, &xy, out);
-            out.push_str("\"/>");
+            pen.put(self.c, "<polyline class=\"notrun\" points=\"", &xy, out);
         }
         let Some(d) = done else {
             return;
@@ -534,9 +657,7 @@ impl Draw<'_> {
         let pts = sample_range(blk, d.0, d.1, n_for(share(d)));
         if is_rapid(blk) {
             let xy: Vec<(f64, f64)> = pts.iter().map(|p| (self.proj)(*p)).collect();
-            out.push_str("<polyline class=\"rapid\" points=\"");
-            push_points(self.c, &xy, out);
-            out.push_str("\"/>");
+            pen.put(self.c, "<polyline class=\"rapid\" points=\"", &xy, out);
             return;
         }
         // Arc length at each sample, scaled to the block's exact length (for a block cut
@@ -562,23 +683,21 @@ impl Draw<'_> {
             // The colour of a segment is that of its faster end.
             let seg = bin(i - 1).max(bin(i));
             if seg != cur {
-                self.emit(&pts[run_start..i], cur, out);
+                self.emit(&pts[run_start..i], cur, pen, out);
                 run_start = i - 1;
                 cur = seg;
             }
         }
-        self.emit(&pts[run_start..], cur, out);
+        self.emit(&pts[run_start..], cur, pen, out);
     }
 
-    fn emit(&self, pts: &[[f64; 3]], bin: usize, out: &mut String) {
+    fn emit(&self, pts: &[[f64; 3]], bin: usize, pen: &mut Pen, out: &mut String) {
         let xy: Vec<(f64, f64)> = pts.iter().map(|p| (self.proj)(*p)).collect();
-        let _ = write!(
-            out,
+        let head = format!(
             "<polyline stroke=\"{}\" class=\"feed\" points=\"",
             FEED_COLOURS[bin]
         );
-        push_points(self.c, &xy, out);
-        out.push_str("\"/>");
+        pen.put(self.c, &head, &xy, out);
     }
 }
 

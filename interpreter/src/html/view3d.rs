@@ -13,8 +13,9 @@
 //! * **A STEP-NC part is drawn at the tool's tip.** Its blocks command the tool's
 //!   reference point `M = C + R·n + (H − R)·z` ([`crate::scallop`]), a tool length `H`
 //!   above the tip; the 3D views subtract `H` along Z from the whole path, so the passes
-//!   lie on the part's surface (the tip of a ball touches the surface where it is level
-//!   and is within `R` of it elsewhere) and the rapids show the true clearance.
+//!   lie on the part's surface (the tip `C + R·(n − z)` of a ball touches the surface
+//!   where it is level and is within `√2·R` of it elsewhere) and the rapids show the
+//!   true clearance.
 //! * **The wireframe** is each distinct Bézier patch of the surface blocks, with a few
 //!   iso-parameter lines, drawn under the path.
 
@@ -31,8 +32,12 @@ const S30: f64 = 0.5;
 /// Iso-parameter lines a patch each way (edges included), and points on each.
 const WIRES: usize = 5;
 const WIRE_POINTS: usize = 24;
-/// Most patches in the wireframe: beyond, only their edges.
+/// Most patches in the wireframe with inner lines: beyond, only their edges.
 const WIRE_PATCHES: usize = 400;
+/// Most patches drawn at all: a part of more is drawn without its surface.
+const WIRE_PATCHES_MAX: usize = 4000;
+/// Points of the wireframe in all, about.
+const WIRE_BUDGET: usize = 40_000;
 
 /// The south-east isometric projection: X right and down, Y right and up, Z up.
 pub fn iso(p: [f64; 3]) -> (f64, f64) {
@@ -61,11 +66,16 @@ fn patches<'a>(blocks: &[&'a CommandBlock]) -> Vec<&'a CommandBlock> {
 
 /// The wireframe's polylines (in part coordinates).
 fn wireframe(patches: &[&CommandBlock]) -> Vec<Vec<[f64; 3]>> {
+    if patches.len() > WIRE_PATCHES_MAX {
+        return Vec::new();
+    }
     let lines = if patches.len() > WIRE_PATCHES {
         2
     } else {
         WIRES
     };
+    // Points a line: fewer on many patches, so the wireframe stays within its budget.
+    let points = (WIRE_BUDGET / (patches.len() * lines * 2).max(1)).clamp(2, WIRE_POINTS);
     let mut out = Vec::new();
     for b in patches {
         let s = shared::path::patch(b);
@@ -73,9 +83,9 @@ fn wireframe(patches: &[&CommandBlock]) -> Vec<Vec<[f64; 3]>> {
             let w = i as f64 / (lines - 1) as f64;
             for along_u in [true, false] {
                 out.push(
-                    (0..=WIRE_POINTS)
+                    (0..=points)
                         .map(|j| {
-                            let t = j as f64 / WIRE_POINTS as f64;
+                            let t = j as f64 / points as f64;
                             let (u, v) = if along_u { (t, w) } else { (w, t) };
                             piegl_tiller_surface(&s, u, v).p
                         })
@@ -146,7 +156,7 @@ pub fn section(run: &Run, contour: Option<&crate::contour::Contour>, out: &mut S
         (760.0, 560.0),
     );
     c.ticks = false;
-    draw(run, &c, &blocks, &proj, scale, top, stop, &wires, out);
+    draw(run, &c, &blocks, &proj, scale, top, stop, &wires, true, out);
     let mut extra = String::new();
     triad(&c, &mut extra);
     path::markers(run, &c, &proj, &all, &mut extra);
@@ -170,25 +180,37 @@ pub fn section(run: &Run, contour: Option<&crate::contour::Contour>, out: &mut S
             let q = tip(p);
             (q[a], q[b])
         };
-        draw(run, &c, &blocks, &proj, scale, top, stop, &wires, out);
+        draw(
+            run, &c, &blocks, &proj, scale, top, stop, &wires, false, out,
+        );
         let mut extra = String::new();
         path::markers(run, &c, &proj, &all, &mut extra);
         c.close_with(out, &[], &extra);
     }
     out.push_str("</div><p class=\"note\">");
-    if lift != 0.0 {
-        let _ = write!(
-            out,
-            "The part's surface is drawn as a wireframe of its {}. The path is the tool's tip: the commanded tool reference point less the tool length, {} mm, along Z. ",
-            count(patches.len()),
-            super::svg::num(lift)
-        );
-    } else if !patches.is_empty() {
-        let _ = write!(
-            out,
-            "The part's surface is drawn as a wireframe of its {}. Its passes use more than one tool, so the path is the commanded tool reference point, above the surface by each tool's length. ",
-            count(patches.len())
-        );
+    if !patches.is_empty() {
+        if wires.is_empty() {
+            let _ = write!(
+                out,
+                "The part's {} are too many to draw as a wireframe. ",
+                count(patches.len())
+            );
+        } else {
+            let _ = write!(
+                out,
+                "The part's surface is drawn as a wireframe of its {} in the isometric view. ",
+                count(patches.len())
+            );
+        }
+        if lift != 0.0 {
+            let _ = write!(
+                out,
+                "The path is the tool's tip: the commanded tool reference point less the tool length, {} mm, along Z. ",
+                super::svg::num(lift)
+            );
+        } else {
+            out.push_str("Its passes use more than one tool, so the path is the commanded tool reference point, above the surface by each tool's length. ");
+        }
     }
     out.push_str("The isometric view looks from the front right, above: X runs to the right and down, Y to the right and up, Z up. Each view keeps equal scales on its axes.</p></section>");
 }
@@ -220,7 +242,8 @@ fn legend(wires: &[Vec<[f64; 3]>], stop: Option<(usize, f64)>) -> Vec<(&'static 
     legend
 }
 
-/// The wireframe under the path, then the path.
+/// The wireframe under the path (in the isometric view only: the planes show the
+/// part's extent by the path), then the path.
 #[allow(clippy::too_many_arguments)]
 fn draw(
     run: &Run,
@@ -231,10 +254,11 @@ fn draw(
     top: f64,
     stop: Option<(usize, f64)>,
     wires: &[Vec<[f64; 3]>],
+    iso: bool,
     out: &mut String,
 ) {
     c.open(out);
-    if !wires.is_empty() {
+    if iso && !wires.is_empty() {
         out.push_str("<g class=\"wire\"><title>part surface</title>");
         for w in wires {
             let xy: Vec<(f64, f64)> = w.iter().map(|p| proj(*p)).collect();
@@ -244,7 +268,16 @@ fn draw(
         }
         out.push_str("</g>");
     }
-    path::draw_blocks(run, c, blocks, proj, scale, top, stop, out);
+    path::draw_blocks_with(
+        run,
+        c,
+        blocks,
+        proj,
+        (scale, top),
+        stop,
+        path::Detail::Compact,
+        out,
+    );
 }
 
 /// X, Y and Z arrows in the lower left corner of the isometric view.
