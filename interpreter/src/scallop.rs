@@ -151,6 +151,29 @@ fn surrounded(p: [f64; 3], n: [f64; 3], r: f64, near: &[[f64; 3]]) -> bool {
     widest < std::f64::consts::PI
 }
 
+/// The surface blocks of `blocks`, each patch once (its control points and the side the
+/// tool is on): the passes of a part share their patches.
+pub fn distinct_patches<'a>(
+    blocks: impl IntoIterator<Item = &'a CommandBlock>,
+) -> Vec<&'a CommandBlock> {
+    let mut seen = std::collections::HashSet::new();
+    blocks
+        .into_iter()
+        .filter(|b| b.is_surface())
+        .filter(|b| {
+            let key: Vec<u64> = b
+                .ctrl()
+                .iter()
+                .flatten()
+                .map(|x| x.to_bits())
+                .chain([b.degree as u64, b.surface.degree_v as u64])
+                .chain([b.surface.normal_sign as u64])
+                .collect();
+            seen.insert(key)
+        })
+        .collect()
+}
+
 /// What the measurement needs: the tool, the ball centres and the distinct patches.
 struct Setup<'a> {
     r: f64,
@@ -174,22 +197,7 @@ impl<'a> Setup<'a> {
         let lift = h - r;
         let ball = |m: [f64; 3]| [m[0], m[1], m[2] - lift];
         let centres = Centres::new(positions.iter().map(|m| ball(*m)));
-        // Each patch once (its control points and the side the tool is on).
-        let mut patches: Vec<&CommandBlock> = Vec::new();
-        let mut seen = std::collections::HashSet::new();
-        for b in &surface {
-            let key: Vec<u64> = b
-                .ctrl()
-                .iter()
-                .flatten()
-                .map(|x| x.to_bits())
-                .chain([b.degree as u64, b.surface.degree_v as u64])
-                .chain([b.surface.normal_sign as u64])
-                .collect();
-            if seen.insert(key) {
-                patches.push(b);
-            }
-        }
+        let patches = distinct_patches(surface.iter().copied());
         Some(Setup {
             r,
             centres,
@@ -370,6 +378,14 @@ mod tests {
         b
     }
 
+    /// The tool reference points of 20 passes along Y, `w` apart in X from X4, a step
+    /// of 0.04 mm, with the tool of length `h`.
+    fn parallel_passes(w: f64, h: f64) -> Vec<[f64; 3]> {
+        (0..20)
+            .flat_map(|k| (0..=500).map(move |s| [4.0 + k as f64 * w, s as f64 * 0.04, h]))
+            .collect()
+    }
+
     /// Passes along Y, `w` apart in X, over a flat surface: the scallop between two is
     /// `R − √(R² − (w/2)²)` exactly (the balls' crest halfway), and the measurement
     /// finds it from the tool reference points of a step of 0.04 mm.
@@ -377,13 +393,7 @@ mod tests {
     fn parallel_passes_on_a_plane_leave_the_closed_form_scallop() {
         let (r, h, w) = (3.0, 40.0, 0.6);
         let b = flat_patch(r, h);
-        let mut positions = Vec::new();
-        for k in 0..20 {
-            let x = 4.0 + k as f64 * w;
-            for s in 0..=500 {
-                positions.push([x, s as f64 * 0.04, h]);
-            }
-        }
+        let positions = parallel_passes(w, h);
         let got = measure(&[b], &positions).unwrap();
         let exact = r - (r * r - (w / 2.0).powi(2)).sqrt();
         // Between consecutive cycles' balls the sweep could cut the crest lower by at
@@ -408,13 +418,7 @@ mod tests {
     fn the_map_of_parallel_passes_judges_only_between_them() {
         let (r, h, w) = (3.0, 40.0, 0.6);
         let b = flat_patch(r, h);
-        let mut positions = Vec::new();
-        for k in 0..20 {
-            let x = 4.0 + k as f64 * w;
-            for s in 0..=500 {
-                positions.push([x, s as f64 * 0.04, h]);
-            }
-        }
+        let positions = parallel_passes(w, h);
         let blocks = [b];
         let worst = measure(&blocks, &positions).unwrap();
         let map = map(&blocks, &positions, 40_000).unwrap();

@@ -44,26 +44,6 @@ pub fn iso(p: [f64; 3]) -> (f64, f64) {
     ((p[0] + p[1]) * C30, (p[1] - p[0]) * S30 + p[2])
 }
 
-/// The distinct patches of the surface blocks (one per control net and side).
-fn patches<'a>(blocks: &[&'a CommandBlock]) -> Vec<&'a CommandBlock> {
-    let mut seen = std::collections::HashSet::new();
-    blocks
-        .iter()
-        .filter(|b| b.is_surface())
-        .filter(|b| {
-            let key: Vec<u64> = b
-                .ctrl()
-                .iter()
-                .flatten()
-                .map(|x| x.to_bits())
-                .chain([b.degree as u64, b.surface.degree_v as u64])
-                .collect();
-            seen.insert(key)
-        })
-        .copied()
-        .collect()
-}
-
 /// The wireframe's polylines (in part coordinates).
 fn wireframe(patches: &[&CommandBlock]) -> Vec<Vec<[f64; 3]>> {
     if patches.len() > WIRE_PATCHES_MAX {
@@ -107,7 +87,7 @@ pub fn section(run: &Run, contour: Option<&crate::contour::Contour>, out: &mut S
         .collect();
     let ext = path::extent(&feed_pts);
     let moves_in_3d = !feed_pts.is_empty() && ext.iter().all(|e| e.1 - e.0 > 1e-6);
-    let patches = patches(&blocks);
+    let patches = crate::scallop::distinct_patches(blocks.iter().copied());
     if !moves_in_3d && patches.is_empty() {
         return;
     }
