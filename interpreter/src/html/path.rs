@@ -508,7 +508,7 @@ pub fn draw_blocks_with(
         for (i, blk) in blocks.iter().enumerate() {
             d.block(blk, ran(i), &mut pen, out);
         }
-        pen.flush(c, out);
+        pen.flush(out);
         return;
     }
     let group = blocks.len().div_ceil(GROUP_BUDGET).max(1);
@@ -592,29 +592,19 @@ impl Pen {
         if joins {
             self.pts.extend_from_slice(&px[1..]);
         } else {
-            self.flush(c, out);
+            self.flush(out);
             self.head = head.to_string();
             self.pts = px;
         }
     }
 
-    fn flush(&mut self, _c: &Chart, out: &mut String) {
+    fn flush(&mut self, out: &mut String) {
         if self.pts.is_empty() {
             return;
         }
         out.push_str(&self.head);
-        let mut last = (f64::NAN, f64::NAN);
-        for (i, &p) in self.pts.iter().enumerate() {
-            let near = (p.0 - last.0).abs() < 0.5 && (p.1 - last.1).abs() < 0.5;
-            if near && i + 1 != self.pts.len() {
-                continue;
-            }
-            let _ = write!(out, "{:.1},{:.1} ", p.0, p.1);
-            last = p;
-        }
-        out.pop();
+        write_px(self.pts.drain(..), out);
         out.push_str("\"/>");
-        self.pts.clear();
     }
 }
 
@@ -704,17 +694,23 @@ impl Draw<'_> {
 /// Writes pixel coordinates, dropping points within half a pixel of the last one kept
 /// (the last point is always kept so blocks join).
 pub fn push_points(c: &Chart, xy: &[(f64, f64)], out: &mut String) {
+    write_px(xy.iter().map(|&(x, y)| (c.px(x), c.py(y))), out);
+}
+
+/// Writes pixel coordinates `pts`, dropping points within half a pixel of the last one
+/// kept (the last point is always kept).
+fn write_px(pts: impl ExactSizeIterator<Item = (f64, f64)>, out: &mut String) {
+    let n = pts.len();
     let mut last = (f64::NAN, f64::NAN);
-    for (i, &(x, y)) in xy.iter().enumerate() {
-        let p = (c.px(x), c.py(y));
+    for (i, p) in pts.enumerate() {
         let near = (p.0 - last.0).abs() < 0.5 && (p.1 - last.1).abs() < 0.5;
-        if near && i + 1 != xy.len() {
+        if near && i + 1 != n {
             continue;
         }
         let _ = write!(out, "{:.1},{:.1} ", p.0, p.1);
         last = p;
     }
-    if out.ends_with(' ') {
+    if n > 0 {
         out.pop();
     }
 }
