@@ -30,6 +30,7 @@ pub mod speed;
 pub use block::{commands, Block, Straight};
 
 use crate::program::{Move, PathControl, Plane};
+use cache::PlanCache;
 use shared::nurbs::{self, SplitCurve, MAX_CTRL};
 use shared::path;
 use shared::profile::Limits as Jerk;
@@ -38,6 +39,7 @@ use shared::Machine;
 use std::f64::consts::{FRAC_PI_2, PI};
 
 pub mod blend;
+mod cache;
 mod eval;
 mod hodograph;
 
@@ -2001,7 +2003,16 @@ pub fn plan_and<B: Plannable>(
 ) {
     split_at_kinks(blocks, machine, period_ns);
     if !blocks.iter().any(is_curve) {
-        plan_split(blocks, machine, period_ns, &|_| NORMAL_SHARE, &mut [], done);
+        let mut none = PlanCache::new(0);
+        plan_split(
+            blocks,
+            machine,
+            period_ns,
+            &|_| NORMAL_SHARE,
+            &mut [],
+            &mut none,
+            done,
+        );
         return;
     }
     // Each round plans from the programmed feeds.
@@ -2009,6 +2020,7 @@ pub fn plan_and<B: Plannable>(
     let mut memo = vec![None; blocks.len()];
     let mut brakes = vec![None; blocks.len()];
     let mut last_ceiling = Vec::new();
+    let mut cache = PlanCache::new(blocks.len());
     let mut round = |blocks: &mut Vec<B>, shares: &[f64]| {
         for (b, f) in blocks.iter_mut().zip(&feeds) {
             if b.is_motion() {
@@ -2022,6 +2034,7 @@ pub fn plan_and<B: Plannable>(
             period_ns,
             &|i| shares[i],
             &mut brakes,
+            &mut cache,
             |_, _| {},
         );
         relax(blocks, machine, &ceiling, &mut memo, false);
@@ -2397,6 +2410,7 @@ fn plan_split<B: Plannable>(
     period_ns: u64,
     share: &dyn Fn(usize) -> f64,
     memo: &mut [Option<BrakeMemo>],
+    cache: &mut PlanCache,
     done: impl FnMut(usize, &B),
 ) -> Vec<Jerk> {
     let period_s = period_ns as f64 * 1e-9;
@@ -2432,7 +2446,7 @@ fn plan_split<B: Plannable>(
             let g = b.geometry();
             let length = match g {
                 Geometry::Straight(d) => path::norm(d),
-                Geometry::Curve(c) => path::length(c),
+                Geometry::Curve(c) => cache.length(i, c),
             };
             let fast = match (g, &straight_limits) {
                 (Geometry::Straight(d), Some(lim)) => {
@@ -2441,7 +2455,7 @@ fn plan_split<B: Plannable>(
                 _ => false,
             };
             if !fast {
-                *shp = shape(g, machine, period_s, feed / 60.0, share(i));
+                *shp = cache.shape(i, g, machine, period_s, feed / 60.0, share(i));
             }
             let limits = Jerk {
                 acc: shp.acc,

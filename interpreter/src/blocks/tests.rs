@@ -736,3 +736,51 @@ fn a_chain_of_short_blends_brakes_by_the_jerk_its_speeds_leave() {
     }
     assert!(braking >= 10, "only {braking} braking blends");
 }
+
+#[test]
+fn the_plan_cache_gives_each_shape_and_length_as_worked_out_anew() {
+    // A block's shape is kept per feed and share: asked again for either, or for a
+    // third pair (which takes a slot), it is what `shape` works out, bit for bit.
+    let m = Machine::default();
+    let c = SplitCurve {
+        degree: 3,
+        knots: vec![0.0, 0.0, 0.0, 0.0, 1.0, 1.0, 1.0, 1.0],
+        ctrl: vec![
+            [0.0, 0.0, 0.0, 1.0],
+            [2.0, 0.0, 0.0, 1.0],
+            [3.0, 0.3, 0.0, 1.0],
+            [3.3, 1.2, 0.0, 1.0],
+        ],
+    };
+    let b = curve_block(1, &c, Helix::NONE, 3000.0);
+    let g = Geometry::Curve(&b);
+    let line = Geometry::Straight([3.0, 4.0, 0.0]);
+    let mut cache = cache::PlanCache::new(3);
+    let asks = [
+        (0, g, 50.0, NORMAL_SHARE),
+        (0, g, 50.0, VALLEY_SHARE),
+        (0, g, 50.0, NORMAL_SHARE),
+        (0, g, 20.0, NORMAL_SHARE),
+        (0, g, 50.0, VALLEY_SHARE),
+        (1, g, 50.0, VALLEY_SHARE),
+        (2, line, 50.0, NORMAL_SHARE),
+        (2, line, 20.0, NORMAL_SHARE),
+        // Past the cache's blocks: worked out, not kept.
+        (7, g, 50.0, NORMAL_SHARE),
+    ];
+    for (i, g, feed, share) in asks {
+        let kept = cache.shape(i, g, &m, 1e-3, feed, share);
+        let anew = shape(g, &m, 1e-3, feed, share);
+        assert_eq!(shape_bits(&kept), shape_bits(&anew), "{i} {feed} {share}");
+    }
+    // The two shares give different shapes here, so a key without the share fails.
+    let (n, v) = (
+        shape(g, &m, 1e-3, 50.0, NORMAL_SHARE),
+        shape(g, &m, 1e-3, 50.0, VALLEY_SHARE),
+    );
+    assert_ne!(shape_bits(&n), shape_bits(&v));
+    let len = path::length(&b);
+    for i in [0, 0, 7] {
+        assert_eq!(cache.length(i, &b).to_bits(), len.to_bits());
+    }
+}
