@@ -45,15 +45,54 @@ impl Source {
 }
 
 /// The bytes of the file at `path`, as `std::fs::read` gives them, into a buffer that
-/// asks for huge pages (a long program is megabytes: see [`crate::pages`]).
+/// asks for huge pages (a long program is megabytes: see [`crate::pages`]). What is not a
+/// regular file (a pipe, a device) is read as a stream ([`read_stream`]), which ends at
+/// its first line too long for a program: `cnc check /dev/zero` grew to 5.9 GB in 5 s.
 fn read_file(path: &Path) -> std::io::Result<Vec<u8>> {
     use std::io::Read;
     let mut file = std::fs::File::open(path)?;
-    let len = file.metadata().map_or(0, |m| m.len());
+    let meta = file.metadata()?;
+    if !meta.is_file() {
+        return read_stream(&mut file);
+    }
+    let len = meta.len();
     let mut bytes = Vec::with_capacity(usize::try_from(len).unwrap_or(0).saturating_add(1));
     crate::pages::prefer_huge_pages(&bytes);
     file.read_to_end(&mut bytes)?;
     Ok(bytes)
+}
+
+/// How much of a line too long for a program ([`program::MAX_LINE_BYTES`]) a stream's
+/// reading keeps: enough for the check to refuse it at its column with its text.
+const OVERLONG_KEPT: usize = 4096;
+
+/// A stream's bytes up to its end, or up to [`OVERLONG_KEPT`] bytes into its first line
+/// longer than any program line may be: the program is refused there (`line-length`),
+/// and the rest, which may never end (`/dev/zero`), is not read.
+fn read_stream(r: &mut impl std::io::Read) -> std::io::Result<Vec<u8>> {
+    let mut bytes = Vec::new();
+    let mut chunk = vec![0u8; 64 * 1024];
+    // Where the line being read starts.
+    let mut line = 0;
+    loop {
+        let n = match r.read(&mut chunk) {
+            Ok(0) => return Ok(bytes),
+            Ok(n) => n,
+            Err(e) if e.kind() == std::io::ErrorKind::Interrupted => continue,
+            Err(e) => return Err(e),
+        };
+        let from = bytes.len();
+        bytes.extend_from_slice(&chunk[..n]);
+        if let Some(p) = bytes[from..].iter().rposition(|&b| b == b'\n') {
+            line = from + p + 1;
+        }
+        let most = line + program::MAX_LINE_BYTES.max(OVERLONG_KEPT);
+        if bytes.len() > most {
+            // (The over-long line's end is not looked for: none of it after this counts.)
+            bytes.truncate(most);
+            return Ok(bytes);
+        }
+    }
 }
 
 /// Every problem of a program as `NAME:LINE:COL: RULE: message` lines; `NAME` is the
@@ -498,4 +537,35 @@ pub fn run_streaming<S: Service>(
         crate::report::write_orphan_report(&cfg.out_dir, &summary.program, cfg.period_ns)?;
     }
     Ok(summary)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::io::Read;
+
+    #[test]
+    fn a_stream_without_line_ends_is_read_no_further_than_its_first_line_can_count() {
+        // `/dev/zero` as a program: 10 MB of it was read whole (and the device itself,
+        // without end, until memory ran out).
+        let read = read_stream(&mut std::io::repeat(0).take(10_000_000)).unwrap();
+        assert_eq!(read.len(), OVERLONG_KEPT);
+        // Lines of a program come whole, up to the stream's end, however many.
+        let text = "G1 X1 F100\n".repeat(20_000) + "M2";
+        let read = read_stream(&mut text.as_bytes()).unwrap();
+        assert_eq!(read, text.as_bytes());
+        // An over-long line after good ones: kept to its column and a little more.
+        let long = "G1 X1\n".to_owned() + &"X".repeat(100_000) + "\nM2\n";
+        let read = read_stream(&mut long.as_bytes()).unwrap();
+        assert_eq!(read.len(), 6 + OVERLONG_KEPT);
+    }
+
+    #[test]
+    fn a_device_as_a_program_is_refused_at_its_first_line() {
+        let src = Source::load(Some(Path::new("/dev/zero"))).unwrap();
+        assert!(src.text.len() <= OVERLONG_KEPT, "{}", src.text.len());
+        let diags = program::interpret(&src.text).err().unwrap_or_default();
+        let first = diags.first().map(|d| d.to_string()).unwrap_or_default();
+        assert!(first.contains("line-length"), "{first}");
+    }
 }
