@@ -369,6 +369,27 @@ fn frame_at(e: &nurbs::CurvePoint) -> Option<([f64; 3], [f64; 3])> {
     Some((t, k))
 }
 
+/// The curvature vector's rate along the path, `dk/ds`, at a point evaluated with its
+/// third derivative `d3` (zero where the curve (nearly) stops, as [`frame_at`] finds).
+/// With `k = (C' × C'') × C' / σ⁴`, `σ = |C'|`:
+/// `dk/du = ((C' × C''') × C' + (C' × C'') × C'') / σ⁴ − 4 (C'·C'') / σ² · k`, and
+/// `dk/ds = (dk/du) / σ`.
+fn rate_at(e: &nurbs::CurvePoint, d3: [f64; 3]) -> [f64; 3] {
+    use crate::surface_path::cross;
+    let (c1, c2) = (e.d1, e.d2);
+    let s2 = dot(c1, c1);
+    let sp = s2.sqrt();
+    if sp < 1e-12 {
+        return [0.0; 3];
+    }
+    let s4 = s2 * s2;
+    let c12 = cross(c1, c2);
+    let k = cross(c12, c1).map(|x| x / s4);
+    let (a, b) = (cross(cross(c1, d3), c1), cross(c12, c2));
+    let g = 4.0 * dot(c1, c2) / s2;
+    [0, 1, 2].map(|i| ((a[i] + b[i]) / s4 - g * k[i]) / sp)
+}
+
 /// What the planner takes from one block's geometry: its speed cap and the tangential
 /// acceleration and jerk its profile may use (all in mm and s), and its end frames.
 #[derive(Debug, Clone, Copy)]
@@ -1010,8 +1031,12 @@ fn samples(b: &CommandBlock, places: bool) -> Samples {
             .clamp(1, spans.len().max(2) - 1);
         (spans[i - 1], spans[i.min(spans.len() - 1)])
     };
-    // dk/ds at `u`, by a central difference inside u's span.
+    // dk/ds at `u`: from the third derivative where the moving-data evaluator gives it
+    // ([`rate_at`]), else by a central difference inside u's span.
     let rate = |u: f64| -> [f64; 3] {
+        if let Some((e, d3)) = ev.eval_d3(u) {
+            return rate_at(&e, d3);
+        }
         let (lo, hi) = span_of(u);
         let h = 1e-4 * (hi - lo);
         let (ua, ub) = ((u - h).max(lo), (u + h).min(hi));
@@ -1032,7 +1057,12 @@ fn samples(b: &CommandBlock, places: bool) -> Samples {
         }
     };
     // The frame and dk/ds at `u`; none where the curve (nearly) stops.
-    let at = |u: f64| -> Option<Sample> { Some((frame(u)?, rate(u))) };
+    let at = |u: f64| -> Option<Sample> {
+        if let Some((e, d3)) = ev.eval_d3(u) {
+            return Some((frame_at(&e)?, rate_at(&e, d3)));
+        }
+        Some((frame(u)?, rate(u)))
+    };
     let mut us: Vec<f64> = Vec::with_capacity(samples + 1);
     let mut pts: Vec<Frame> = Vec::with_capacity(samples + 1);
     let mut dk: Vec<[f64; 3]> = Vec::with_capacity(samples + 1);
@@ -1096,6 +1126,10 @@ fn samples(b: &CommandBlock, places: bool) -> Samples {
     };
     let curvature = |u: f64| frame(u).map(|(_, k)| path::norm(k));
     let curvature_rate = |u: f64| {
+        if let Some((e, d3)) = ev.eval_d3(u) {
+            frame_at(&e)?;
+            return Some(path::norm(rate_at(&e, d3)));
+        }
         if !surely_moving(u) {
             frame(u)?;
         }

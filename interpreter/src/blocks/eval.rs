@@ -60,6 +60,18 @@ impl<'a> BlockEval<'a> {
     }
 }
 
+impl BlockEval<'_> {
+    /// [`Self::eval`] with the third derivative, where the moving-data evaluator takes
+    /// the block and it has no helical axial motion (whose third derivative is not
+    /// worked out); `None` elsewhere.
+    pub(crate) fn eval_d3(&self, u: f64) -> Option<(CurvePoint, [f64; 3])> {
+        if self.block.helix.axis != shared::protocol::Helix::NONE.axis {
+            return None;
+        }
+        self.fast.as_ref().map(|f| f.borrow_mut().eval_d3(u))
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -784,3 +784,73 @@ fn the_plan_cache_gives_each_shape_and_length_as_worked_out_anew() {
         assert_eq!(cache.length(i, &b).to_bits(), len.to_bits());
     }
 }
+
+proptest::proptest! {
+    #![proptest_config(proptest::prelude::ProptestConfig::with_cases(200))]
+    /// The curvature's rate from the third derivative (`rate_at`) against central
+    /// differences of the curvature vector along the arc (Richardson-extrapolated from
+    /// steps of 1e-3 and 5e-4 of the span, the general evaluator), inside a span of
+    /// random curves, rational or not: to 1e-5 of the larger of `|dk/ds|` and `κ² + κ/L`
+    /// (`L` the control polygon's size).
+    #[test]
+    fn the_curvature_rate_is_the_rate_of_the_curvature(
+        degree in 3usize..=5,
+        pts in proptest::collection::vec((-20.0f64..20.0, -20.0f64..20.0, -2.0f64..2.0), 6),
+        weights in proptest::collection::vec(0.3f64..3.0, 6),
+        rational in proptest::bool::ANY,
+        t in 0.1f64..0.9,
+    ) {
+        let n = degree + 1;
+        let ctrl: Vec<[f64; 4]> = pts[..n]
+            .iter()
+            .zip(&weights)
+            .map(|(&(x, y, z), &w)| [x, y, z, if rational { w } else { 1.0 }])
+            .collect();
+        let mut knots = vec![0.0; degree + 1];
+        knots.extend(std::iter::repeat_n(1.0, degree + 1));
+        let b = curve_block(3, &SplitCurve { degree, knots, ctrl }, Helix::NONE, 900.0);
+        let ev = eval::BlockEval::new(&b);
+        let Some((e, d3)) = ev.eval_d3(t) else {
+            return Err(proptest::test_runner::TestCaseError::fail("no third derivative"));
+        };
+        let got = rate_at(&e, d3);
+        let diff = |h: f64| -> Option<[f64; 3]> {
+            let (a, c) = (path::eval(&b, t - h), path::eval(&b, t + h));
+            let ((_, ka), (_, kc)) = (frame_at(&a)?, frame_at(&c)?);
+            let ds = path::norm(sub(c.p, a.p));
+            Some(sub(kc, ka).map(|x| x / ds))
+        };
+        let (Some(d1), Some(d2)) = (diff(1e-3), diff(5e-4)) else {
+            return Ok(());
+        };
+        let want: [f64; 3] = std::array::from_fn(|i| (4.0 * d2[i] - d1[i]) / 3.0);
+        let Some((_, k)) = frame_at(&e) else { return Ok(()); };
+        let kappa = path::norm(k);
+        let size = pts.iter().fold(1.0f64, |m, p| m.max(p.0.abs()).max(p.1.abs()));
+        let scale = path::norm(want).max(kappa * kappa + kappa / size);
+        let err = path::norm(sub(got, want)) / scale;
+        proptest::prop_assert!(err < 1e-5, "{:?} vs {:?}: {:e}", got, want, err);
+    }
+}
+
+/// On a circle of radius `r` the curvature vector turns with the tangent: `dk/ds =
+/// −T/r²`, of length `1/r²`. The rational quadratic quarter circle, to 1e-12 of it.
+#[test]
+fn the_curvature_rate_of_a_circle_is_its_closed_form() {
+    let (r, w) = (7.0, std::f64::consts::FRAC_1_SQRT_2);
+    let c = SplitCurve {
+        degree: 2,
+        knots: vec![0.0, 0.0, 0.0, 1.0, 1.0, 1.0],
+        ctrl: vec![[r, 0.0, 0.0, 1.0], [r, r, 0.0, w], [0.0, r, 0.0, 1.0]],
+    };
+    let b = curve_block(1, &c, Helix::NONE, 900.0);
+    let ev = eval::BlockEval::new(&b);
+    for u in [0.0, 0.2, 0.5, 0.77, 1.0] {
+        let (e, d3) = ev.eval_d3(u).expect("a plain curve");
+        let (t, _) = frame_at(&e).expect("moving");
+        let got = rate_at(&e, d3);
+        let want = t.map(|x| -x / (r * r));
+        let err = path::norm(sub(got, want)) * r * r;
+        assert!(err < 1e-12, "{u}: {got:?} vs {want:?} ({err:e})");
+    }
+}

@@ -553,6 +553,64 @@ impl Core {
         by_degree!(self, self.cursor.degree, eval_fixed, eval_general, u)
     }
 
+    /// [`Self::eval_d3_any`] in the AVX2 kernel where the CPU has it (its fused
+    /// multiply-adds are a library call without it).
+    fn eval_d3(&mut self, u: f64) -> (CurvePoint, [f64; 3]) {
+        #[cfg(target_arch = "x86_64")]
+        if self.simd {
+            // SAFETY: `simd` is set only when the running CPU reports AVX2.
+            return unsafe { self.eval_d3_avx2(u) };
+        }
+        self.eval_d3_any(u)
+    }
+
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2,fma")]
+    #[inline(never)]
+    fn eval_d3_avx2(&mut self, u: f64) -> (CurvePoint, [f64; 3]) {
+        self.eval_d3_any(u)
+    }
+
+    /// [`Self::eval_power`] (the same bits for the point and its first two derivatives)
+    /// with the third derivative: for the planner's curvature rate, not for the cycle.
+    #[inline(always)]
+    fn eval_d3_any(&mut self, u: f64) -> (CurvePoint, [f64; 3]) {
+        let (u, moved) = self.cursor.enter(u);
+        if moved {
+            self.load_window();
+        }
+        let p = self.cursor.degree.min(MAX_DEGREE);
+        let t = u - self.mid;
+        let a0 = horner(&self.c0, p, t);
+        let a1 = if p >= 1 {
+            horner(&self.c1, p - 1, t)
+        } else {
+            [0.0; 4]
+        };
+        let a2 = if p >= 2 {
+            horner(&self.c2, p - 2, t)
+        } else {
+            [0.0; 4]
+        };
+        let a3 = if p >= 3 {
+            let mut c3 = [[0.0; 4]; ORD];
+            for (k, c) in c3.iter_mut().enumerate().take(p - 2) {
+                let f = ((k + 1) * (k + 2) * (k + 3)) as f64;
+                *c = self.c0[k + 3].map(|x| f * x);
+            }
+            horner(&c3, p - 3, t)
+        } else {
+            [0.0; 4]
+        };
+        let e = quotient(self.cursor.span(), &a0, &a1, &a2);
+        // `A = w·C` differentiated three times: `A''' = w'''C + 3w''C' + 3w'C'' + wC'''`.
+        let (w, w1, w2, w3) = (a0[3], a1[3], a2[3], a3[3]);
+        let d3 = std::array::from_fn(|k| {
+            (a3[k] - w3 * e.p[k] - 3.0 * w2 * e.d1[k] - 3.0 * w1 * e.d2[k]) / w
+        });
+        (e, d3)
+    }
+
     #[inline(never)]
     fn eval_recurrence_fixed<const P: usize>(&mut self, u: f64) -> CurvePoint {
         self.eval_deg(P, u)
@@ -793,6 +851,13 @@ impl FastCurve {
     #[inline]
     pub fn eval(&mut self, u: f64) -> CurvePoint {
         self.core.eval(u)
+    }
+
+    /// Point, first and second derivative at `u`, as [`Self::eval`] gives them within
+    /// rounding (the same bits as its kernels without AVX2), with the third derivative.
+    /// Off the cycle: the planner's curvature rate.
+    pub fn eval_d3(&mut self, u: f64) -> (CurvePoint, [f64; 3]) {
+        self.core.eval_d3(u)
     }
 
     /// [`Self::eval`] without the AVX2 kernels: for the test that both give the same bits.

@@ -52,4 +52,13 @@ impl LocalCurve {
         }
         e
     }
+
+    /// [`Self::eval`] with the third derivative ([`FastCurve::eval_d3`]).
+    pub fn eval_d3(&mut self, u: f64) -> (CurvePoint, [f64; 3]) {
+        let (mut e, d3) = self.curve.eval_d3(u);
+        for (p, o) in e.p.iter_mut().zip(self.origin) {
+            *p += o;
+        }
+        (e, d3)
+    }
 }

@@ -307,3 +307,62 @@ fn nan_gives_nan_and_the_next_call_recovers() {
     assert_eq!(f.eval(f64::INFINITY), fresh(&c, 1.0));
     assert_eq!(f.eval(f64::NEG_INFINITY), fresh(&c, 0.0));
 }
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(300))]
+
+    /// The third derivative against central differences of the second, inside a span
+    /// (where the curve is smooth); the point and its first two derivatives are the bits
+    /// of the kernels without AVX2. Tolerance: 1e-6 of the larger of `|C'''|`, the
+    /// second derivative over the span's width and the curve's size (the differences'
+    /// own truncation is about 1e-10 of these at a step of 1e-5 of the span).
+    #[test]
+    fn third_derivative_matches_differences_of_the_second(
+        c in random_curve(MAX_DEGREE),
+        pick in 0usize..64,
+        t in 0.1f64..0.9,
+    ) {
+        let spans: Vec<(f64, f64)> = c.knots.windows(2)
+            .filter(|w| w[1] > w[0])
+            .map(|w| (w[0], w[1]))
+            .collect();
+        let (lo, hi) = spans[pick % spans.len()];
+        let u = lo + t * (hi - lo);
+        let mut f = fast(&c);
+        let (e, d3) = f.eval_d3(u);
+        let base = fast(&c).eval_baseline(u);
+        prop_assert_eq!(e.p.map(f64::to_bits), base.p.map(f64::to_bits));
+        prop_assert_eq!(e.d1.map(f64::to_bits), base.d1.map(f64::to_bits));
+        prop_assert_eq!(e.d2.map(f64::to_bits), base.d2.map(f64::to_bits));
+        let h = 1e-5 * (hi - lo);
+        let (a, b) = (f.eval_d3(u - h).0.d2, f.eval_d3(u + h).0.d2);
+        let diff: [f64; 3] = std::array::from_fn(|k| (b[k] - a[k]) / (2.0 * h));
+        let scale = max_abs(d3)
+            .max(max_abs(e.d2) / (hi - lo))
+            .max(c.scale());
+        let err = max_diff(d3, diff) / scale;
+        prop_assert!(err < 1e-6, "{:?} vs {:?}: {:e}", d3, diff, err);
+    }
+}
+
+/// A polynomial cubic's third derivative is constant, `6 (P3 − 3 P2 + 3 P1 − P0)` on
+/// `[0, 1]`, and a quadratic's is zero: to 1e-12 of the control points' size.
+#[test]
+fn third_derivative_of_polynomials_is_the_closed_form() {
+    let p = [
+        [1.0, -2.0, 0.5, 1.0],
+        [4.0, 3.0, -1.0, 1.0],
+        [-2.0, 5.0, 2.0, 1.0],
+        [7.0, 1.0, -3.0, 1.0],
+    ];
+    let want: [f64; 3] =
+        std::array::from_fn(|k| 6.0 * (p[3][k] - 3.0 * p[2][k] + 3.0 * p[1][k] - p[0][k]));
+    let mut cubic = FastCurve::new(3, &[0.0, 0.0, 0.0, 0.0, 1.0, 1.0, 1.0, 1.0], &p).unwrap();
+    let mut quad = FastCurve::new(2, &[0.0, 0.0, 0.0, 1.0, 1.0, 1.0], &p[..3]).unwrap();
+    for u in [0.0, 0.1, 0.37, 0.5, 0.99, 1.0] {
+        let (_, d3) = cubic.eval_d3(u);
+        assert!(max_diff(d3, want) < 1e-12 * 50.0, "{u}: {d3:?} vs {want:?}");
+        let (_, d3) = quad.eval_d3(u);
+        assert!(max_abs(d3) < 1e-12 * 50.0, "{u}: {d3:?}");
+    }
+}
