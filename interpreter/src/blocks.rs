@@ -903,7 +903,7 @@ fn shape_straight(d: [f64; 3], lim: &StraightLimits, feed_mm_s: f64) -> Option<S
     shape_straight_into(d, path::norm(d), lim, feed_mm_s, &mut shape).then_some(shape)
 }
 
-/// [`shape_straight`] written into `out` (where it stays: a shape is 248 bytes), `false`
+/// [`shape_straight`] written into `out` (where it stays: a shape is 312 bytes), `false`
 /// where it is `None`, leaving `out` as it was; `len` is the chord's `path::norm`, which
 /// the planner has worked out already.
 fn shape_straight_into(
@@ -1020,8 +1020,9 @@ fn samples(b: &CommandBlock, places: bool) -> Samples {
     let ev = eval::BlockEval::new(b);
     let frame = |u: f64| frame_at(&ev.eval(u));
     let samples = (16 * b.n_ctrl.max(2) as usize).max(32);
-    // Distinct knots: dk/ds is taken by differences inside one span (where the curve is
-    // smooth), and the curvature jump at a knot of continuity below C² is a junction of
+    // Distinct knots: dk/ds, where it is not worked out from the third derivative, is
+    // taken by differences inside one span (where the curve is smooth), and the curvature
+    // jump at a knot of continuity below C² is a junction of
     // its own.
     let mut spans: Vec<f64> = b.knots().to_vec();
     spans.dedup();
@@ -1106,10 +1107,13 @@ fn samples(b: &CommandBlock, places: bool) -> Samples {
     // the largest local maxima of each are searched (Brent's method, [`brent_min`])
     // between their neighbours, and what is found joins the samples (before the last,
     // which gives the end's tangent). The searches look at one measure: the curvature takes one
-    // evaluation, its rate the two of its difference, plus one to know the curve does
-    // not stop there, unless its speed is proven well above that stop
-    // ([`hodograph`]; curves without a helix that are one Bézier span).
-    let moving = match (b.helix.axis == Helix::NONE.axis)
+    // evaluation, and so does its rate where it comes from the third derivative; its rate
+    // by differences takes the two of its difference, plus one to know the curve does
+    // not stop there, unless its speed is proven well above that stop ([`hodograph`];
+    // curves without a helix that are one Bézier span, which the moving-data evaluator
+    // refused).
+    let by_differences = ev.eval_d3(u0).is_none();
+    let moving = match (by_differences && b.helix.axis == Helix::NONE.axis)
         .then(|| hodograph::Hodograph::of_span(b.degree as usize, b.knots(), b.ctrl()))
         .flatten()
     {
@@ -2108,6 +2112,8 @@ pub fn plan_and<B: Plannable>(
         shares = trial;
         before = if kept { after } else { round(blocks, &shares) };
     }
+    // (The rounds' shapes and lengths are done with.)
+    drop(cache);
     // The jerk once, on the plan kept (but for the blocks braking by their jerk, which
     // `braking_relaxed` gives theirs in every round): in every round it doubled the
     // planning's cost (nearly every curve block sampled again each round) for the same
@@ -2461,7 +2467,7 @@ fn plan_split<B: Plannable>(
         },
     );
     // The shapes of the block before and of this one (where they are motions), taking
-    // turns (`i % 2`), each worked out where it stays: a shape is 248 bytes, and making
+    // turns (`i % 2`), each worked out where it stays: a shape is 312 bytes, and making
     // one and handing it on were copies a block.
     let mut shapes = [Shape::NONE; 2];
     let mut shaped = [false; 2];

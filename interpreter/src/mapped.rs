@@ -25,6 +25,11 @@ impl MappedText {
     #[cfg(unix)]
     pub fn open(path: &Path) -> Option<MappedText> {
         use std::os::fd::AsRawFd;
+        // Looked at before it is opened: a named pipe opened here and closed again
+        // would lose its writer, and the caller's own open would then wait for ever.
+        if !std::fs::metadata(path).is_ok_and(|m| m.is_file()) {
+            return None;
+        }
         let file = std::fs::File::open(path).ok()?;
         let meta = file.metadata().ok()?;
         let len = usize::try_from(meta.len()).ok()?;

@@ -44,16 +44,16 @@ impl Source {
     }
 }
 
-/// The bytes of the file at `path`, as `std::fs::read` gives them, into a buffer that
-/// asks for huge pages (a long program is megabytes: see [`crate::pages`]). What is not a
-/// regular file (a pipe, a device) is read as a stream ([`read_stream`]), which ends at
-/// its first line too long for a program: `cnc check /dev/zero` grew to 5.9 GB in 5 s.
+/// The bytes of the file at `path`, into a buffer that asks for huge pages (a long
+/// program is megabytes: see [`crate::pages`]). What is not a regular file (a pipe, a
+/// device) is read as a stream, within bounds ([`read_stream`]): `cnc check /dev/zero`
+/// grew to 5.9 GB in 5 s.
 fn read_file(path: &Path) -> std::io::Result<Vec<u8>> {
     use std::io::Read;
     let mut file = std::fs::File::open(path)?;
     let meta = file.metadata()?;
     if !meta.is_file() {
-        return read_stream(&mut file);
+        return read_stream(&mut file, STREAM_MAX_BYTES);
     }
     let len = meta.len();
     let mut bytes = Vec::with_capacity(usize::try_from(len).unwrap_or(0).saturating_add(1));
@@ -62,35 +62,57 @@ fn read_file(path: &Path) -> std::io::Result<Vec<u8>> {
     Ok(bytes)
 }
 
-/// How much of a line too long for a program ([`program::MAX_LINE_BYTES`]) a stream's
-/// reading keeps: enough for the check to refuse it at its column with its text.
-const OVERLONG_KEPT: usize = 4096;
+/// The longest line a program read from a stream may have: far above G-code's 252 bytes
+/// (a longer G-code line is refused by the check, at its column), and above the longest
+/// line of a STEP-NC part (an entity on one line: 4 391 bytes in
+/// `examples/tspline-bump.stp`).
+const STREAM_MAX_LINE: usize = 1 << 20;
 
-/// A stream's bytes up to its end, or up to [`OVERLONG_KEPT`] bytes into its first line
-/// longer than any program line may be: the program is refused there (`line-length`),
-/// and the rest, which may never end (`/dev/zero`), is not read.
-fn read_stream(r: &mut impl std::io::Read) -> std::io::Result<Vec<u8>> {
+/// The most of a stream read as one program: it is read whole before anything runs
+/// (192 MB for 8 million lines of `G1`). Larger programs are read from a file.
+const STREAM_MAX_BYTES: usize = 512 << 20;
+
+/// A stream's bytes to its end, refused with an error naming the line where one has no
+/// end within [`STREAM_MAX_LINE`] bytes (`/dev/zero`) or where the stream passes `most`
+/// bytes (`/dev/urandom`, `yes`), neither read further. Whether a stream is refused
+/// does not depend on the size of its reads.
+fn read_stream(r: &mut impl std::io::Read, most: usize) -> std::io::Result<Vec<u8>> {
+    use std::io::{Error, ErrorKind};
     let mut bytes = Vec::new();
     let mut chunk = vec![0u8; 64 * 1024];
-    // Where the line being read starts.
-    let mut line = 0;
+    // Where the line being read starts, and its number.
+    let (mut line, mut number) = (0usize, 1usize);
     loop {
         let n = match r.read(&mut chunk) {
             Ok(0) => return Ok(bytes),
             Ok(n) => n,
-            Err(e) if e.kind() == std::io::ErrorKind::Interrupted => continue,
+            Err(e) if e.kind() == ErrorKind::Interrupted => continue,
             Err(e) => return Err(e),
         };
         let from = bytes.len();
         bytes.extend_from_slice(&chunk[..n]);
-        if let Some(p) = bytes[from..].iter().rposition(|&b| b == b'\n') {
-            line = from + p + 1;
+        for (i, &b) in bytes[from..].iter().enumerate() {
+            let at = from + i;
+            if b == b'\n' {
+                (line, number) = (at + 1, number + 1);
+            } else if at - line >= STREAM_MAX_LINE {
+                return Err(Error::new(
+                    ErrorKind::InvalidData,
+                    format!(
+                        "line {number} has no end within {} MiB: not a program (nothing after it read)",
+                        STREAM_MAX_LINE >> 20
+                    ),
+                ));
+            }
         }
-        let most = line + program::MAX_LINE_BYTES.max(OVERLONG_KEPT);
         if bytes.len() > most {
-            // (The over-long line's end is not looked for: none of it after this counts.)
-            bytes.truncate(most);
-            return Ok(bytes);
+            return Err(Error::new(
+                ErrorKind::InvalidData,
+                format!(
+                    "more than {} MiB from a pipe or a device (stopped at line {number}): a program read whole before it runs; write it to a file",
+                    most >> 20
+                ),
+            ));
         }
     }
 }
@@ -544,28 +566,59 @@ mod tests {
     use super::*;
     use std::io::Read;
 
+    /// A reader that hands out its bytes `step` at a time.
+    struct Trickle<'a>(&'a [u8], usize);
+    impl Read for Trickle<'_> {
+        fn read(&mut self, buf: &mut [u8]) -> std::io::Result<usize> {
+            let n = self.1.min(buf.len()).min(self.0.len());
+            buf[..n].copy_from_slice(&self.0[..n]);
+            self.0 = &self.0[n..];
+            Ok(n)
+        }
+    }
+
     #[test]
-    fn a_stream_without_line_ends_is_read_no_further_than_its_first_line_can_count() {
+    fn a_stream_is_read_within_its_bounds_whatever_the_size_of_its_reads() {
         // `/dev/zero` as a program: 10 MB of it was read whole (and the device itself,
-        // without end, until memory ran out).
-        let read = read_stream(&mut std::io::repeat(0).take(10_000_000)).unwrap();
-        assert_eq!(read.len(), OVERLONG_KEPT);
-        // Lines of a program come whole, up to the stream's end, however many.
-        let text = "G1 X1 F100\n".repeat(20_000) + "M2";
-        let read = read_stream(&mut text.as_bytes()).unwrap();
-        assert_eq!(read, text.as_bytes());
-        // An over-long line after good ones: kept to its column and a little more.
-        let long = "G1 X1\n".to_owned() + &"X".repeat(100_000) + "\nM2\n";
-        let read = read_stream(&mut long.as_bytes()).unwrap();
-        assert_eq!(read.len(), 6 + OVERLONG_KEPT);
+        // without end, until memory ran out); now refused at its first line.
+        let e = read_stream(&mut std::io::repeat(0).take(10_000_000), 1 << 30).unwrap_err();
+        assert!(
+            e.to_string().starts_with("line 1 has no end within 1 MiB"),
+            "{e}"
+        );
+        // The same line found whatever the reads' size: after 3 good lines.
+        let mut long = "G1 X1\n".repeat(3).into_bytes();
+        long.extend(std::iter::repeat_n(b'X', 3 << 20));
+        for step in [1000, 4096, 65536, 1 << 20] {
+            let e = read_stream(&mut Trickle(&long, step), 1 << 30).unwrap_err();
+            assert!(
+                e.to_string().starts_with("line 4 has no end"),
+                "{step}: {e}"
+            );
+        }
+        // Lines of a program come whole, up to the stream's end, however they are read;
+        // a long line (a STEP entity) too.
+        let text = "G1 X1 F100\n".repeat(20_000) + &"#1=(".repeat(20_000) + "\nM2";
+        for step in [7, 4096, 65536] {
+            let read = read_stream(&mut Trickle(text.as_bytes(), step), 1 << 30).unwrap();
+            assert_eq!(read, text.as_bytes());
+        }
+        // Short lines without end (`yes`, `/dev/urandom`) stop at the bound.
+        let e = read_stream(&mut std::io::repeat(b'\n').take(5_000_000), 1 << 20).unwrap_err();
+        assert!(
+            e.to_string().starts_with("more than 1 MiB from a pipe"),
+            "{e}"
+        );
     }
 
     #[test]
     fn a_device_as_a_program_is_refused_at_its_first_line() {
-        let src = Source::load(Some(Path::new("/dev/zero"))).unwrap();
-        assert!(src.text.len() <= OVERLONG_KEPT, "{}", src.text.len());
-        let diags = program::interpret(&src.text).err().unwrap_or_default();
-        let first = diags.first().map(|d| d.to_string()).unwrap_or_default();
-        assert!(first.contains("line-length"), "{first}");
+        let e = Source::load(Some(Path::new("/dev/zero")))
+            .err()
+            .unwrap_or_default();
+        assert_eq!(
+            e,
+            "/dev/zero: line 1 has no end within 1 MiB: not a program (nothing after it read)"
+        );
     }
 }

@@ -295,7 +295,7 @@ struct State {
 /// The longest line LinuxCNC reads, in bytes without the newline: its `fgets` buffer is
 /// `LINELEN` = 255 bytes, and a line that fills it (253 bytes and the newline) is
 /// refused as "Command too long" (checked with rs274 2.9: 252 pass, 253 fail).
-pub(crate) const MAX_LINE_BYTES: usize = 252;
+const MAX_LINE_BYTES: usize = 252;
 
 const AXES: [char; 3] = ['X', 'Y', 'Z'];
 

@@ -1,14 +1,15 @@
 //! Each curve block's length and shapes, kept across [`plan_and`](super::plan_and)'s
 //! planning rounds.
 //!
-//! A program with curves is planned in two to four rounds, and each round took every
-//! curve block's length and [`shape`](super::shape) again, sampling its curve each
-//! time, though neither changes from round to round: a block's length depends on its
-//! curve alone, and its shape on its curve, its programmed feed and the share of the
-//! limits its curvature may take, which is one of two ([`NORMAL_SHARE`](super::NORMAL_SHARE)
-//! or [`VALLEY_SHARE`](super::VALLEY_SHARE)). So each is worked out once and kept: the
-//! length in 8 bytes a block, each shape asked for (at most two a curve block) in about
-//! 260 bytes. What is returned is the same as working it out again, bit for bit: the
+//! A program with curves is planned in one to five rounds (see `plan_and`), and each
+//! round took every curve block's length and [`shape`](super::shape) again, sampling its
+//! curve each time, though neither changes from round to round: a block's length depends
+//! on its curve alone, and its shape on its curve, its programmed feed and the share of
+//! the limits its curvature may take, which is one of two
+//! ([`NORMAL_SHARE`](super::NORMAL_SHARE) or [`VALLEY_SHARE`](super::VALLEY_SHARE)). So
+//! each is worked out once and kept, for as long as the rounds last: 24 bytes a block (its
+//! length and two slots), and each shape asked for (at most two a curve block) in about
+//! 340 bytes. What is returned is the same as working it out again, bit for bit: the
 //! cache changes the cost, never the plan.
 //!
 //! The samples themselves (a few kilobytes a block) are not kept: [`relax`](super::relax)
