@@ -347,12 +347,17 @@ fn injected_preemptions_are_preempted_misses_not_long_computes() {
     }
     let injected = injected_cycles(&d);
     let (_, sp) = tests::csv(&out.join("setpoints.csv"));
-    let mut preempted = 0;
+    let (mut preempted, mut held) = (0, 0);
     for c in &injected {
         let m = listed(&d, *c, &sp);
         // Held off its CPU for 1.5 periods; its own CPU time over the cycle (compute,
-        // wake-up and the previous publish) is far below the period.
-        assert!(ns(m, "preempted_ns") >= 1_000_000, "cycle {c}: {m}");
+        // wake-up and the previous publish) is far below the period. Counted, not
+        // required of each: on a loaded machine a cycle woken late (1.7 ms in one CI
+        // run) meets the competitor part-way through its hold, and only the rest of it
+        // (0.76 ms there) falls in the cycle.
+        if ns(m, "preempted_ns") >= 1_000_000 {
+            held += 1;
+        }
         assert_ne!(m["cause"], "long_compute", "cycle {c}: {m}");
         if m["cause"] == "preempted" {
             preempted += 1;
@@ -371,6 +376,10 @@ fn injected_preemptions_are_preempted_misses_not_long_computes() {
     assert!(
         preempted * 2 >= injected.len(),
         "{preempted} of {injected:?}"
+    );
+    assert!(
+        held * 2 >= injected.len(),
+        "{held} of {injected:?} held off the CPU for 1 ms or more"
     );
     // A stray long compute elsewhere (an interrupt storm is charged to the thread as
     // CPU time on these kernels) is counted, not forbidden: a timing test must not
