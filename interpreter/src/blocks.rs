@@ -374,6 +374,13 @@ fn frame_at(e: &nurbs::CurvePoint) -> Option<([f64; 3], [f64; 3])> {
 /// With `k = (C' × C'') × C' / σ⁴`, `σ = |C'|`:
 /// `dk/du = ((C' × C''') × C' + (C' × C'') × C'') / σ⁴ − 4 (C'·C'') / σ² · k`, and
 /// `dk/ds = (dk/du) / σ`.
+///
+/// Not used by the planner yet, which still takes a difference of curvatures: used for
+/// every sample, it made `cnc check` 15 % faster on curves, but where a curve leaves
+/// its start at nearly zero parametric speed (LinuxCNC's trident, `tests/servo.rs`) its
+/// division by a tiny `σ` gave a rate that capped the feed at 0.008 mm/min, and the
+/// program was refused. Tested against differences and a closed form, for that step.
+#[allow(dead_code)]
 fn rate_at(e: &nurbs::CurvePoint, d3: [f64; 3]) -> [f64; 3] {
     use crate::surface_path::cross;
     let (c1, c2) = (e.d1, e.d2);
@@ -1020,9 +1027,8 @@ fn samples(b: &CommandBlock, places: bool) -> Samples {
     let ev = eval::BlockEval::new(b);
     let frame = |u: f64| frame_at(&ev.eval(u));
     let samples = (16 * b.n_ctrl.max(2) as usize).max(32);
-    // Distinct knots: dk/ds, where it is not worked out from the third derivative, is
-    // taken by differences inside one span (where the curve is smooth), and the curvature
-    // jump at a knot of continuity below C² is a junction of
+    // Distinct knots: dk/ds is taken by differences inside one span (where the curve is
+    // smooth), and the curvature jump at a knot of continuity below C² is a junction of
     // its own.
     let mut spans: Vec<f64> = b.knots().to_vec();
     spans.dedup();
@@ -1032,12 +1038,8 @@ fn samples(b: &CommandBlock, places: bool) -> Samples {
             .clamp(1, spans.len().max(2) - 1);
         (spans[i - 1], spans[i.min(spans.len() - 1)])
     };
-    // dk/ds at `u`: from the third derivative where the moving-data evaluator gives it
-    // ([`rate_at`]), else by a central difference inside u's span.
+    // dk/ds at `u`, by a central difference inside u's span.
     let rate = |u: f64| -> [f64; 3] {
-        if let Some((e, d3)) = ev.eval_d3(u) {
-            return rate_at(&e, d3);
-        }
         let (lo, hi) = span_of(u);
         let h = 1e-4 * (hi - lo);
         let (ua, ub) = ((u - h).max(lo), (u + h).min(hi));
@@ -1058,12 +1060,7 @@ fn samples(b: &CommandBlock, places: bool) -> Samples {
         }
     };
     // The frame and dk/ds at `u`; none where the curve (nearly) stops.
-    let at = |u: f64| -> Option<Sample> {
-        if let Some((e, d3)) = ev.eval_d3(u) {
-            return Some((frame_at(&e)?, rate_at(&e, d3)));
-        }
-        Some((frame(u)?, rate(u)))
-    };
+    let at = |u: f64| -> Option<Sample> { Some((frame(u)?, rate(u))) };
     let mut us: Vec<f64> = Vec::with_capacity(samples + 1);
     let mut pts: Vec<Frame> = Vec::with_capacity(samples + 1);
     let mut dk: Vec<[f64; 3]> = Vec::with_capacity(samples + 1);
@@ -1107,13 +1104,10 @@ fn samples(b: &CommandBlock, places: bool) -> Samples {
     // the largest local maxima of each are searched (Brent's method, [`brent_min`])
     // between their neighbours, and what is found joins the samples (before the last,
     // which gives the end's tangent). The searches look at one measure: the curvature takes one
-    // evaluation, and so does its rate where it comes from the third derivative; its rate
-    // by differences takes the two of its difference, plus one to know the curve does
-    // not stop there, unless its speed is proven well above that stop ([`hodograph`];
-    // curves without a helix that are one Bézier span, which the moving-data evaluator
-    // refused).
-    let by_differences = ev.eval_d3(u0).is_none();
-    let moving = match (by_differences && b.helix.axis == Helix::NONE.axis)
+    // evaluation, its rate the two of its difference, plus one to know the curve does
+    // not stop there, unless its speed is proven well above that stop
+    // ([`hodograph`]; curves without a helix that are one Bézier span).
+    let moving = match (b.helix.axis == Helix::NONE.axis)
         .then(|| hodograph::Hodograph::of_span(b.degree as usize, b.knots(), b.ctrl()))
         .flatten()
     {
@@ -1130,10 +1124,6 @@ fn samples(b: &CommandBlock, places: bool) -> Samples {
     };
     let curvature = |u: f64| frame(u).map(|(_, k)| path::norm(k));
     let curvature_rate = |u: f64| {
-        if let Some((e, d3)) = ev.eval_d3(u) {
-            frame_at(&e)?;
-            return Some(path::norm(rate_at(&e, d3)));
-        }
         if !surely_moving(u) {
             frame(u)?;
         }

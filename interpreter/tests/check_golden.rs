@@ -307,57 +307,46 @@ M2
 /// outline cut 1 mm deep, the bore by a helical entry and a finishing circle, the NURBS
 /// engraved 0.3 mm deep, where it cut its NURBS at Z5 in the air): 27 blocks, 15.201 s.
 /// Only the demo's fingerprint changed.
-/// Renewed for issue #23's planning throughput, on purpose: the curvature's rate
-/// `dk/ds` of a plain curve (no helix) is worked out from its third derivative
-/// (`blocks::rate_at`, `FastCurve::eval_d3`) instead of a difference of curvatures
-/// over 1e-4 of a span, which was first-order only at a span's ends and lost the
-/// curvature's rounding elsewhere. The same block counts; every program with a curve
-/// changed but plain_g1, o_words, seed004_table1 and g5_curva_stella. Per block
-/// (`cnc check` of the peers, cam-circle and cam-polygon, both machines): caps within
-/// 1.9e-4 but in the g6 delfinos (5.4e-2: a cap from `dk/ds` near a span's end);
-/// machining times (`cnc check --estimate`) the same to the millisecond on every peer
-/// and example on both machines but the g6 chitarras (+1 ms on the built-in machine)
-/// and cam-polygon (+1 ms).
 const GOLDEN_BLOCKS: &[(&str, usize, u64)] = &[
     ("plain_g1", 99999, 0x2314c695b1663686),
-    ("mixed", 2080, 0xc0befd03c72b64b5),
-    ("curves", 3426, 0xf846164a73a67d25),
-    ("demo", 27, 0xc75e0e94f8fa4166),
-    ("every_kind", 24, 0xb4642dedba9c5f95),
-    ("fanuc_ellipse.ngc", 7, 0x333fbfcccf6c7fad),
-    ("g5_splines.ngc", 36, 0x4f12753bcf3994c2),
+    ("mixed", 2080, 0x4439fabd5e87ca03),
+    ("curves", 3426, 0xe4ab312bb13a5f02),
+    ("demo", 27, 0x2a28606f38a9be94),
+    ("every_kind", 24, 0xf676e445eab79c17),
+    ("fanuc_ellipse.ngc", 7, 0xa35475d3b8b1d4ba),
+    ("g5_splines.ngc", 36, 0x027bc48da1e6d0e0),
     ("o_words.ngc", 14, 0x341004163056a35e),
-    ("seed004_fixed.ngc", 10, 0xd7f7f872e9c29513),
+    ("seed004_fixed.ngc", 10, 0x0cbba02580e9dbab),
     ("seed004_table1.ngc", 1, 0x547761ab9c6006f2),
-    ("g5_butterfly-xy.ngc", 69, 0x8eeaaf0dc3bb3376),
-    ("g5_butterfly-yz.ngc", 69, 0x5adcb46f76d5b681),
-    ("g5_butterfly-zx.ngc", 69, 0x09b081d87c657890),
-    ("g5_curva_chitarra.ngc", 57, 0xbfdd1d681cc281ac),
-    ("g5_curva_delfino.ngc", 91, 0x603f50e391288168),
-    ("g5_curva_mazatrol.ngc", 26, 0xab06ee0aa805c6b9),
+    ("g5_butterfly-xy.ngc", 69, 0x9ba864cd95897112),
+    ("g5_butterfly-yz.ngc", 69, 0x67c61ff47dadec68),
+    ("g5_butterfly-zx.ngc", 69, 0xdb329070a628fce5),
+    ("g5_curva_chitarra.ngc", 57, 0x12e35c7b1331412a),
+    ("g5_curva_delfino.ngc", 91, 0xafb16c34fbbef21e),
+    ("g5_curva_mazatrol.ngc", 26, 0xcb5de93385d0cf76),
     ("g5_curva_stella.ngc", 17, 0xe4673450da4ffb27),
-    ("g5_leto-xy.ngc", 16, 0xc6b6a21b62f2de67),
-    ("g5_nurbs-xy.ngc", 8, 0xcf8742102ee30c06),
-    ("g5_nurbs-yz.ngc", 8, 0x208ae9dd6db89226),
-    ("g5_nurbs-zx.ngc", 8, 0x7751f443ebb88936),
-    ("g6_curva_chitarra_q1.ngc", 34, 0xe8df73f1c15a0c41),
-    ("g6_curva_chitarra_q2.ngc", 34, 0xa7d6d454483d2015),
-    ("g6_curva_chitarra_q3.ngc", 34, 0x98a434410d9d4de2),
-    ("g6_curva_delfino_q1.ngc", 67, 0xd2eac08e6d9f6674),
-    ("g6_curva_delfino_q2.ngc", 67, 0xd2eac08e6d9f6674),
-    ("g6_curva_delfino_q3.ngc", 67, 0x30d547c4e2aa9d8e),
-    ("g6_curva_mazatrol_q1_xy.ngc", 15, 0x6da398af24d28f40),
-    ("g6_curva_mazatrol_q1_yz.ngc", 14, 0x1ec7251dd5154e8d),
-    ("g6_curva_mazatrol_q1_zx.ngc", 14, 0x92aac76fff74dd90),
-    ("g6_homer16_q1_xy.ngc", 11, 0x23f6eb27eef755a9),
-    ("g6_homer16_q1_yz.ngc", 11, 0x275217c6d27ee7c0),
-    ("g6_homer16_q1_zx.ngc", 11, 0xd687546dd7369b5b),
-    ("g6_ruota_dentata_q1.ngc", 591, 0xbb95a46c338f560d),
-    ("g6_ruota_dentata_q2.ngc", 591, 0x59a75402b3269631),
-    ("g6_ruota_dentata_q3.ngc", 591, 0x59a75402b3269631),
-    ("g6_unipa_q1.ngc", 49, 0xc39acf5fa1b3cb0c),
-    ("g6_unipa_q2.ngc", 49, 0xae2ac1382cab04d6),
-    ("g6_unipa_q3.ngc", 49, 0xdb0a97bf729ecc69),
+    ("g5_leto-xy.ngc", 16, 0xd4e1280e6b859543),
+    ("g5_nurbs-xy.ngc", 8, 0xefa3f4b2a46de8af),
+    ("g5_nurbs-yz.ngc", 8, 0xf48da55f0bf4428f),
+    ("g5_nurbs-zx.ngc", 8, 0x514bb438ddd1deef),
+    ("g6_curva_chitarra_q1.ngc", 34, 0xed2a46f3bceef0a6),
+    ("g6_curva_chitarra_q2.ngc", 34, 0x543f45349a8a73f2),
+    ("g6_curva_chitarra_q3.ngc", 34, 0x685ed16fa46f8b65),
+    ("g6_curva_delfino_q1.ngc", 67, 0x24b30a3d4cecbcc1),
+    ("g6_curva_delfino_q2.ngc", 67, 0x24b30a3d4cecbcc1),
+    ("g6_curva_delfino_q3.ngc", 67, 0x28569eff9fbc8e8f),
+    ("g6_curva_mazatrol_q1_xy.ngc", 15, 0x87cf77f716b8fc98),
+    ("g6_curva_mazatrol_q1_yz.ngc", 14, 0x029d7b42a2e005d1),
+    ("g6_curva_mazatrol_q1_zx.ngc", 14, 0x35b48db448395ac4),
+    ("g6_homer16_q1_xy.ngc", 11, 0x43a64dfa9185a7a1),
+    ("g6_homer16_q1_yz.ngc", 11, 0x1ca0f77481c76a50),
+    ("g6_homer16_q1_zx.ngc", 11, 0x571645ff1bd15eeb),
+    ("g6_ruota_dentata_q1.ngc", 591, 0xc2f9102f7b7e7160),
+    ("g6_ruota_dentata_q2.ngc", 591, 0x1d3a468f4402389c),
+    ("g6_ruota_dentata_q3.ngc", 591, 0x1d3a468f4402389c),
+    ("g6_unipa_q1.ngc", 49, 0xd4f2bba150a1617d),
+    ("g6_unipa_q2.ngc", 49, 0x19ea909a97399faf),
+    ("g6_unipa_q3.ngc", 49, 0x5ae39c5c11442c1c),
 ];
 
 fn block_cases() -> Vec<(String, String)> {

@@ -12,9 +12,8 @@
 //! Both agree within rounding, and this one is the closer to the curve: far from the
 //! origin, on a narrow span, `path::eval`'s second derivative loses the rounding of the
 //! coordinates (on LinuxCNC's delfino at 98 mm, spans of 1/64: 2e-9 of a curvature of
-//! 0.08), which the planner's `dk/ds`, then a difference of curvatures over 1e-4 of a
-//! span, magnified to 3e-4 of a jerk-bound cap. (It now comes from the third
-//! derivative, [`BlockEval::eval_d3`], where the block has no helix.) The tests hold this evaluator to the general
+//! 0.08), which the planner's `dk/ds` (a difference of curvatures over 1e-4 of a span)
+//! magnified to 3e-4 of a jerk-bound cap. The tests hold this evaluator to the general
 //! one run on the curve moved to its first control point (exact: a rational curve moved
 //! is the curve moved), to 1e-12 of each derivative's size.
 //!
@@ -64,7 +63,9 @@ impl<'a> BlockEval<'a> {
 impl BlockEval<'_> {
     /// [`Self::eval`] with the third derivative, where the moving-data evaluator takes
     /// the block and it has no helical axial motion (whose third derivative is not
-    /// worked out); `None` elsewhere.
+    /// worked out); `None` elsewhere. (For `blocks::rate_at`, not used by the planner
+    /// yet.)
+    #[allow(dead_code)]
     pub(crate) fn eval_d3(&self, u: f64) -> Option<(CurvePoint, [f64; 3])> {
         if self.block.helix.axis != shared::protocol::Helix::NONE.axis {
             return None;
