@@ -620,6 +620,7 @@ pub fn main() -> ExitCode {
             process::Streaming {
                 repeat,
                 throttle: throttle_ms.map(std::time::Duration::from_millis),
+                hold_before_reading: None,
                 dialect,
                 subroutine_dirs: subroutine_path,
                 tool_table,

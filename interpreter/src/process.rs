@@ -4,7 +4,7 @@
 use crate::blocks::{self, Block};
 use crate::parse::Diagnostic;
 use crate::program;
-use crate::publish::{publish, Finish, Pace};
+use crate::publish::{send, Finish, Link, Pace};
 use crate::report::InterpreterSummary;
 use iceoryx2::prelude::Service;
 use shared::cmdlog::CommandLog;
@@ -368,6 +368,8 @@ pub struct Streaming {
     pub repeat: u32,
     /// Test aid: wait this long before each block (a slow interpreter).
     pub throttle: Option<Duration>,
+    /// Test aid: wait this long before reading the program (a long plan).
+    pub hold_before_reading: Option<Duration>,
     /// Read the program in this dialect instead of detecting it (`--dialect`).
     pub dialect: Option<program::Dialect>,
     /// Where subroutine files are looked for, in order (see [`program::Options`]).
@@ -383,6 +385,7 @@ impl Default for Streaming {
         Streaming {
             repeat: 1,
             throttle: None,
+            hold_before_reading: None,
             dialect: None,
             subroutine_dirs: Vec::new(),
             tool_table: None,
@@ -442,6 +445,50 @@ pub fn repeated<'a>(
         })
 }
 
+/// How often reading and planning look for a stop request or an interpolator that left.
+const PLAN_WATCH_EVERY: Duration = Duration::from_millis(10);
+
+/// [`compile_source`] on a thread of its own, given up (with nothing sent, so nothing
+/// moved) on a stop request or when the interpolator, once there, has left: a program of
+/// many curves plans for tens of seconds, and the operator's Ctrl-C must not wait for it.
+/// `hold` is a test aid (a long plan).
+fn compile_watched<S: Service>(
+    link: &Link<S>,
+    (name, text, opts): (String, String, program::Options),
+    machine: &Machine,
+    period_ns: u64,
+    hold: Option<Duration>,
+) -> Result<Compiled, String> {
+    let machine = machine.clone();
+    let planner = std::thread::Builder::new()
+        .name("plan".into())
+        .spawn(move || {
+            if let Some(d) = hold {
+                std::thread::sleep(d);
+            }
+            compile_source(&name, &text, &opts, &machine, period_ns)
+        })
+        .map_err(|e| format!("starting the planning thread: {e}"))?;
+    let mut came = false;
+    while !planner.is_finished() {
+        std::thread::sleep(PLAN_WATCH_EVERY);
+        if shared::stop::requested() {
+            return Err(
+                "stopped on request while the program was read and planned; nothing was sent"
+                    .into(),
+            );
+        }
+        let there = link.interpolator_there();
+        if came && !there {
+            return Err("the interpolator is gone (its process ended or died) while the program was read and planned; nothing was sent".into());
+        }
+        came |= there;
+    }
+    planner
+        .join()
+        .map_err(|_| "the planning thread panicked".to_string())?
+}
+
 /// Runs the interpreter until the interpolator reports the end; writes `commands.log` and
 /// `interpreter.json`.
 pub fn run<S: Service>(cfg: &Config) -> Result<InterpreterSummary, String> {
@@ -453,6 +500,9 @@ pub fn run_streaming<S: Service>(
     cfg: &Config,
     streaming: Streaming,
 ) -> Result<InterpreterSummary, String> {
+    // The ports first: the interpolator waits for the first block as long as they are
+    // there, however long the program takes to read and plan.
+    let link = Link::<S>::open(&cfg.prefix).map_err(|e| e.to_string())?;
     let mut salvaged = None;
     let mut dialect = None;
     let mut max_scallop_mm = None;
@@ -478,7 +528,13 @@ pub fn run_streaming<S: Service>(
                 uncompensated: false,
                 extensions: streaming.extensions.clone(),
             };
-            let c = compile_source(&name, &src.text, &opts, &cfg.machine, cfg.period_ns)?;
+            let c = compile_watched(
+                &link,
+                (name.clone(), src.text, opts),
+                &cfg.machine,
+                cfg.period_ns,
+                streaming.hold_before_reading,
+            )?;
             dialect = c.dialect.map(|d| d.name().to_string());
             max_scallop_mm = c.max_scallop_mm;
             notes = c.notes;
@@ -502,8 +558,8 @@ pub fn run_streaming<S: Service>(
         &name,
     )
     .map_err(|e| format!("creating commands.log: {e}"))?;
-    let result = publish::<S>(
-        &cfg.prefix,
+    let result = send(
+        &link,
         repeated(&blocks, streaming.repeat, &cfg.machine),
         Some(&mut log),
         Duration::from_secs(20),

@@ -43,32 +43,65 @@ fn log_sent(b: &CommandBlock) {
     );
 }
 
+/// The interpreter's ports: blocks out, the interpolator's status in. Opened before the
+/// program is read and planned, so the interpolator knows an interpreter is there and
+/// waits for its first block however long the planning takes.
+pub struct Link<S: Service> {
+    _node: Node<S>,
+    service: ipc::PubSub<S, CommandBlock>,
+    publisher: iceoryx2::port::publisher::Publisher<S, CommandBlock, ()>,
+    status_sub: iceoryx2::port::subscriber::Subscriber<S, shared::protocol::Status, ()>,
+}
+
+impl<S: Service> Link<S> {
+    pub fn open(prefix: &str) -> Result<Self, IpcError> {
+        let svc = Services::new(prefix);
+        let node = ipc::node::<S>("interpreter")?;
+        let service = ipc::blocks(&node, &svc)?;
+        let publisher = service
+            .publisher_builder()
+            .create()
+            .map_err(|e| err("block publisher", e))?;
+        let status = ipc::status(&node, &svc)?;
+        let status_sub = status
+            .subscriber_builder()
+            .create()
+            .map_err(|e| err("status subscriber", e))?;
+        tracing::debug!(
+            blocks = %svc.blocks(),
+            status = %svc.status(),
+            "interpreter: shared-memory services open (blocks out, the interpolator's status in)"
+        );
+        Ok(Link {
+            _node: node,
+            service,
+            publisher,
+            status_sub,
+        })
+    }
+
+    /// Whether the interpolator's block port is there (dead nodes removed first).
+    pub fn interpolator_there(&self) -> bool {
+        let _ = self.service.try_cleanup_dead_nodes();
+        self.service.dynamic_config().number_of_subscribers() > 0
+    }
+}
+
 /// Sends every block in order, then waits for the interpolator to report done or fault.
 /// Returns how it finished and how many blocks were sent.
-pub fn publish<S: Service>(
-    prefix: &str,
+pub fn send<S: Service>(
+    link: &Link<S>,
     blocks: impl IntoIterator<Item = CommandBlock>,
     mut log: Option<&mut CommandLog>,
     start_timeout: Duration,
     pace: Pace,
 ) -> Result<(Finish, u64), IpcError> {
-    let svc = Services::new(prefix);
-    let node = ipc::node::<S>("interpreter")?;
-    let service = ipc::blocks(&node, &svc)?;
-    let publisher = service
-        .publisher_builder()
-        .create()
-        .map_err(|e| err("block publisher", e))?;
-    let status = ipc::status(&node, &svc)?;
-    let status_sub = status
-        .subscriber_builder()
-        .create()
-        .map_err(|e| err("status subscriber", e))?;
-    tracing::debug!(
-        blocks = %svc.blocks(),
-        status = %svc.status(),
-        "interpreter: shared-memory services open (blocks out, the interpolator's status in)"
-    );
+    let Link {
+        service,
+        publisher,
+        status_sub,
+        ..
+    } = link;
     let mut last_state = RunState::Idle;
     let mut last_cycle: Option<u64> = None;
     let poll_status = |last: &mut RunState, cycle: &mut Option<u64>| -> Result<(), IpcError> {

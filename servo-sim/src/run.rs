@@ -187,6 +187,10 @@ impl Drives {
     }
 }
 
+/// Before the first set-point: how often to look whether the interpolator is there
+/// (about 55 µs of CPU a look).
+const START_LIVENESS_EVERY: Duration = Duration::from_millis(20);
+
 /// Runs the servo-sim until the last set-point, and writes `feedback.csv` and
 /// `servo.json` into the run directory.
 pub fn run<S: Service>(cfg: &Config) -> Result<Summary, IpcError> {
@@ -265,6 +269,9 @@ pub fn run<S: Service>(cfg: &Config) -> Result<Summary, IpcError> {
     // this VM's scheduling stalls alone can reach several periods.
     let period = Duration::from_nanos(cfg.period_ns);
     let mut last_check = Instant::now();
+    // Before the first set-point: whether the interpolator's port was there when last
+    // looked at.
+    let mut interpolator_there = false;
     let mut done = false;
     let own = cfg.servo_clock == ServoClock::Own;
     // Own clock: the tick schedule, the command in force and how it came to be.
@@ -395,11 +402,28 @@ pub fn run<S: Service>(cfg: &Config) -> Result<Summary, IpcError> {
         } else {
             cfg.idle_timeout
         };
-        if !done && last_seen.elapsed() > limit {
+        // Before the first set-point, an interpolator that is there is waiting for its
+        // first block (the interpreter may read and plan for many seconds): waited for
+        // as long as it stays, past the start timeout too. One that came and left before
+        // it moved ends the wait at once.
+        if !done && count == 0 && last_check.elapsed() >= START_LIVENESS_EVERY {
+            last_check = Instant::now();
+            let _ = setpoints.try_cleanup_dead_nodes();
+            let there = setpoints.dynamic_config().number_of_publishers() > 0;
+            if interpolator_there && !there && !sp_sub.has_samples().unwrap_or(false) {
+                fault = Some(
+                    "the interpolator is gone (its process ended or died) before its first set-point; drives hold position"
+                        .into(),
+                );
+                done = true;
+            }
+            interpolator_there = there;
+        }
+        if !done && last_seen.elapsed() > limit && !(count == 0 && interpolator_there) {
             fault = Some(if count == 0 {
                 format!(
-                    "no set-point came within {:.1} s of the start: the interpolator never started moving; drives hold position",
-                    limit.as_secs_f64()
+                    "no set-point came in the {:.1} s since the start, and no interpolator is there (it never came, or ended before it moved); drives hold position",
+                    last_seen.elapsed().as_secs_f64()
                 )
             } else {
                 format!(

@@ -13,6 +13,30 @@ fn run_stack(
     dir: &Path,
     program: &str,
 ) -> (interpolator::summary::Summary, servo_sim::run::Summary) {
+    let (i, ipol, servo) = start_stack(dir, program, Duration::from_secs(20), None);
+    let i = i.join().unwrap().unwrap();
+    assert_eq!(i.outcome, "done", "{i:?}");
+    (
+        ipol.join().unwrap().unwrap(),
+        servo.join().unwrap().unwrap(),
+    )
+}
+
+type Joined<T, E> = std::thread::JoinHandle<Result<T, E>>;
+
+/// The three roles on threads: the interpolator and the drives give up on a stack that
+/// never starts after `start_timeout`; the interpreter waits `hold` before it reads the
+/// program (a long plan).
+fn start_stack(
+    dir: &Path,
+    program: &str,
+    start_timeout: Duration,
+    hold: Option<Duration>,
+) -> (
+    Joined<interpreter::report::InterpreterSummary, String>,
+    Joined<interpolator::summary::Summary, interpolator::rt::cycle::RunError>,
+    Joined<servo_sim::run::Summary, shared::ipc::IpcError>,
+) {
     let prog = dir.join("program.ngc");
     std::fs::write(&prog, program).unwrap();
     let prefix = format!(
@@ -30,7 +54,7 @@ fn run_stack(
         servo_clock: servo_sim::run::ServoClock::Lockstep,
         sched: SchedMode::Other,
         rt_priority: 1,
-        start_timeout: Duration::from_secs(20),
+        start_timeout,
         idle_timeout: Duration::from_secs(5),
     };
     let ipol_cfg = interpolator::rt::cycle::Config {
@@ -41,7 +65,7 @@ fn run_stack(
         sched: SchedMode::Other,
         rt_priority: interpolator::rt::sched::DEFAULT_PRIORITY,
         clock: ClockMode::Real,
-        start_timeout: Duration::from_secs(20),
+        start_timeout,
     };
     let interp_cfg = interpreter::process::Config {
         prefix,
@@ -53,17 +77,71 @@ fn run_stack(
         replay: None,
         salvage: false,
     };
-    let servo =
-        std::thread::spawn(move || servo_sim::run::run::<local::Service>(&servo_cfg).unwrap());
-    let ipol = std::thread::spawn(move || {
-        interpolator::rt::cycle::run::<local::Service>(&ipol_cfg).unwrap()
-    });
+    let servo = std::thread::spawn(move || servo_sim::run::run::<local::Service>(&servo_cfg));
+    let ipol =
+        std::thread::spawn(move || interpolator::rt::cycle::run::<local::Service>(&ipol_cfg));
     let interp = std::thread::spawn(move || {
-        interpreter::process::run::<local::Service>(&interp_cfg).unwrap()
+        let streaming = interpreter::process::Streaming {
+            hold_before_reading: hold,
+            ..Default::default()
+        };
+        interpreter::process::run_streaming::<local::Service>(&interp_cfg, streaming)
     });
-    let i = interp.join().unwrap();
+    (interp, ipol, servo)
+}
+
+#[test]
+fn a_program_that_plans_longer_than_the_start_timeouts_still_runs() {
+    // A program of 50 000 lines of curves plans for about 20 s, and the interpolator gave
+    // up on its first block after 20 s ("timed out waiting for the first command block"):
+    // such a program could not run at all. Here the plan takes 1.5 s against start
+    // timeouts of 0.3 s.
+    let dir = temp_dir("thr-long-plan");
+    let (i, ipol, servo) = start_stack(
+        &dir,
+        "G1 X5 F3000\nM2\n",
+        Duration::from_millis(300),
+        Some(Duration::from_millis(1500)),
+    );
+    let i = i.join().unwrap().unwrap();
     assert_eq!(i.outcome, "done", "{i:?}");
-    (ipol.join().unwrap(), servo.join().unwrap())
+    let ipol = ipol.join().unwrap().unwrap();
+    assert_eq!(ipol.outcome, "done", "{:?}", ipol.fault);
+    let servo = servo.join().unwrap().unwrap();
+    assert_eq!(servo.outcome, "done", "{:?}", servo.fault);
+    let (_, sp) = csv(&dir.join("setpoints.csv"));
+    assert_eq!(sp.last().unwrap()[2], 5.0);
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn an_interpreter_that_leaves_before_its_first_block_ends_the_wait_at_once() {
+    // A program the interpreter refuses (`cnc run` checks it first; a role started by
+    // hand does not): the interpolator and the drives wait for nothing, not for their
+    // start timeouts (a minute here), and say why.
+    let dir = temp_dir("thr-left");
+    let t = std::time::Instant::now();
+    let (i, ipol, servo) = start_stack(
+        &dir,
+        "G1 X5 F3000\nG1 X\nM2\n",
+        Duration::from_secs(60),
+        Some(Duration::from_millis(300)),
+    );
+    let e = i.join().unwrap().unwrap_err();
+    assert!(e.contains(":2:"), "{e}");
+    let e = ipol.join().unwrap().unwrap_err();
+    assert!(e.to_string().starts_with("the interpreter left"), "{e}");
+    let servo = servo.join().unwrap().unwrap();
+    let f = servo.fault.unwrap_or_default();
+    assert!(
+        f.starts_with(
+            "the interpolator is gone (its process ended or died) before its first set-point"
+        ),
+        "{f}"
+    );
+    // The drives look once every 20 ms; generous for a loaded machine.
+    assert!(t.elapsed() < Duration::from_secs(20), "{:?}", t.elapsed());
+    let _ = std::fs::remove_dir_all(&dir);
 }
 
 #[test]

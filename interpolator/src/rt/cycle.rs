@@ -52,7 +52,9 @@ pub struct Config {
     /// SCHED_FIFO priority when real-time scheduling is granted.
     pub rt_priority: i32,
     pub clock: ClockMode,
-    /// How long to wait for the servo-sim and the first block before giving up.
+    /// How long to wait for the servo-sim, and for an interpreter to come, before giving
+    /// up. An interpreter that is there is waited for as long as it reads and plans
+    /// ([`wait_for_first_block`]).
     pub start_timeout: Duration,
 }
 
@@ -122,6 +124,11 @@ pub enum RunError {
     Ipc(IpcError),
     Io(std::io::Error),
     Timeout(&'static str),
+    /// The interpreter was there and left (its process ended or died) before it sent
+    /// anything.
+    InterpreterLeft,
+    /// A stop was asked for before the first block came: nothing moved.
+    StoppedBeforeStart,
 }
 
 impl core::fmt::Display for RunError {
@@ -130,6 +137,14 @@ impl core::fmt::Display for RunError {
             RunError::Ipc(e) => write!(f, "{e}"),
             RunError::Io(e) => write!(f, "writing the run directory: {e}"),
             RunError::Timeout(what) => write!(f, "timed out waiting for {what}"),
+            RunError::InterpreterLeft => write!(
+                f,
+                "the interpreter left (its process ended or died) before it sent the first command block; nothing moved"
+            ),
+            RunError::StoppedBeforeStart => write!(
+                f,
+                "stopped on request before the first command block; nothing moved"
+            ),
         }
     }
 }
@@ -225,6 +240,50 @@ fn wait_for(
     while !ready() {
         if t.elapsed() > timeout {
             return Err(RunError::Timeout(what));
+        }
+        std::thread::sleep(Duration::from_micros(500));
+    }
+    Ok(())
+}
+
+/// How often a wait for the first block asks iceoryx2 to remove dead nodes.
+const FIRST_BLOCK_LIVENESS_EVERY: Duration = Duration::from_millis(20);
+
+/// Waits for the first command block (`take` takes it) for as long as an interpreter is
+/// there to send it: a program of many curves takes tens of seconds to read and plan, and
+/// the interpreter opens its block port before it starts reading. `timeout` holds only
+/// while no interpreter has come. One that leaves (its process ended, or died and its node
+/// is found dead) ends the wait at once, and so does a stop request: nothing has moved.
+fn wait_for_first_block<S: Service>(
+    blocks: &shared::ipc::PubSub<S, CommandBlock>,
+    timeout: Duration,
+    mut take: impl FnMut() -> bool,
+) -> Result<(), RunError> {
+    let start = Instant::now();
+    let mut last_check = start;
+    let mut came = false;
+    while !take() {
+        if shared::stop::requested() {
+            return Err(RunError::StoppedBeforeStart);
+        }
+        if last_check.elapsed() >= FIRST_BLOCK_LIVENESS_EVERY {
+            last_check = Instant::now();
+            let _ = blocks.try_cleanup_dead_nodes();
+        }
+        let there = blocks.dynamic_config().number_of_publishers() > 0;
+        if came && !there {
+            // Its last block may have come as it left.
+            return if take() {
+                Ok(())
+            } else {
+                Err(RunError::InterpreterLeft)
+            };
+        }
+        came |= there;
+        if !came && start.elapsed() > timeout {
+            return Err(RunError::Timeout(
+                "an interpreter to send the first command block",
+            ));
         }
         std::thread::sleep(Duration::from_micros(500));
     }
@@ -327,7 +386,7 @@ pub fn run_with<S: Service>(cfg: &Config, hooks: Hooks) -> Result<Summary, RunEr
         || setpoints.dynamic_config().number_of_subscribers() >= 1,
     )?;
     let mut first = None;
-    wait_for("the first command block", cfg.start_timeout, || {
+    wait_for_first_block(&blocks, cfg.start_timeout, || {
         first = block_sub.receive().ok().flatten().map(|s| *s.payload());
         first.is_some()
     })?;
