@@ -248,7 +248,7 @@ impl DeadlineReport {
     /// The report of a run whose timing was not measured (the simulated clock).
     pub fn not_measured(clock: &str, period_ns: u64, cycles: u64) -> DeadlineReport {
         let why = format!(
-            "timing not measured: the {clock} clock runs each cycle as soon as the drives have answered the previous one, without sleeping, so wake-up lateness, compute time and deadlines mean nothing; run with --clock real to measure them"
+            "timing not measured: the {clock} clock runs each cycle as soon as the drives have answered the cycles a few before it, without sleeping, so wake-up lateness, compute time and deadlines mean nothing; run with --clock real to measure them"
         );
         DeadlineReport {
             format: FORMAT.into(),

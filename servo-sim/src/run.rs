@@ -344,6 +344,7 @@ pub fn run<S: Service>(cfg: &Config) -> Result<Summary, IpcError> {
         }
         // Lock-step: every set-point that has arrived, in order (the own clock took its
         // set-points above).
+        let mut answered = false;
         while let Some(sample) = if own {
             None
         } else {
@@ -361,9 +362,7 @@ pub fn run<S: Service>(cfg: &Config) -> Result<Summary, IpcError> {
             let fb = drives.step(&sp);
             count += 1;
             let _ = fb_pub.send_copy(fb);
-            if sim {
-                let _ = fb_notify.notify();
-            }
+            answered = true;
             trace.push(FeedbackRec {
                 cycle: fb.cycle,
                 t_ns: sp.t_ns,
@@ -374,6 +373,11 @@ pub fn run<S: Service>(cfg: &Config) -> Result<Summary, IpcError> {
                 done = true;
                 break;
             }
+        }
+        // Under the simulated clock the interpolator may be asleep on these answers: one
+        // wake-up for all of them.
+        if sim && answered {
+            let _ = fb_notify.notify();
         }
         // Only SIGTERM stops the drives here: on a SIGINT (a terminal's Ctrl-C reaches
         // every process) or the launcher's death the interpolator brakes on the path, and

@@ -59,8 +59,9 @@ pub enum ClockMode {
     #[default]
     Real,
     /// Simulated time: cycle k is still stamped `k·period`, but the next cycle starts as
-    /// soon as the drives have answered the previous one. Same set-points, faster than
-    /// real time; timing is not measured (it would mean nothing).
+    /// soon as the drives have answered the cycle a few before it (the interpolator runs
+    /// a bounded few cycles ahead of them). Same set-points, faster than real time;
+    /// timing is not measured (it would mean nothing).
     Sim,
 }
 
