@@ -472,6 +472,9 @@ fn compile_watched<S: Service>(
     let mut came = false;
     while !planner.is_finished() {
         std::thread::sleep(PLAN_WATCH_EVERY);
+        if shared::stop::launcher_gone() {
+            return Err("the launcher (cnc run) died while the program was read and planned; nothing was sent".into());
+        }
         if shared::stop::requested() {
             return Err(
                 "stopped on request while the program was read and planned; nothing was sent"
@@ -534,7 +537,8 @@ pub fn run_streaming<S: Service>(
                 &cfg.machine,
                 cfg.period_ns,
                 streaming.hold_before_reading,
-            )?;
+            )
+            .map_err(|e| nothing_sent(cfg, &name, e))?;
             dialect = c.dialect.map(|d| d.name().to_string());
             max_scallop_mm = c.max_scallop_mm;
             notes = c.notes;
@@ -607,14 +611,43 @@ pub fn run_streaming<S: Service>(
         dialect,
         max_scallop_mm,
     };
-    let text = serde_json::to_string_pretty(&summary).map_err(|e| e.to_string())?;
+    write_summary(cfg, &summary)?;
+    Ok(summary)
+}
+
+/// Writes `interpreter.json`, and the report when the launcher is dead (nobody else will
+/// fold the summaries into one).
+fn write_summary(cfg: &Config, summary: &InterpreterSummary) -> Result<(), String> {
+    let text = serde_json::to_string_pretty(summary).map_err(|e| e.to_string())?;
     std::fs::write(cfg.out_dir.join("interpreter.json"), text)
         .map_err(|e| format!("writing interpreter.json: {e}"))?;
-    // With the launcher dead nobody else will fold the summaries into a report.
     if shared::stop::launcher_gone() {
         crate::report::write_orphan_report(&cfg.out_dir, &summary.program, cfg.period_ns)?;
     }
-    Ok(summary)
+    Ok(())
+}
+
+/// The planning given up (`why`) before anything was sent: with the launcher dead, its
+/// summary and the report are still written, as after a run.
+fn nothing_sent(cfg: &Config, program: &str, why: String) -> String {
+    if shared::stop::launcher_gone() {
+        let summary = InterpreterSummary {
+            outcome: "fault".into(),
+            fault: Some(why.clone()),
+            pid: std::process::id(),
+            program: program.to_string(),
+            blocks: 0,
+            messages: Vec::new(),
+            notes: Vec::new(),
+            salvaged: None,
+            dialect: None,
+            max_scallop_mm: None,
+        };
+        if let Err(e) = write_summary(cfg, &summary) {
+            tracing::error!("{e}");
+        }
+    }
+    why
 }
 
 #[cfg(test)]

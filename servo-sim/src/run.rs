@@ -52,7 +52,8 @@ pub struct Config {
     pub sched: interpolator::rt::sched::SchedMode,
     /// SCHED_FIFO priority when real-time scheduling is granted.
     pub rt_priority: i32,
-    /// How long to wait for the first set-point.
+    /// How long to wait for the first set-point while no interpolator is there (one that
+    /// is there is waited for as long as it stays: it waits for its first block).
     pub start_timeout: Duration,
     /// Silence after which the interpolator is taken for dead (drives hold position).
     pub idle_timeout: Duration,
@@ -311,7 +312,7 @@ pub fn run<S: Service>(cfg: &Config) -> Result<Summary, IpcError> {
                     held.acc_mm_per_s2 = [0.0; 3];
                     Some(held)
                 }
-                // Nothing yet: the start timeout below applies.
+                // Nothing yet: the start wait below applies.
                 (None, None) => None,
             };
             if let Some(sp) = sp {

@@ -94,14 +94,14 @@ fn start_stack(
 fn a_program_that_plans_longer_than_the_start_timeouts_still_runs() {
     // A program of 50 000 lines of curves plans for about 20 s, and the interpolator gave
     // up on its first block after 20 s ("timed out waiting for the first command block"):
-    // such a program could not run at all. Here the plan takes 1.5 s against start
-    // timeouts of 0.3 s.
+    // such a program could not run at all. Here the plan takes 4 s against start
+    // timeouts of 1 s.
     let dir = temp_dir("thr-long-plan");
     let (i, ipol, servo) = start_stack(
         &dir,
         "G1 X5 F3000\nM2\n",
-        Duration::from_millis(300),
-        Some(Duration::from_millis(1500)),
+        Duration::from_secs(1),
+        Some(Duration::from_secs(4)),
     );
     let i = i.join().unwrap().unwrap();
     assert_eq!(i.outcome, "done", "{i:?}");
@@ -125,7 +125,8 @@ fn an_interpreter_that_leaves_before_its_first_block_ends_the_wait_at_once() {
         &dir,
         "G1 X5 F3000\nG1 X\nM2\n",
         Duration::from_secs(60),
-        Some(Duration::from_millis(300)),
+        // (Long enough for the interpolator to see the interpreter come on a loaded machine.)
+        Some(Duration::from_secs(2)),
     );
     let e = i.join().unwrap().unwrap_err();
     assert!(e.contains(":2:"), "{e}");

@@ -102,8 +102,9 @@ const SIM_SPIN_NS: u64 = 200_000;
 /// processes then work side by side instead of in turns: the butterfly's loop took 0.53 s
 /// answer by answer, 0.32 s with 8 ahead (4, 16 and 64 measured the same). The set-points
 /// do not change: feedback only ever brings a fault, and a fault in the drives' answer to
-/// cycle j is acted on by cycle j + SIM_AHEAD instead of j + 1 (the real clock allows an
-/// answer 100 cycles late, [`feedback_lag_limit`]).
+/// cycle j is acted on in cycle j + SIM_AHEAD exactly instead of j + 1, whatever the
+/// scheduling ([`Answers::due`]; the real clock allows an answer 100 cycles late,
+/// [`feedback_lag_limit`]).
 const SIM_AHEAD: u64 = 8;
 const SIM_TIMEOUT_NS: u64 = 5_000_000_000;
 
@@ -304,15 +305,26 @@ fn wait_for_first_block<S: Service>(
 struct Answers {
     last_cycle: Option<u64>,
     max_ferr_mm: f64,
+    /// The first bad answer's fault and the cycle it answers, until it is due.
+    pending: Option<(u64, Fault)>,
+    /// How many cycles after the cycle it answers a bad answer is acted on: none under
+    /// the real clock (at once), [`SIM_AHEAD`] under the simulated one.
+    delay: u64,
 }
 
 impl Answers {
-    /// Takes every feedback sample waiting; the first bad one becomes the fault.
+    fn new(delay: u64) -> Self {
+        Answers {
+            delay,
+            ..Answers::default()
+        }
+    }
+
+    /// Takes every feedback sample waiting; the first bad one is kept for [`Self::due`].
     fn drain<S: Service>(
         &mut self,
         sub: &Subscriber<S, Feedback, ()>,
         engine: &Engine,
-        fault: &mut Option<Fault>,
         lines: &[u32; LINE_RING],
     ) {
         while let Ok(Some(fb)) = sub.receive() {
@@ -322,13 +334,28 @@ impl Answers {
                         *line = *l;
                     }
                 }
-                fault.get_or_insert(f);
+                self.pending.get_or_insert((fb.cycle, f));
             }
             self.last_cycle = Some(fb.cycle);
             self.max_ferr_mm = fb
                 .ferr_mm
                 .iter()
                 .fold(self.max_ferr_mm, |m, e| m.max(e.abs()));
+        }
+    }
+
+    /// The bad answer's fault once cycle `now` is due to act on it. Under the simulated
+    /// clock that is the cycle it answers plus [`SIM_AHEAD`], whenever it came in: by
+    /// then it has surely come (cycle k waits for the answer to k - SIM_AHEAD), so the
+    /// stop starts in the same cycle however the two processes were scheduled, and a
+    /// replay of the run stops there too.
+    fn due(&mut self, now: u64) -> Option<Fault> {
+        match self.pending {
+            Some((answers, f)) if now >= answers + self.delay => {
+                self.pending = None;
+                Some(f)
+            }
+            _ => None,
         }
     }
 
@@ -462,7 +489,7 @@ pub fn run_with<S: Service>(cfg: &Config, hooks: Hooks) -> Result<Summary, RunEr
     // Whether the servo-sim's process was found gone when the stop began (a silent one
     // that is alive was starved or suspended).
     let mut servo_dead = false;
-    let mut answers = Answers::default();
+    let mut answers = Answers::new(if sim { SIM_AHEAD } else { 0 });
     let mut lines = [0u32; LINE_RING];
     // Under the simulated clock: once the drives are gone or silent, stop waiting for them.
     let mut servo_lost = false;
@@ -481,7 +508,7 @@ pub fn run_with<S: Service>(cfg: &Config, hooks: Hooks) -> Result<Summary, RunEr
                     SIM_SPIN_NS,
                     SIM_TIMEOUT_NS,
                     || {
-                        answers.drain(&fb_sub, &engine, &mut fault, &lines);
+                        answers.drain(&fb_sub, &engine, &lines);
                         answers.has(cycle - SIM_AHEAD) || watch.servo_gone()
                     },
                     |d| {
@@ -501,7 +528,10 @@ pub fn run_with<S: Service>(cfg: &Config, hooks: Hooks) -> Result<Summary, RunEr
         let wake = now_ns();
 
         // inputs → faults
-        answers.drain(&fb_sub, &engine, &mut fault, &lines);
+        answers.drain(&fb_sub, &engine, &lines);
+        if let Some(f) = answers.due(cycle) {
+            fault.get_or_insert(f);
+        }
         // Set-points sent (cycles 0..cycle) that the drives have not answered yet; once
         // they are gone that is the fault's business, not a miss.
         let unanswered = if servo_lost || watch.servo_gone() {
@@ -649,9 +679,17 @@ pub fn run_with<S: Service>(cfg: &Config, hooks: Hooks) -> Result<Summary, RunEr
     // Let the drives answer the last set-point, so the report covers every cycle (unless
     // they are gone).
     let _ = wait_for("final feedback", Duration::from_secs(2), || {
-        answers.drain(&fb_sub, &engine, &mut fault, &lines);
+        answers.drain(&fb_sub, &engine, &lines);
         answers.has(cycle) || watch.servo_gone()
     });
+    // A bad answer to the last cycles, too late to stop for (the run is at rest): the
+    // run's fault all the same, recorded at its end.
+    if let Some((_, f)) = answers.pending.take() {
+        if fault.is_none() {
+            fault = Some(f);
+            info = Some(FaultRecord::at(f, cycle, &engine, answers.last_cycle));
+        }
+    }
     // Stay until the interpreter has seen the final status and left (it keeps the blocks'
     // memory alive until then), so neither side sees the other vanish mid-handshake.
     let _ = wait_for("the interpreter to leave", Duration::from_secs(2), || {

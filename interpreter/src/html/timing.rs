@@ -103,7 +103,7 @@ pub fn section(run: &Run, out: &mut String) {
 
 fn not_measured(sim: bool, out: &mut String) {
     let why = if sim {
-        "Timing was not measured: this run used the simulated clock (each cycle starts as soon as the drives answered the previous one, without sleeping), so wake-up lateness, compute time and deadline misses have no meaning here. Run with <code>--clock real</code> to measure them."
+        "Timing was not measured: this run used the simulated clock (each cycle starts as soon as the drives answered the cycles a few before it, without sleeping), so wake-up lateness, compute time and deadline misses have no meaning here. Run with <code>--clock real</code> to measure them."
     } else {
         "Timing was not recorded for this run."
     };
