@@ -28,13 +28,20 @@ pub struct Estimate {
     pub moves: Vec<LineTime>,
 }
 
-struct Slice<'a>(&'a [CommandBlock], usize);
+/// The blocks handed to the engine, with the source lines of the rapid ones noted as they
+/// go.
+struct Feed<I> {
+    blocks: I,
+    rapid_lines: std::collections::HashSet<u32>,
+}
 
-impl BlockSource for Slice<'_> {
+impl<I: Iterator<Item = CommandBlock>> BlockSource for Feed<I> {
     fn next_block(&mut self) -> Option<CommandBlock> {
-        let b = self.0.get(self.1).copied();
-        self.1 += usize::from(b.is_some());
-        b
+        let b = self.blocks.next()?;
+        if b.flags & FLAG_RAPID != 0 {
+            self.rapid_lines.insert(b.source_line);
+        }
+        Some(b)
     }
 }
 
@@ -57,9 +64,23 @@ pub fn estimate_up_to(
     period_ns: u64,
     max_cycles: u64,
 ) -> Result<Option<Estimate>, String> {
+    estimate_of(blocks.iter().copied(), machine, period_ns, max_cycles)
+}
+
+/// [`estimate_up_to`] of the blocks as an iterator yields them: a program held compact
+/// is made into command blocks one at a time.
+pub fn estimate_of(
+    blocks: impl Iterator<Item = CommandBlock>,
+    machine: &Machine,
+    period_ns: u64,
+    max_cycles: u64,
+) -> Result<Option<Estimate>, String> {
     let lim = Limits::new(machine, period_ns);
     let mut engine = Engine::new(lim, [0.0; 3]);
-    let mut src = Slice(blocks, 0);
+    let mut src = Feed {
+        blocks,
+        rapid_lines: Default::default(),
+    };
     let mut moves: Vec<LineTime> = Vec::new();
     let mut cycles = 0u64;
     let mut last = engine.position();
@@ -96,17 +117,12 @@ pub fn estimate_up_to(
             TickState::Starved => return Err("the program has no end block".into()),
         }
     }
-    // The source lines with a rapid block, looked up once (looking through every block
-    // for each line made a long program's estimate quadratic: 100 000 lines of `G1`
-    // took 73 s, all but 5 of them here).
-    let rapid_lines: std::collections::HashSet<u32> = blocks
-        .iter()
-        .filter(|b| b.flags & FLAG_RAPID != 0)
-        .map(|b| b.source_line)
-        .collect();
+    // The source lines with a rapid block, noted as the blocks went in (looking through
+    // every block for each line made a long program's estimate quadratic: 100 000 lines
+    // of `G1` took 73 s, all but 5 of them here).
     for m in &mut moves {
         m.time_s = (m.cycles * period_ns) as f64 * 1e-9;
-        m.rapid = m.rapid || rapid_lines.contains(&m.line);
+        m.rapid = m.rapid || src.rapid_lines.contains(&m.line);
     }
     Ok(Some(Estimate {
         period_ns,

@@ -375,7 +375,7 @@ fn run_inner(args: &RunArgs) -> Result<bool, String> {
         uncompensated: false,
         extensions: args.extensions.clone(),
     };
-    let blocks = match process::compile_source(&src.name, &src.text, &opts, &machine, period_ns) {
+    let blocks = match process::compile_compact(&src.name, &src.text, &opts, &machine, period_ns) {
         Ok(c) => {
             eprint!("{}", process::format_notes(&src.name, &c.notes));
             c.blocks
@@ -419,9 +419,17 @@ fn run_inner(args: &RunArgs) -> Result<bool, String> {
     }
     // The length of the run for a progress bar, only where one is drawn.
     let expected_cycles = progress_wanted().then(|| {
-        let all: Vec<_> = process::repeated(&blocks, args.repeat, &machine).collect();
-        expected_cycles(&all, &machine, period_ns)
+        expected_cycles(
+            process::repeated(&blocks, args.repeat, &machine),
+            &machine,
+            period_ns,
+        )
     });
+    // Neither the blocks nor the text are needed while the stack runs (the interpreter
+    // process reads the run directory's copy): a long program's are hundreds of MB.
+    drop(blocks);
+    let name = src.name;
+    drop(src.text);
     let stack = Stack {
         dir,
         machine,
@@ -433,7 +441,7 @@ fn run_inner(args: &RunArgs) -> Result<bool, String> {
         expected_cycles: expected_cycles.flatten(),
         servo_clock: args.servo_clock,
     };
-    stack.launch(&src.name, input)
+    stack.launch(&name, input)
 }
 
 /// Everything `cnc run` and `cnc replay` share: a run directory, a machine, a period, a
@@ -461,12 +469,13 @@ pub fn progress_wanted() -> bool {
 
 /// The cycles a run of `blocks` takes: the interpolator's own engine, stepped in-process.
 pub fn expected_cycles(
-    blocks: &[shared::protocol::CommandBlock],
+    blocks: impl Iterator<Item = shared::protocol::CommandBlock>,
     machine: &shared::Machine,
     period_ns: u64,
 ) -> Option<u64> {
-    crate::estimate::estimate(blocks, machine, period_ns)
+    crate::estimate::estimate_of(blocks, machine, period_ns, u64::MAX)
         .ok()
+        .flatten()
         .map(|e| e.cycles)
 }
 

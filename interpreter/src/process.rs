@@ -251,10 +251,14 @@ pub fn format_notes(name: &str, notes: &[(u32, String)]) -> String {
         .collect()
 }
 
-/// A program ready to send: its blocks and what the reports say about it.
+/// A program ready to send: its blocks and what the reports say about it. The blocks are
+/// [`CommandBlock`]s for [`compile_source`], and held compact ([`Block`]: a straight move
+/// in its few numbers, not the 1.6 kB payload) for [`compile_compact`], which the
+/// launcher and the interpreter process use: 8 million lines of `G1` made each of them
+/// 13 GB of command blocks.
 #[derive(Debug, Clone)]
-pub struct Compiled {
-    pub blocks: Vec<CommandBlock>,
+pub struct Compiled<B = CommandBlock> {
+    pub blocks: Vec<B>,
     /// The NC dialect a G-code program was read in; none for a STEP-NC part.
     pub dialect: Option<program::Dialect>,
     pub messages: Vec<(u32, String)>,
@@ -273,11 +277,30 @@ pub fn compile_source(
     machine: &Machine,
     period_ns: u64,
 ) -> Result<Compiled, String> {
+    let c = compile_compact(name, text, opts, machine, period_ns)?;
+    Ok(Compiled {
+        blocks: blocks::commands(&c.blocks),
+        dialect: c.dialect,
+        messages: c.messages,
+        notes: c.notes,
+        max_scallop_mm: c.max_scallop_mm,
+    })
+}
+
+/// [`compile_source`], the blocks held compact: each becomes its [`CommandBlock`] when
+/// it is sent ([`repeated`]), the same bit for bit.
+pub fn compile_compact(
+    name: &str,
+    text: &str,
+    opts: &program::Options,
+    machine: &Machine,
+    period_ns: u64,
+) -> Result<Compiled<Block>, String> {
     if crate::step::check::is_step_file(name, text) {
         let (blocks, scallop) = crate::surface_blocks::part_blocks(text, machine, period_ns)
             .map_err(|e| crate::step::format_errors(name, &e))?;
         return Ok(Compiled {
-            blocks,
+            blocks: blocks.into_iter().map(Block::from).collect(),
             dialect: None,
             messages: Vec::new(),
             notes: crate::step::check::part_notes(text, machine),
@@ -285,7 +308,7 @@ pub fn compile_source(
         });
     }
     let (prog, blocks) =
-        compile_with(text, opts, machine, period_ns).map_err(|d| format_diagnostics(name, &d))?;
+        check_with(text, opts, machine, period_ns).map_err(|d| format_diagnostics(name, &d))?;
     Ok(Compiled {
         blocks,
         dialect: Some(prog.dialect),
@@ -415,27 +438,37 @@ fn return_to_start(from: [f64; 3], machine: &Machine) -> Option<CommandBlock> {
 }
 
 /// The blocks of `repeat` runs of a compiled program as one stream, numbered 0, 1, 2, ...
-/// Lazy, so a soak of any length holds one copy of the program.
+/// Lazy, so a soak of any length holds one copy of the program, and each block becomes
+/// its [`CommandBlock`] only as it is taken.
 pub fn repeated<'a>(
-    blocks: &'a [CommandBlock],
+    blocks: &'a [Block],
     repeat: u32,
     machine: &Machine,
 ) -> impl Iterator<Item = CommandBlock> + 'a {
+    let kind = |b: &Block| match b {
+        Block::Straight(_) => BlockKind::Motion as u32,
+        Block::Whole(w) => w.kind,
+    };
     let (body, end) = match blocks.split_last() {
-        Some((last, body)) if last.kind == BlockKind::ProgramEnd as u32 => (body, Some(*last)),
+        Some((last, body)) if kind(last) == BlockKind::ProgramEnd as u32 => {
+            (body, Some(last.command(0)))
+        }
         _ => (blocks, None),
     };
     let end_pos = body
         .iter()
         .rev()
-        .find(|b| b.kind == BlockKind::Motion as u32)
-        .map(|b| shared::path::eval(b, shared::path::domain(b).1).p);
+        .find(|b| kind(b) == BlockKind::Motion as u32)
+        .map(|b| {
+            let b = b.command(0);
+            shared::path::eval(&b, shared::path::domain(&b).1).p
+        });
     let back = end_pos.and_then(|p| return_to_start(p, machine));
     let repeat = repeat.max(1);
     (0..repeat)
         .flat_map(move |r| {
             let between = if r + 1 < repeat { back } else { None };
-            body.iter().copied().chain(between)
+            body.iter().map(|b| b.command(0)).chain(between)
         })
         .chain(end)
         .enumerate()
@@ -458,7 +491,7 @@ fn compile_watched<S: Service>(
     machine: &Machine,
     period_ns: u64,
     hold: Option<Duration>,
-) -> Result<Compiled, String> {
+) -> Result<Compiled<Block>, String> {
     let machine = machine.clone();
     let planner = std::thread::Builder::new()
         .name("plan".into())
@@ -466,7 +499,7 @@ fn compile_watched<S: Service>(
             if let Some(d) = hold {
                 std::thread::sleep(d);
             }
-            compile_source(&name, &text, &opts, &machine, period_ns)
+            compile_compact(&name, &text, &opts, &machine, period_ns)
         })
         .map_err(|e| format!("starting the planning thread: {e}"))?;
     let mut came = false;
@@ -514,7 +547,8 @@ pub fn run_streaming<S: Service>(
         Some(log) => {
             let r = load_replay(log, cfg.salvage)?;
             salvaged = r.salvaged;
-            (r.header.program, r.blocks, Vec::new())
+            let blocks = r.blocks.into_iter().map(Block::from).collect();
+            (r.header.program, blocks, Vec::new())
         }
         None => {
             let src = Source::load(cfg.program.as_deref())?;
@@ -654,6 +688,55 @@ fn nothing_sent(cfg: &Config, program: &str, why: String) -> String {
 mod tests {
     use super::*;
     use std::io::Read;
+
+    #[test]
+    fn compact_blocks_are_sent_as_the_whole_ones_bit_for_bit() {
+        // Lines, rapids, an arc, a NURBS, a dwell and the end, twice over with the return
+        // to the start between: what the launcher and the interpreter hold compact is
+        // what was sent when they held every block whole.
+        let text = "G21 G90 G17\nG0 X1 Y1\nG1 X10 F600\nG2 X12 Y3 I0 J2\nG4 P0.1\n\
+                    G5.2 X14 Y3 P1 L4\nX16 Y5 P1\nX18 Y3 P1\nG5.3\nG1 X20 Y0\nM2\n";
+        let machine = Machine::default();
+        let opts = program::Options::default();
+        let whole = compile_source("p.ngc", text, &opts, &machine, 1_000_000).unwrap();
+        let compact = compile_compact("p.ngc", text, &opts, &machine, 1_000_000).unwrap();
+        assert!(compact
+            .blocks
+            .iter()
+            .any(|b| matches!(b, Block::Straight(_))));
+        let mut all = whole.blocks.clone();
+        for (i, b) in all.iter_mut().enumerate() {
+            b.seq = i as u64;
+        }
+        let body = &all[..all.len() - 1];
+        let sent: Vec<String> = repeated(&compact.blocks, 2, &machine)
+            .map(|b| format!("{b:?}"))
+            .collect();
+        // Two runs, the way back between them, the end.
+        assert_eq!(sent.len(), 2 * body.len() + 2);
+        for (k, b) in body.iter().enumerate() {
+            for (run, at) in [(0, k), (1, body.len() + 1 + k)] {
+                let mut want = *b;
+                want.seq = at as u64;
+                assert_eq!(sent[at], format!("{want:?}"), "run {run}, block {k}");
+            }
+        }
+        let mut end = all[all.len() - 1];
+        end.seq = (sent.len() - 1) as u64;
+        assert_eq!(sent[sent.len() - 1], format!("{end:?}"));
+        // The estimate of either form is the same.
+        let a = crate::estimate::estimate(&all, &machine, 1_000_000).unwrap();
+        let b = crate::estimate::estimate_of(
+            repeated(&compact.blocks, 1, &machine),
+            &machine,
+            1_000_000,
+            u64::MAX,
+        )
+        .unwrap()
+        .unwrap();
+        assert_eq!(a, b);
+        assert!(a.moves.iter().any(|m| m.rapid));
+    }
 
     /// A reader that hands out its bytes `step` at a time.
     struct Trickle<'a>(&'a [u8], usize);

@@ -114,7 +114,7 @@ fn replay_inner(args: &ReplayArgs) -> Result<bool, String> {
     }
     let expected_cycles = if crate::launch::progress_wanted() {
         let blocks = crate::process::load_replay(&log, args.salvage)?.blocks;
-        crate::launch::expected_cycles(&blocks, &machine, header.period_ns)
+        crate::launch::expected_cycles(blocks.into_iter(), &machine, header.period_ns)
     } else {
         None
     };

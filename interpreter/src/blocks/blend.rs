@@ -94,9 +94,12 @@
 //! * otherwise both ways are planned and stepped through the interpolator's engine
 //!   ([`crate::estimate`], what `cnc check --estimate` runs) over the corner's
 //!   neighbourhood: the lines joined to it by blendable corners, as far as the machine
-//!   needs to stop from their feed twice over on each side, from rest to rest, the
+//!   needs to stop from their feed twice over on each side, or to the nearest exact
+//!   stop ([`stops`]: the machine is at rest there either way), from rest to rest, the
 //!   corners before it as already decided and those after it exact. The blend is kept if
-//!   its cycles are no more;
+//!   its cycles are no more. (Ending at the stops changed none of the 82 estimates of
+//!   the repository's programs and halved `cnc check` on a zigzag of short lines, 8.3 →
+//!   4.8 s for 5 000 lines);
 //! * then each chain of corners (each at the end of the line the one before goes into,
 //!   [`chains`]) is stepped whole, from rest to rest, as decided and with every corner the
 //!   screen left open blended, and the quicker kept. Corner by corner, one blend among
@@ -545,7 +548,7 @@ fn time_around(
         let (a, b, _) = line(k)?;
         along += norm(sub(b, a));
         match prev[k] {
-            Some(p) if along < reach => {
+            Some(p) if along < reach && !(kept[p].is_none() && stops(plans[p], machine)) => {
                 back.push(p);
                 k = p;
             }
@@ -560,7 +563,7 @@ fn time_around(
         let (a, b, _) = line(k)?;
         along += norm(sub(b, a));
         match plans[k] {
-            Some(c) if along < reach => {
+            Some(c) if along < reach && !stops(Some(c), machine) => {
                 ahead.push(c.next);
                 k = c.next;
             }
@@ -610,6 +613,14 @@ fn time_around(
         segs.push((a, b, f));
     }
     window_cycles(&segs, corner_of, machine, period_ns)
+}
+
+/// Whether the corner `c`, left exact, is an exact stop (a turn sharper than the
+/// machine's `corner_angle_deg`, a hair's margin kept for the planner's own rounding of
+/// the angle): the machine comes to rest there whatever is on either side, so a
+/// neighbourhood ([`time_around`]) ends there.
+fn stops(c: Option<Corner>, machine: &Machine) -> bool {
+    c.is_some_and(|c| dot(c.u1, c.u2) < machine.corner_angle_deg.to_radians().cos() - 1e-9)
 }
 
 /// The cycles the lines `segs` (from, to, feed) take from rest to rest, with the corner
