@@ -451,8 +451,13 @@ pub fn main() -> ExitCode {
             }
             match checked {
                 Ok((prog, blocks)) if estimate => {
-                    let blocks = crate::blocks::commands(&blocks);
-                    match crate::estimate::estimate(&blocks, &machine, period_ns) {
+                    // Each block made a command block as it is stepped, not all at once.
+                    let commands = blocks.iter().enumerate().map(|(i, b)| b.command(i as u64));
+                    let est = crate::estimate::estimate_of(commands, &machine, period_ns, u64::MAX)
+                        .and_then(|e| {
+                            e.ok_or_else(|| "the program did not end in 2^64 cycles".to_string())
+                        });
+                    match est {
                         Ok(est) if json => {
                             println!("{}", serde_json::to_string_pretty(&est).unwrap_or_default());
                             ExitCode::SUCCESS

@@ -300,7 +300,7 @@ pub fn compile_compact(
         let (blocks, scallop) = crate::surface_blocks::part_blocks(text, machine, period_ns)
             .map_err(|e| crate::step::format_errors(name, &e))?;
         return Ok(Compiled {
-            blocks: blocks.into_iter().map(Block::from).collect(),
+            blocks: blocks.into_iter().map(Block::compact).collect(),
             dialect: None,
             messages: Vec::new(),
             notes: crate::step::check::part_notes(text, machine),
@@ -481,7 +481,7 @@ pub fn repeated<'a>(
 /// How often reading and planning look for a stop request or an interpolator that left.
 const PLAN_WATCH_EVERY: Duration = Duration::from_millis(10);
 
-/// [`compile_source`] on a thread of its own, given up (with nothing sent, so nothing
+/// [`compile_compact`] on a thread of its own, given up (with nothing sent, so nothing
 /// moved) on a stop request or when the interpolator, once there, has left: a program of
 /// many curves plans for tens of seconds, and the operator's Ctrl-C must not wait for it.
 /// `hold` is a test aid (a long plan).
@@ -547,7 +547,10 @@ pub fn run_streaming<S: Service>(
         Some(log) => {
             let r = load_replay(log, cfg.salvage)?;
             salvaged = r.salvaged;
-            let blocks = r.blocks.into_iter().map(Block::from).collect();
+            // Straight moves compact (112 bytes, not 1.6 kB), the rest whole: while they
+            // are made the log's own list is still there, so a log of curves is held
+            // twice for that moment, one of lines about once.
+            let blocks = r.blocks.into_iter().map(Block::compact).collect();
             (r.header.program, blocks, Vec::new())
         }
         None => {
@@ -736,6 +739,18 @@ mod tests {
         .unwrap();
         assert_eq!(a, b);
         assert!(a.moves.iter().any(|m| m.rapid));
+        // A logged block (a replay's) held compact where that gives it back bit for bit:
+        // the lines and rapids, not the arcs, NURBS, dwell or end.
+        for b in &all {
+            let c = Block::compact(*b);
+            assert!(shared::cmdlog::same_bits(&c.command(b.seq), b));
+            let straight = b.kind == BlockKind::Motion as u32 && b.degree == 1;
+            assert_eq!(matches!(c, Block::Straight(_)), straight, "{b:?}");
+        }
+        // A degree-1 block that is not as the planner makes one (a weight) stays whole.
+        let mut odd = *all.iter().find(|b| b.degree == 1).unwrap();
+        odd.ctrl[1][3] = 2.0;
+        assert!(matches!(Block::compact(odd), Block::Whole(_)));
     }
 
     /// A reader that hands out its bytes `step` at a time.

@@ -80,6 +80,12 @@ fn bytes(b: &CommandBlock) -> &[u8] {
     unsafe { core::slice::from_raw_parts((b as *const CommandBlock).cast::<u8>(), BLOCK_SIZE) }
 }
 
+/// Whether two blocks are the same bit for bit (every field, NaNs and signed zeros
+/// included): what a log records of each.
+pub fn same_bits(a: &CommandBlock, b: &CommandBlock) -> bool {
+    bytes(a) == bytes(b)
+}
+
 /// What the header says about the run that wrote the log.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Header {

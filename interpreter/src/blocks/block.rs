@@ -157,6 +157,33 @@ impl From<CommandBlock> for Block {
 }
 
 impl Block {
+    /// `b` held as a [`Straight`] where that gives it back bit for bit (a straight move as
+    /// the planner makes it: a command log of `G1` lines), else whole.
+    pub fn compact(b: CommandBlock) -> Block {
+        if b.kind == BlockKind::Motion as u32 && b.degree == 1 && b.n_ctrl == 2 {
+            let [x0, y0, z0, _] = b.ctrl[0];
+            let [x1, y1, z1, _] = b.ctrl[1];
+            let s = Straight {
+                source_line: b.source_line,
+                flags: b.flags,
+                from: [x0, y0, z0],
+                to: [x1, y1, z1],
+                feed_mm_per_min: b.feed_mm_per_min,
+                start_feed_mm_per_min: b.start_feed_mm_per_min,
+                end_feed_mm_per_min: b.end_feed_mm_per_min,
+                length_mm: b.length_mm,
+                acc_mm_per_s2: b.acc_mm_per_s2,
+                jerk_mm_per_s3: b.jerk_mm_per_s3,
+            };
+            if shared::cmdlog::same_bits(&s.command(b.seq), &b) {
+                return Block::Straight(s);
+            }
+        }
+        Block::from(b)
+    }
+}
+
+impl Block {
     /// The block as it is sent, numbered `seq`.
     pub fn command(&self, seq: u64) -> CommandBlock {
         match self {
