@@ -382,6 +382,51 @@ fn check_step(
     }
 }
 
+/// A program's machining time, or why the engine could not step it.
+type EstimateOrWhy = Result<crate::estimate::Estimate, String>;
+
+/// `cnc check --estimate`: the program checked and planned window by window, each
+/// window's blocks stepped through the interpolator's engine on a thread of its own as
+/// they come (the two run side by side, on two cores where there are two). The estimate
+/// is there only when the program is good; the time of each source line only if
+/// `per_line` (`--json`).
+fn estimated(
+    text: &str,
+    opts: &crate::program::Options,
+    machine: &shared::Machine,
+    period_ns: u64,
+    per_line: bool,
+    release: &mut dyn FnMut(usize, usize),
+) -> Result<(crate::window::Planned, Option<EstimateOrWhy>), Vec<crate::parse::Diagnostic>> {
+    // A few windows ahead of the engine at most.
+    let (tx, rx) = std::sync::mpsc::sync_channel::<(Vec<crate::blocks::Block>, usize)>(2);
+    std::thread::scope(|scope| {
+        // A program found bad stops coming: the engine starves, and the estimate is
+        // not wanted then.
+        let stepping = scope
+            .spawn(move || crate::estimate::estimate_windows(&rx, machine, period_ns, per_line));
+        let planned = process::check_streaming(
+            text,
+            opts,
+            machine,
+            period_ns,
+            crate::window::Stream {
+                every: crate::window::BATCH_MOVES,
+                blocks: &mut |blocks, first| {
+                    // (The engine gone means it failed: its error is what is reported.)
+                    let _ = tx.send((blocks, first));
+                },
+                release,
+            },
+        );
+        drop(tx);
+        let est = stepping
+            .join()
+            .unwrap_or_else(|_| Err("the estimate's thread panicked".to_string()));
+        planned.map(|p| (p, Some(est)))
+    })
+}
+
 pub fn main() -> ExitCode {
     let cli = Cli::parse();
     shared::logging::init();
@@ -442,54 +487,58 @@ pub fn main() -> ExitCode {
                 uncompensated: false,
                 extensions,
             };
-            let checked = process::check_with(text, &opts, &machine, period_ns);
-            if let Ok((prog, _)) = &checked {
-                eprint!(
-                    "{}",
-                    process::format_notes(&src.name, &process::notes(prog, &machine))
-                );
+            // Read, planned and checked window by window: only a window of the program
+            // is held at a time, and the pages of the file read are given back.
+            let mut read = |from: usize, to: usize| {
+                if let Some(m) = &mapped {
+                    m.release(from, to);
+                }
+            };
+            let checked = if estimate {
+                estimated(text, &opts, &machine, period_ns, json, &mut read)
+            } else {
+                process::check_streaming(
+                    text,
+                    &opts,
+                    &machine,
+                    period_ns,
+                    crate::window::Stream {
+                        every: crate::window::BATCH_MOVES,
+                        blocks: &mut |_, _| {},
+                        release: &mut read,
+                    },
+                )
+                .map(|p| (p, None))
+            };
+            if let Ok((planned, _)) = &checked {
+                eprint!("{}", process::format_notes(&src.name, &planned.notes));
             }
             match checked {
-                Ok((prog, blocks)) if estimate => {
-                    // Each block made a command block as it is stepped, not all at once.
-                    let commands = blocks.iter().enumerate().map(|(i, b)| b.command(i as u64));
-                    let est = crate::estimate::estimate_of(commands, &machine, period_ns, u64::MAX)
-                        .and_then(|e| {
-                            e.ok_or_else(|| "the program did not end in 2^64 cycles".to_string())
-                        });
-                    match est {
-                        Ok(est) if json => {
-                            println!("{}", serde_json::to_string_pretty(&est).unwrap_or_default());
-                            ExitCode::SUCCESS
-                        }
-                        Ok(est) => {
-                            println!(
+                Ok((planned, Some(est))) => match est {
+                    Ok(est) if json => {
+                        println!("{}", serde_json::to_string_pretty(&est).unwrap_or_default());
+                        ExitCode::SUCCESS
+                    }
+                    Ok(est) => {
+                        println!(
                             "{}: ok, {} dialect, {} blocks; machining time {:.3} s ({} cycles of {} µs), path {:.3} mm",
                             src.name,
-                            prog.dialect,
-                            blocks.len(),
+                            planned.dialect,
+                            planned.blocks,
                             est.time_s,
                             est.cycles,
                             period_us,
                             est.path_length_mm
                         );
-                            ExitCode::SUCCESS
-                        }
-                        Err(e) => fail(format!("{}: estimate: {e}", src.name)),
+                        ExitCode::SUCCESS
                     }
-                }
-                Ok((prog, blocks)) => {
+                    Err(e) => fail(format!("{}: estimate: {e}", src.name)),
+                },
+                Ok((planned, None)) => {
                     println!(
                         "{}: ok, {} dialect, {} blocks",
-                        src.name,
-                        prog.dialect,
-                        blocks.len()
+                        src.name, planned.dialect, planned.blocks
                     );
-                    // The process ends here, and the kernel takes its memory back at
-                    // once: dropping the lists first would only walk every move (for
-                    // the curves' own lists) and unmap them, a few percent of the
-                    // check of a long program.
-                    std::mem::forget((prog, blocks, src, mapped));
                     ExitCode::SUCCESS
                 }
                 Err(diags) => {

@@ -33,12 +33,14 @@ pub struct Estimate {
 struct Feed<I> {
     blocks: I,
     rapid_lines: std::collections::HashSet<u32>,
+    /// The lines' times are wanted (else the rapid lines are not noted).
+    per_line: bool,
 }
 
 impl<I: Iterator<Item = CommandBlock>> BlockSource for Feed<I> {
     fn next_block(&mut self) -> Option<CommandBlock> {
         let b = self.blocks.next()?;
-        if b.flags & FLAG_RAPID != 0 {
+        if self.per_line && b.flags & FLAG_RAPID != 0 {
             self.rapid_lines.insert(b.source_line);
         }
         Some(b)
@@ -75,11 +77,25 @@ pub fn estimate_of(
     period_ns: u64,
     max_cycles: u64,
 ) -> Result<Option<Estimate>, String> {
+    stepped(blocks, machine, period_ns, max_cycles, true)
+}
+
+/// [`estimate_of`], with the time of each source line (`per_line`) or without (then
+/// [`Estimate::moves`] is empty, and a program of ten million lines is not ten million
+/// entries).
+fn stepped(
+    blocks: impl Iterator<Item = CommandBlock>,
+    machine: &Machine,
+    period_ns: u64,
+    max_cycles: u64,
+    per_line: bool,
+) -> Result<Option<Estimate>, String> {
     let lim = Limits::new(machine, period_ns);
     let mut engine = Engine::new(lim, [0.0; 3]);
     let mut src = Feed {
         blocks,
         rapid_lines: Default::default(),
+        per_line,
     };
     let mut moves: Vec<LineTime> = Vec::new();
     let mut cycles = 0u64;
@@ -96,6 +112,7 @@ pub fn estimate_of(
         last = t.pos_mm;
         total += d;
         match moves.last_mut() {
+            _ if !per_line => {}
             Some(m) if m.line == t.source_line => {
                 m.cycles += 1;
                 m.length_mm += d;
@@ -131,4 +148,74 @@ pub fn estimate_of(
         path_length_mm: total,
         moves,
     }))
+}
+
+/// The windows of blocks a program is planned in ([`crate::window`]), as they come
+/// over a channel with the sequence number of each window's first block.
+type Windows = std::sync::mpsc::Receiver<(Vec<crate::blocks::Block>, usize)>;
+
+/// [`estimate_of`] the blocks of the windows that come over `windows` until it closes,
+/// each block made its command block as it is stepped; the time of each source line
+/// only if `per_line`. Block 0 coming again means the
+/// program is being read again from its start (see [`crate::window::Stream`]): the
+/// stepping starts again with it.
+pub fn estimate_windows(
+    windows: &Windows,
+    machine: &Machine,
+    period_ns: u64,
+    per_line: bool,
+) -> Result<Estimate, String> {
+    let mut from = Stepped {
+        windows,
+        window: Vec::new().into_iter(),
+        seq: 0,
+        held: None,
+        started: false,
+        again: false,
+    };
+    loop {
+        let est = stepped(&mut from, machine, period_ns, u64::MAX, per_line);
+        if !std::mem::take(&mut from.again) {
+            return est.and_then(|e| {
+                e.ok_or_else(|| "the program did not end in 2^64 cycles".to_string())
+            });
+        }
+        from.started = false;
+        from.window = Vec::new().into_iter();
+    }
+}
+
+/// The command blocks of the windows of [`estimate_windows`], one at a time; ends
+/// (with `again`) where block 0 comes again.
+struct Stepped<'a> {
+    windows: &'a Windows,
+    window: std::vec::IntoIter<crate::blocks::Block>,
+    /// The sequence number of the next block of `window`.
+    seq: u64,
+    /// A window that came after the stepping was ended for it.
+    held: Option<(Vec<crate::blocks::Block>, usize)>,
+    started: bool,
+    again: bool,
+}
+
+impl Iterator for Stepped<'_> {
+    type Item = CommandBlock;
+
+    fn next(&mut self) -> Option<CommandBlock> {
+        loop {
+            if let Some(b) = self.window.next() {
+                self.seq += 1;
+                return Some(b.command(self.seq - 1));
+            }
+            let (blocks, first) = self.held.take().or_else(|| self.windows.recv().ok())?;
+            if first == 0 && self.started {
+                self.held = Some((blocks, first));
+                self.again = true;
+                return None;
+            }
+            self.started = true;
+            self.window = blocks.into_iter();
+            self.seq = first as u64;
+        }
+    }
 }

@@ -45,3 +45,4 @@ pub mod surface_blocks;
 pub mod surface_path;
 pub mod surface_plane;
 pub mod tspline;
+pub mod window;

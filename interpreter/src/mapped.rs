@@ -5,7 +5,9 @@
 //! first touched, then the file is copied over them (`read`). On 200 000 lines of CAM
 //! output (5.7 MB) that was about a twentieth of `cnc check`'s time. Mapped, the file's
 //! pages are only entered into the process's page table, all at once
-//! (`MAP_POPULATE`).
+//! (`MAP_POPULATE`) for a file of up to 64 MiB. A longer one is read page by page, and
+//! the pages read are given back as the reading goes ([`MappedText::release`]): a
+//! program of ten million lines is never resident whole.
 //!
 //! The text must be UTF-8 and must not change while it is read, as for any program read:
 //! a file that is not UTF-8, not a regular file or empty is not mapped, and the caller
@@ -13,6 +15,13 @@
 //! another program while it is being checked ends the check with `SIGBUS`.
 
 use std::path::Path;
+
+/// Files up to this size are mapped whole at once (`MAP_POPULATE`); longer ones page by
+/// page as they are read, and given back behind ([`MappedText::release`]).
+const POPULATE_MAX_BYTES: usize = 64 << 20;
+
+/// How much of a file is checked for UTF-8 at a time.
+const VALIDATE_STRETCH: usize = 4 << 20;
 
 /// A whole file mapped read-only, valid UTF-8.
 pub struct MappedText {
@@ -43,7 +52,12 @@ impl MappedText {
                 std::ptr::null_mut(),
                 len,
                 libc::PROT_READ,
-                libc::MAP_PRIVATE | populate(),
+                libc::MAP_PRIVATE
+                    | if len <= POPULATE_MAX_BYTES {
+                        populate()
+                    } else {
+                        0
+                    },
                 file.as_raw_fd(),
                 0,
             )
@@ -55,8 +69,22 @@ impl MappedText {
             ptr: ptr.cast::<u8>(),
             len,
         };
-        // Validated once here; `as_str` relies on it.
-        std::str::from_utf8(mapped.bytes()).ok()?;
+        // Validated once here; `as_str` relies on it. A stretch at a time, each given
+        // back behind: a long file is never resident whole.
+        let bytes = mapped.bytes();
+        let mut at = 0;
+        while at < len {
+            let end = (at + VALIDATE_STRETCH).min(len);
+            match std::str::from_utf8(&bytes[at..end]) {
+                Ok(_) => at = end,
+                // A character cut by the stretch's end: from its start, with the next.
+                Err(e) if e.error_len().is_none() && end < len => at += e.valid_up_to(),
+                Err(_) => return None,
+            }
+            if len > POPULATE_MAX_BYTES {
+                mapped.release(0, at);
+            }
+        }
         Some(mapped)
     }
 
@@ -75,6 +103,40 @@ impl MappedText {
         // SAFETY: checked to be UTF-8 by `open`, and read-only to this process.
         unsafe { std::str::from_utf8_unchecked(self.bytes()) }
     }
+}
+
+impl MappedText {
+    /// Lets the kernel take back the pages of bytes `from..to` of the text (whole
+    /// pages within them) from this process's memory: they stay the file's, and are
+    /// read again from the kernel's cache if touched again. A long program read in
+    /// windows is then never resident whole, whatever its size.
+    #[cfg(unix)]
+    pub fn release(&self, from: usize, to: usize) {
+        // SAFETY: `sysconf` has no preconditions.
+        let page = usize::try_from(unsafe { libc::sysconf(libc::_SC_PAGESIZE) }).unwrap_or(4096);
+        let start = from.div_ceil(page) * page;
+        let end = if to >= self.len {
+            self.len
+        } else {
+            to / page * page
+        };
+        if end <= start {
+            return;
+        }
+        // SAFETY: a range of whole pages within the mapping `open` made (page-aligned,
+        // as the mapping's start is). The mapping is private, read-only and never
+        // written: the pages come back as the file's bytes, unchanged, when next read.
+        unsafe {
+            libc::madvise(
+                self.ptr.add(start) as *mut libc::c_void,
+                end - start,
+                libc::MADV_DONTNEED,
+            );
+        }
+    }
+
+    #[cfg(not(unix))]
+    pub fn release(&self, _from: usize, _to: usize) {}
 }
 
 #[cfg(unix)]
@@ -110,7 +172,12 @@ mod tests {
         let text = "G1 X1 Y2 (é)\nM2\n";
         let file = dir.join("p.ngc");
         std::fs::write(&file, text).unwrap();
-        assert_eq!(MappedText::open(&file).unwrap().as_str(), text);
+        let m = MappedText::open(&file).unwrap();
+        assert_eq!(m.as_str(), text);
+        // Released, the pages are read again from the file.
+        m.release(0, text.len());
+        assert_eq!(m.as_str(), text);
+        drop(m);
         // Not UTF-8, empty, a directory, missing: read the usual way.
         std::fs::write(&file, b"G1 X1 \xff\n").unwrap();
         assert!(MappedText::open(&file).is_none());

@@ -6,6 +6,7 @@ use crate::parse::Diagnostic;
 use crate::program;
 use crate::publish::{send, Finish, Link, Pace};
 use crate::report::InterpreterSummary;
+use crate::window::{self, Planned};
 use iceoryx2::prelude::Service;
 use shared::cmdlog::CommandLog;
 use shared::protocol::{BlockKind, CommandBlock, FLAG_RAPID};
@@ -131,7 +132,7 @@ pub fn compile(
     text: &str,
     machine: &Machine,
     period_ns: u64,
-) -> Result<(program::Program, Vec<CommandBlock>), Vec<Diagnostic>> {
+) -> Result<(Planned, Vec<CommandBlock>), Vec<Diagnostic>> {
     compile_with(text, &program::Options::default(), machine, period_ns)
 }
 
@@ -141,19 +142,50 @@ pub fn compile_with(
     opts: &program::Options,
     machine: &Machine,
     period_ns: u64,
-) -> Result<(program::Program, Vec<CommandBlock>), Vec<Diagnostic>> {
+) -> Result<(Planned, Vec<CommandBlock>), Vec<Diagnostic>> {
     check_with(text, opts, machine, period_ns).map(|(prog, b)| (prog, blocks::commands(&b)))
 }
 
 /// What `cnc check` runs: reads, checks, builds and plans, and validates every block as
 /// it will be sent; the blocks as [`blocks::build`] holds them (straight moves compact),
-/// [`blocks::commands`] turns them into those [`compile_with`] gives.
+/// [`blocks::commands`] turns them into those [`compile_with`] gives. Planned window by
+/// window ([`crate::window`]), the blocks gathered.
 pub fn check_with(
     text: &str,
     opts: &program::Options,
     machine: &Machine,
     period_ns: u64,
-) -> Result<(program::Program, Vec<Block>), Vec<Diagnostic>> {
+) -> Result<(Planned, Vec<Block>), Vec<Diagnostic>> {
+    let mut all = Vec::new();
+    let planned = check_streaming(
+        text,
+        opts,
+        machine,
+        period_ns,
+        window::Stream {
+            every: window::BATCH_MOVES,
+            blocks: &mut |mut b, first| {
+                // (From block 0 again: the program is read again, see `window::plan`.)
+                if first == 0 {
+                    all.clear();
+                }
+                all.append(&mut b)
+            },
+            release: &mut |_, _| {},
+        },
+    )?;
+    Ok((planned, all))
+}
+
+/// [`check_with`], the blocks handed on window by window as [`window::Stream`] says
+/// instead of gathered: a long program is never held whole.
+pub fn check_streaming(
+    text: &str,
+    opts: &program::Options,
+    machine: &Machine,
+    period_ns: u64,
+    stream: window::Stream<'_>,
+) -> Result<Planned, Vec<Diagnostic>> {
     // NURBS offsets under G41/G42 are fitted within the machine's chord tolerance.
     let opts = program::Options {
         offset_tolerance_mm: opts
@@ -161,21 +193,9 @@ pub fn check_with(
             .or(Some(machine.chord_tolerance_mm)),
         ..opts.clone()
     };
-    let prog = program::interpret_with(text, &opts)?;
-    let mut blocks = blocks::build(&prog.moves, machine);
     // Nothing leaves this process unless a receiver would accept it: every block is
-    // validated, and kept within the machine's travel, as soon as the plan is done with
-    // it (last to first).
-    let mut check = blocks::check::Checker::new(text, machine);
-    blocks::plan_and(&mut blocks, machine, period_ns, |seq, b| {
-        check.block(seq, b)
-    });
-    let bad = check.finish();
-    if bad.is_empty() {
-        Ok((prog, blocks))
-    } else {
-        Err(bad)
-    }
+    // validated, and kept within the machine's travel, as soon as its window is planned.
+    window::plan(text, &opts, machine, period_ns, stream)
 }
 
 /// What the machine changes of what a program asks, each at the first source line
@@ -203,38 +223,66 @@ pub fn feed_notes(
     machine: &Machine,
     what: &str,
 ) -> Vec<(u32, String)> {
-    let max = machine.max_feed_mm_per_min;
-    // (feed, first line, how many ask it)
-    let mut over: Vec<(f64, u32, usize)> = Vec::new();
+    let mut over = FeedNotes::new(machine);
     for (line, feed) in feeds {
-        // (A rounding above the limit is the limit: an inch F at the limit converts to
-        // a hair over it.)
-        if feed <= max * (1.0 + 1e-9) {
-            continue;
-        }
-        // One note for each feed as it is shown.
-        match over.iter_mut().find(|o| shown(o.0) == shown(feed)) {
-            Some(o) => o.2 += 1,
-            None => over.push((feed, line, 1)),
+        over.push(line, feed);
+    }
+    over.finish(what)
+}
+
+/// [`feed_notes`] gathered as the feeds come (a program read in windows).
+#[derive(Debug, Clone)]
+pub struct FeedNotes {
+    /// The machine's `max_feed_mm_per_min`.
+    max: f64,
+    /// Each feed above it as shown, with the first line that asks it and how many do.
+    over: Vec<(f64, u32, usize)>,
+}
+
+impl FeedNotes {
+    pub fn new(machine: &Machine) -> Self {
+        FeedNotes {
+            max: machine.max_feed_mm_per_min,
+            over: Vec::new(),
         }
     }
-    over.into_iter()
-        .map(|(feed, line, n)| {
-            let who = match n {
-                1 => format!("the {what} runs"),
-                2 => format!("this {what} and 1 more at that feed run"),
-                n => format!("this {what} and {} more at that feed run", n - 1),
-            };
-            (
-                line,
-                format!(
-                    "feed {} mm/min is above the machine's max_feed_mm_per_min: {who} at {} mm/min",
-                    shown(feed),
-                    shown(max)
-                ),
-            )
-        })
-        .collect()
+
+    /// The feed `feed` (mm/min) asked for at source line `line`.
+    pub fn push(&mut self, line: u32, feed: f64) {
+        // (A rounding above the limit is the limit: an inch F at the limit converts to
+        // a hair over it.)
+        if feed <= self.max * (1.0 + 1e-9) {
+            return;
+        }
+        // One note for each feed as it is shown.
+        match self.over.iter_mut().find(|o| shown(o.0) == shown(feed)) {
+            Some(o) => o.2 += 1,
+            None => self.over.push((feed, line, 1)),
+        }
+    }
+
+    /// The notes, one for each feed above the machine's as it is shown.
+    pub fn finish(self, what: &str) -> Vec<(u32, String)> {
+        let max = self.max;
+        self.over
+            .into_iter()
+            .map(|(feed, line, n)| {
+                let who = match n {
+                    1 => format!("the {what} runs"),
+                    2 => format!("this {what} and 1 more at that feed run"),
+                    n => format!("this {what} and {} more at that feed run", n - 1),
+                };
+                (
+                    line,
+                    format!(
+                        "feed {} mm/min is above the machine's max_feed_mm_per_min: {who} at {} mm/min",
+                        shown(feed),
+                        shown(max)
+                    ),
+                )
+            })
+            .collect()
+    }
 }
 
 /// A figure as a user reads it: at most three decimals, no trailing zeros.
@@ -312,7 +360,7 @@ pub fn compile_compact(
     Ok(Compiled {
         blocks,
         dialect: Some(prog.dialect),
-        notes: notes(&prog, machine),
+        notes: prog.notes,
         messages: prog.messages,
         max_scallop_mm: None,
     })

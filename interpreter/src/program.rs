@@ -396,7 +396,52 @@ pub fn interpret(text: &str) -> Result<Program, Vec<Diagnostic>> {
 
 /// [`interpret`], with the dialect forced or other options.
 pub fn interpret_with(text: &str, opts: &Options) -> Result<Program, Vec<Diagnostic>> {
-    interpret_lines(text, opts, Way::Short)
+    interpret_lines(text, opts, Way::Short, None)
+}
+
+/// Where [`interpret_batched`] hands the moves over as it reads.
+pub struct Batches<'f> {
+    /// Moves to gather before a batch is handed over (more where a batch cannot end
+    /// yet: see [`interpret_batched`]).
+    pub every: usize,
+    /// Takes each batch, in program order, and what was read by then.
+    pub sink: &'f mut dyn FnMut(Vec<Move>, Read),
+    /// Told of each stretch of the text, as byte offsets `from..to`, that the reading
+    /// is done with for now (it may come back to it only to name a problem's column): a
+    /// program read in order (without O-words) is looked through once for its lines
+    /// and then read, a stretch at a time. A mapped file can give those pages back.
+    pub release: &'f mut dyn FnMut(usize, usize),
+}
+
+/// What the reading had got to when a batch was handed over.
+#[derive(Debug, Clone, Copy)]
+pub struct Read {
+    /// No problem found in the lines read so far.
+    pub clean: bool,
+    /// The batch has a `G4 P` dwell read before the dialect was known, in seconds: if
+    /// the program turns out to be Fanuc's, it was milliseconds (and the program must
+    /// be read again as Fanuc's).
+    pub in_doubt: bool,
+}
+
+/// [`interpret_with`], handing the moves over in batches as the program is read, so
+/// that a long one need not be held whole: the moves handed to `batches` and then those
+/// of the returned program (the last, ending with its end) are, in order, the moves
+/// [`interpret_with`] gives, bit for bit, and the problems are the same.
+///
+/// A batch ends between lines, and never while a move already made may still change
+/// (while cutter compensation is on, its last moves wait for the next corner). A `G4 P`
+/// dwell read before the dialect was known is handed over in seconds, and the batch
+/// says so ([`Read::in_doubt`]): should the program turn out to be Fanuc's, those are
+/// the only moves that differ, and the caller reads it again as Fanuc's. The program's
+/// own facts (its dialect, its messages) are in the returned program, as is every
+/// problem found.
+pub fn interpret_batched(
+    text: &str,
+    opts: &Options,
+    batches: Batches<'_>,
+) -> Result<Program, Vec<Diagnostic>> {
+    interpret_lines(text, opts, Way::Short, Some(batches))
 }
 
 /// How [`interpret_lines`] reads plain straight moves.
@@ -410,7 +455,12 @@ enum Way {
 }
 
 /// [`interpret_with`], reading plain straight moves as `way` says.
-fn interpret_lines(text: &str, opts: &Options, way: Way) -> Result<Program, Vec<Diagnostic>> {
+fn interpret_lines(
+    text: &str,
+    opts: &Options,
+    way: Way,
+    mut batches: Option<Batches<'_>>,
+) -> Result<Program, Vec<Diagnostic>> {
     let mut st = State {
         pos: [0.0; 3],
         g62: None,
@@ -450,23 +500,41 @@ fn interpret_lines(text: &str, opts: &Options, way: Way) -> Result<Program, Vec<
     // A program without O-words (most CAM output) runs its lines in order, each once:
     // they are split off the text as they are read, without a list of them (16 bytes
     // a line). Any other is listed, for its flow to jump about in.
-    let listed = subfile::may_have_o_words(text);
+    let (listed, counted) = match &mut batches {
+        None => (subfile::may_have_o_words(text), None),
+        Some(b) => {
+            let (o, n) = looked_through(text, b.release);
+            (o, Some(n))
+        }
+    };
     let mut lines = if listed { lines_of(text) } else { Vec::new() };
     let mut in_order = (!listed).then(|| LineSplitter::new(text));
     let own_lines = if listed {
         lines.len()
     } else {
-        line_count(text)
+        counted.unwrap_or_else(|| line_count(text))
     };
-    let mut o_words = subfile::o_words_of(text, &lines, 1);
+    // The text read and given back (batches of a program read in order).
+    let mut released = 0;
+    // (Without an `o` anywhere there are none: not looked for again.)
+    let mut o_words = if listed {
+        subfile::o_words_of(text, &lines, 1)
+    } else {
+        Vec::new()
+    };
     let (mut flow, flow_errors) = flow(&o_words);
     errors.extend(flow_errors);
     // Subroutine files join the program after its own lines.
     let (files, missing) = subfile::load(&o_words, &opts.subroutine_dirs);
     // About a move a line in the programs that are long (CAM output): one allocation,
     // not a list copied each time it doubles (mapped at once, see `pages`).
-    prog.moves.reserve(own_lines);
-    crate::pages::prefer_huge_pages(&prog.moves);
+    match &batches {
+        None => {
+            prog.moves.reserve(own_lines);
+            crate::pages::prefer_huge_pages(&prog.moves);
+        }
+        Some(b) => prog.moves.reserve(batch_room(b.every, own_lines)),
+    }
     let mut units = subfile::Units::default();
     for f in &files {
         let start = lines.len();
@@ -489,6 +557,24 @@ fn interpret_lines(text: &str, opts: &Options, way: Way) -> Result<Program, Vec<
         let line = pc as u32 + 1;
         if st.ended {
             break; // LinuxCNC ignores everything after M2/M30.
+        }
+        if let Some(b) = &mut batches {
+            if prog.moves.len() >= b.every && st.comp.is_none() {
+                if st.comp_used {
+                    drop_empty_lines(&mut prog.moves);
+                }
+                if let Some(at) = in_order.as_ref().map(|s| s.at) {
+                    (b.release)(released, at);
+                    released = at;
+                }
+                let read = Read {
+                    clean: errors.is_empty(),
+                    in_doubt: !st.dwells_in_doubt.is_empty(),
+                };
+                st.dwells_in_doubt.clear();
+                let next = Vec::with_capacity(batch_room(b.every, own_lines));
+                (b.sink)(std::mem::replace(&mut prog.moves, next), read);
+            }
         }
         let here = pc;
         pc += 1;
@@ -639,11 +725,8 @@ fn interpret_lines(text: &str, opts: &Options, way: Way) -> Result<Program, Vec<
             }
         }
     }
-    // A compensated move cut short to nothing at a concave corner: LinuxCNC sends it,
-    // it moves nothing, and a block must have a length.
     if st.comp_used {
-        prog.moves
-            .retain(|m| !matches!(m, Move::Line { from, to, .. } if from == to));
+        drop_empty_lines(&mut prog.moves);
     }
     errors.iter_mut().for_each(|d| units.locate(d));
     if errors.is_empty() {
@@ -651,6 +734,17 @@ fn interpret_lines(text: &str, opts: &Options, way: Way) -> Result<Program, Vec<
     } else {
         Err(errors)
     }
+}
+
+/// Room for a batch of `every` moves (a line may make a few) in a program of `lines`.
+fn batch_room(every: usize, lines: usize) -> usize {
+    every.min(lines).saturating_add(every.min(lines) / 8)
+}
+
+/// A compensated move cut short to nothing at a concave corner: LinuxCNC sends it, it
+/// moves nothing, and a block must have a length. (Only compensation makes such moves.)
+fn drop_empty_lines(moves: &mut Vec<Move>) {
+    moves.retain(|m| !matches!(m, Move::Line { from, to, .. } if from == to));
 }
 
 /// The lines of `text`, as `str::lines` gives them (split at `\n`, a `\r` before it
@@ -666,6 +760,22 @@ fn lines_of(text: &str) -> Vec<&str> {
 }
 
 /// How many lines [`lines_of`] finds in `text`: one a `\n`, and the last one without.
+/// Whether `text` may have O-words ([`subfile::may_have_o_words`]) and its
+/// [`line_count`], looked through a stretch at a time, each `release`d behind.
+fn looked_through(text: &str, release: &mut dyn FnMut(usize, usize)) -> (bool, usize) {
+    const STRETCH: usize = 1 << 22;
+    let bytes = text.as_bytes();
+    let (mut o_words, mut newlines_seen) = (false, 0);
+    for (k, chunk) in bytes.chunks(STRETCH).enumerate() {
+        // (`may_have_o_words` looks at bytes: a stretch may end inside a character.)
+        o_words |= chunk.iter().any(|b| b | 0x20 == b'o');
+        newlines_seen += newlines(chunk);
+        release(k * STRETCH, k * STRETCH + chunk.len());
+    }
+    let n = newlines_seen + usize::from(!text.is_empty() && !text.ends_with('\n'));
+    (o_words, n)
+}
+
 fn line_count(text: &str) -> usize {
     newlines(text.as_bytes()) + usize::from(!text.is_empty() && !text.ends_with('\n'))
 }

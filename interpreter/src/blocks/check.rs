@@ -24,8 +24,9 @@ pub const MAX_PROGRAM_S: f64 = 10.0 * 365.25 * 86_400.0;
 /// Where the machine stands when a program starts (the interpreter's origin).
 pub const START_MM: [f64; 3] = [0.0; 3];
 
-/// Checks the blocks of a program one at a time, in any order (the planner hands them
-/// over last to first), and gives every problem found as a [`Diagnostic`].
+/// Checks the blocks of a program one at a time, in program order (a problem of time
+/// names the line by which the program has taken too long), and gives every problem
+/// found as a [`Diagnostic`].
 pub struct Checker<'a> {
     text: &'a str,
     machine: &'a Machine,
@@ -131,6 +132,11 @@ impl<'a> Checker<'a> {
                 None,
             ));
         }
+    }
+
+    /// No problem found so far.
+    pub fn is_clean(&self) -> bool {
+        self.found.is_empty()
     }
 
     /// Every problem found, in the order of the lines (the start position first), each

@@ -415,7 +415,7 @@ proptest::proptest! {
             if cut_end {
                 text.pop();
             }
-            let read = |way| match interpret_lines(&text, &Options::default(), way) {
+            let read = |way| match interpret_lines(&text, &Options::default(), way, None) {
                 Ok(p) => Ok((p.moves, p.messages, p.dialect)),
                 Err(e) => Err(e),
             };
@@ -440,7 +440,7 @@ fn the_short_way_on_chosen_cases() {
         long.as_str(),
         "F100\nG1 X1\nM2\nG1 X-1e6\n",
     ] {
-        let read = |way| match interpret_lines(text, &Options::default(), way) {
+        let read = |way| match interpret_lines(text, &Options::default(), way, None) {
             Ok(p) => Ok((p.moves, p.messages, p.dialect)),
             Err(e) => Err(e),
         };
