@@ -1,8 +1,9 @@
 //! From moves to command blocks: lines and arcs as exact NURBS (degree 1 and rational
 //! quadratic), NURBS split exactly to block capacity, and the feed plan.
 //!
-//! The plan is a look-ahead over the whole program (the interpreter reads all of it before
-//! any motion): each motion block gets a speed cap (programmed feed, reduced where its
+//! The plan is a look-ahead over the blocks it is given: a whole window of the program,
+//! from one rest to another ([`crate::window`]), which the interpreter plans before any of
+//! it moves. Each motion block gets a speed cap (programmed feed, reduced where its
 //! curvature demands it by the chord tolerance and the path's and axes' acceleration and
 //! jerk) and the tangential acceleration and jerk its S-curve may use; each junction a
 //! speed (exact stop at corners sharper than the machine's corner angle, limited at kinks
@@ -2004,8 +2005,8 @@ pub fn plan_alone(b: &mut CommandBlock, machine: &Machine, feed: f64) {
 }
 
 /// Fills in lengths, feed caps, profile limits and start/end speeds of every motion
-/// block: a look-ahead over the whole program (the interpreter reads all of it before
-/// any motion). Junction speeds (lowered where kinks are closer than two steps, see
+/// block: a look-ahead over all of `blocks` (a window of the program from rest to rest,
+/// see [`crate::window`]). Junction speeds (lowered where kinks are closer than two steps, see
 /// [`CloseKinks`]), then a backward pass with the jerk-limited distances of
 /// [`shared::profile`], make every block able to slow to its end speed; the
 /// interpolator accelerates as its limits allow by itself (no forward pass).

@@ -382,51 +382,6 @@ fn check_step(
     }
 }
 
-/// A program's machining time, or why the engine could not step it.
-type EstimateOrWhy = Result<crate::estimate::Estimate, String>;
-
-/// `cnc check --estimate`: the program checked and planned window by window, each
-/// window's blocks stepped through the interpolator's engine on a thread of its own as
-/// they come (the two run side by side, on two cores where there are two). The estimate
-/// is there only when the program is good; the time of each source line only if
-/// `per_line` (`--json`).
-fn estimated(
-    text: &str,
-    opts: &crate::program::Options,
-    machine: &shared::Machine,
-    period_ns: u64,
-    per_line: bool,
-    release: &mut dyn FnMut(usize, usize),
-) -> Result<(crate::window::Planned, Option<EstimateOrWhy>), Vec<crate::parse::Diagnostic>> {
-    // A few windows ahead of the engine at most.
-    let (tx, rx) = std::sync::mpsc::sync_channel::<(Vec<crate::blocks::Block>, usize)>(2);
-    std::thread::scope(|scope| {
-        // A program found bad stops coming: the engine starves, and the estimate is
-        // not wanted then.
-        let stepping = scope
-            .spawn(move || crate::estimate::estimate_windows(&rx, machine, period_ns, per_line));
-        let planned = process::check_streaming(
-            text,
-            opts,
-            machine,
-            period_ns,
-            crate::window::Stream {
-                every: crate::window::BATCH_MOVES,
-                blocks: &mut |blocks, first| {
-                    // (The engine gone means it failed: its error is what is reported.)
-                    let _ = tx.send((blocks, first));
-                },
-                release,
-            },
-        );
-        drop(tx);
-        let est = stepping
-            .join()
-            .unwrap_or_else(|_| Err("the estimate's thread panicked".to_string()));
-        planned.map(|p| (p, Some(est)))
-    })
-}
-
 pub fn main() -> ExitCode {
     let cli = Cli::parse();
     shared::logging::init();
@@ -495,7 +450,7 @@ pub fn main() -> ExitCode {
                 }
             };
             let checked = if estimate {
-                estimated(text, &opts, &machine, period_ns, json, &mut read)
+                process::check_estimated(text, &opts, &machine, period_ns, json, &mut read)
             } else {
                 process::check_streaming(
                     text,

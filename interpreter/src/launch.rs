@@ -340,7 +340,20 @@ fn run_inner(args: &RunArgs) -> Result<bool, String> {
     let machine = shared::machine::load(args.machine.as_deref())?;
     shared::machine::log_in_force("cnc run", args.machine.as_deref(), &machine);
     machine.check_period(args.period_us)?;
-    let src = Source::load(args.program.as_deref())?;
+    // A regular file is mapped, not read into memory (see `crate::mapped`), and checked
+    // window by window: a program of any length is never held whole here.
+    let mapped = args
+        .program
+        .as_deref()
+        .and_then(crate::mapped::MappedText::open);
+    let src = match (&mapped, args.program.as_deref()) {
+        (Some(_), Some(p)) => Source {
+            name: p.display().to_string(),
+            text: String::new(),
+        },
+        _ => Source::load(args.program.as_deref())?,
+    };
+    let text = mapped.as_ref().map_or(src.text.as_str(), |m| m.as_str());
     let period_ns = args.period_us * 1000;
     // Bad input is rejected before any process starts, let alone any motion.
     // Subroutine files are looked for beside the program first, as LinuxCNC looks in
@@ -375,11 +388,57 @@ fn run_inner(args: &RunArgs) -> Result<bool, String> {
         uncompensated: false,
         extensions: args.extensions.clone(),
     };
-    let blocks = match process::compile_compact(&src.name, &src.text, &opts, &machine, period_ns) {
-        Ok(c) => {
+    // The run's length in cycles for a progress bar, only where one is drawn: the
+    // engine stepped along as the program is checked (a STEP-NC part is planned whole).
+    let progress = progress_wanted();
+    let repeat = u64::from(args.repeat.max(1));
+    let checked: Result<Option<u64>, String> = if crate::step::check::is_step_file(&src.name, text)
+    {
+        process::compile_compact(&src.name, text, &opts, &machine, period_ns).map(|c| {
             eprint!("{}", process::format_notes(&src.name, &c.notes));
-            c.blocks
-        }
+            progress
+                .then(|| {
+                    expected_cycles(
+                        process::repeated(&c.blocks, args.repeat, &machine),
+                        &machine,
+                        period_ns,
+                    )
+                })
+                .flatten()
+        })
+    } else {
+        let mut release = |from: usize, to: usize| {
+            if let Some(m) = &mapped {
+                m.release(from, to);
+            }
+        };
+        let planned = if progress {
+            process::check_estimated(text, &opts, &machine, period_ns, false, &mut release)
+                // (The return moves between repeats left out of the bar's length.)
+                .map(|(p, e)| (p, e.and_then(|e| e.ok()).map(|e| e.cycles * repeat)))
+        } else {
+            process::check_streaming(
+                text,
+                &opts,
+                &machine,
+                period_ns,
+                crate::window::Stream {
+                    every: crate::window::BATCH_MOVES,
+                    blocks: &mut |_, _| {},
+                    release: &mut release,
+                },
+            )
+            .map(|p| (p, None))
+        };
+        planned
+            .map(|(p, cycles)| {
+                eprint!("{}", process::format_notes(&src.name, &p.notes));
+                cycles
+            })
+            .map_err(|d| process::format_diagnostics(&src.name, &d))
+    };
+    let expected_cycles = match checked {
+        Ok(c) => c,
         Err(errors) => {
             say_err(&errors);
             return Ok(false);
@@ -390,8 +449,11 @@ fn run_inner(args: &RunArgs) -> Result<bool, String> {
     // The run directory keeps the exact program and machine it ran (a STEP-NC part too:
     // the interpreter process knows it by its content, the report page reads its lines).
     let program_copy = dir.join("program.ngc");
-    std::fs::write(&program_copy, &src.text)
-        .map_err(|e| format!("{}: {e}", program_copy.display()))?;
+    match (&mapped, args.program.as_deref()) {
+        (Some(_), Some(p)) => std::fs::copy(p, &program_copy).map(drop),
+        _ => std::fs::write(&program_copy, &src.text),
+    }
+    .map_err(|e| format!("{}: {e}", program_copy.display()))?;
     let mut input = vec![
         "--program".into(),
         program_copy.display().to_string(),
@@ -417,19 +479,11 @@ fn run_inner(args: &RunArgs) -> Result<bool, String> {
         std::fs::copy(path, &copy).map_err(|e| format!("{}: {e}", copy.display()))?;
         input.extend(["--tool-table".into(), copy.display().to_string()]);
     }
-    // The length of the run for a progress bar, only where one is drawn.
-    let expected_cycles = progress_wanted().then(|| {
-        expected_cycles(
-            process::repeated(&blocks, args.repeat, &machine),
-            &machine,
-            period_ns,
-        )
-    });
-    // Neither the blocks nor the text are needed while the stack runs (the interpreter
-    // process reads the run directory's copy): a long program's are hundreds of MB.
-    drop(blocks);
+    // The text is not needed while the stack runs (the interpreter process reads the
+    // run directory's copy).
     let name = src.name;
     drop(src.text);
+    drop(mapped);
     let stack = Stack {
         dir,
         machine,
@@ -438,7 +492,7 @@ fn run_inner(args: &RunArgs) -> Result<bool, String> {
         sched: args.sched,
         rt_priority: args.rt_priority,
         html: !args.no_report,
-        expected_cycles: expected_cycles.flatten(),
+        expected_cycles,
         servo_clock: args.servo_clock,
     };
     stack.launch(&name, input)

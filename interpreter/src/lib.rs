@@ -4,7 +4,9 @@
 //!   machine over the lines and produces moves (lines, arcs, NURBS, dwells, the end),
 //!   collecting every error with its line and column;
 //! * [`blocks`] turns moves into command blocks (everything as exact NURBS, split to block
-//!   capacity) and plans their feeds with look-ahead over the whole program;
+//!   capacity) and plans their feeds with look-ahead; [`window`] reads, builds, plans and
+//!   checks a program window by window, each window ending where the machine is at rest
+//!   whatever the plan, so that a long program is never held whole;
 //! * [`publish`] streams the blocks to the interpolator with back-pressure and records
 //!   each one as sent in the command log ([`shared::cmdlog`]);
 //! * [`estimate`] steps the planned blocks through the interpolator's engine in-process

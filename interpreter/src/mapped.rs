@@ -105,6 +105,11 @@ impl MappedText {
     }
 }
 
+// SAFETY: the mapping is read-only and private and nothing writes it; `release` only
+// lets pages go, which come back unchanged when next read, from any thread.
+unsafe impl Send for MappedText {}
+unsafe impl Sync for MappedText {}
+
 impl MappedText {
     /// Lets the kernel take back the pages of bytes `from..to` of the text (whole
     /// pages within them) from this process's memory: they stay the file's, and are

@@ -198,6 +198,51 @@ pub fn check_streaming(
     window::plan(text, &opts, machine, period_ns, stream)
 }
 
+/// A program's machining time, or why the engine could not step it.
+pub type EstimateOrWhy = Result<crate::estimate::Estimate, String>;
+
+/// `cnc check --estimate` (and the launcher's progress bar): the program checked and planned window by window, each
+/// window's blocks stepped through the interpolator's engine on a thread of its own as
+/// they come (the two run side by side, on two cores where there are two). The estimate
+/// is there only when the program is good; the time of each source line only if
+/// `per_line` (`--json`).
+pub fn check_estimated(
+    text: &str,
+    opts: &crate::program::Options,
+    machine: &shared::Machine,
+    period_ns: u64,
+    per_line: bool,
+    release: &mut dyn FnMut(usize, usize),
+) -> Result<(Planned, Option<EstimateOrWhy>), Vec<Diagnostic>> {
+    // A few windows ahead of the engine at most.
+    let (tx, rx) = std::sync::mpsc::sync_channel::<(Vec<crate::blocks::Block>, usize)>(2);
+    std::thread::scope(|scope| {
+        // A program found bad stops coming: the engine starves, and the estimate is
+        // not wanted then.
+        let stepping = scope
+            .spawn(move || crate::estimate::estimate_windows(&rx, machine, period_ns, per_line));
+        let planned = check_streaming(
+            text,
+            opts,
+            machine,
+            period_ns,
+            window::Stream {
+                every: window::BATCH_MOVES,
+                blocks: &mut |blocks, first| {
+                    // (The engine gone means it failed: its error is what is reported.)
+                    let _ = tx.send((blocks, first));
+                },
+                release,
+            },
+        );
+        drop(tx);
+        let est = stepping
+            .join()
+            .unwrap_or_else(|_| Err("the estimate's thread panicked".to_string()));
+        planned.map(|p| (p, Some(est)))
+    })
+}
+
 /// What the machine changes of what a program asks, each at the first source line
 /// that asks it: a feed above `max_feed_mm_per_min` runs at that limit (the planner
 /// clamps it). One note for each feed asked for, with how many more moves ask it.
@@ -529,25 +574,23 @@ pub fn repeated<'a>(
 /// How often reading and planning look for a stop request or an interpolator that left.
 const PLAN_WATCH_EVERY: Duration = Duration::from_millis(10);
 
-/// [`compile_compact`] on a thread of its own, given up (with nothing sent, so nothing
-/// moved) on a stop request or when the interpolator, once there, has left: a program of
-/// many curves plans for tens of seconds, and the operator's Ctrl-C must not wait for it.
-/// `hold` is a test aid (a long plan).
-fn compile_watched<S: Service>(
+/// `work` (reading and planning) on a thread of its own, given up (with nothing sent, so
+/// nothing moved) on a stop request or when the interpolator, once there, has left: a
+/// program of many curves plans for tens of seconds, and the operator's Ctrl-C must not
+/// wait for it. Given up, the thread is left to end with the process. `hold` is a test
+/// aid (a long plan).
+fn watched<S: Service, R: Send + 'static>(
     link: &Link<S>,
-    (name, text, opts): (String, String, program::Options),
-    machine: &Machine,
-    period_ns: u64,
     hold: Option<Duration>,
-) -> Result<Compiled<Block>, String> {
-    let machine = machine.clone();
+    work: impl FnOnce() -> Result<R, String> + Send + 'static,
+) -> Result<R, String> {
     let planner = std::thread::Builder::new()
         .name("plan".into())
         .spawn(move || {
             if let Some(d) = hold {
                 std::thread::sleep(d);
             }
-            compile_compact(&name, &text, &opts, &machine, period_ns)
+            work()
         })
         .map_err(|e| format!("starting the planning thread: {e}"))?;
     let mut came = false;
@@ -573,6 +616,64 @@ fn compile_watched<S: Service>(
         .map_err(|_| "the planning thread panicked".to_string())?
 }
 
+/// The blocks a run sends: held (a replay, a STEP-NC part, a program run more than
+/// once) or planned window by window as they are sent.
+enum Sent {
+    Held(Vec<Block>),
+    /// A G-code program checked whole (`planned`), to be read and planned again as it
+    /// is sent, in the dialect it was found to be in.
+    Streamed {
+        text: std::sync::Arc<ProgramText>,
+        opts: program::Options,
+        planned: Planned,
+    },
+}
+
+/// A program's text: the file mapped where it can be (given back as it is read), else
+/// read.
+pub struct ProgramText {
+    mapped: Option<crate::mapped::MappedText>,
+    read: String,
+}
+
+impl ProgramText {
+    /// The program file at `path`.
+    pub fn load(path: &Path) -> Result<ProgramText, String> {
+        Ok(match crate::mapped::MappedText::open(path) {
+            Some(m) => ProgramText {
+                mapped: Some(m),
+                read: String::new(),
+            },
+            None => ProgramText {
+                mapped: None,
+                read: Source::load(Some(path))?.text,
+            },
+        })
+    }
+
+    /// The text as it is (the built-in demo).
+    pub fn of(text: String) -> ProgramText {
+        ProgramText {
+            mapped: None,
+            read: text,
+        }
+    }
+
+    pub fn as_str(&self) -> &str {
+        self.mapped
+            .as_ref()
+            .map_or(self.read.as_str(), |m| m.as_str())
+    }
+
+    /// Gives back the pages of bytes `from..to` (see
+    /// [`crate::mapped::MappedText::release`]).
+    pub fn release(&self, from: usize, to: usize) {
+        if let Some(m) = &self.mapped {
+            m.release(from, to);
+        }
+    }
+}
+
 /// Runs the interpreter until the interpolator reports the end; writes `commands.log` and
 /// `interpreter.json`.
 pub fn run<S: Service>(cfg: &Config) -> Result<InterpreterSummary, String> {
@@ -591,7 +692,7 @@ pub fn run_streaming<S: Service>(
     let mut dialect = None;
     let mut max_scallop_mm = None;
     let mut notes = Vec::new();
-    let (name, blocks, messages) = match &cfg.replay {
+    let (name, sent_blocks, messages) = match &cfg.replay {
         Some(log) => {
             let r = load_replay(log, cfg.salvage)?;
             salvaged = r.salvaged;
@@ -599,11 +700,18 @@ pub fn run_streaming<S: Service>(
             // are made the log's own list is still there, so a log of curves is held
             // twice for that moment, one of lines about once.
             let blocks = r.blocks.into_iter().map(Block::compact).collect();
-            (r.header.program, blocks, Vec::new())
+            (r.header.program, Sent::Held(blocks), Vec::new())
         }
         None => {
-            let src = Source::load(cfg.program.as_deref())?;
-            let name = cfg.program_name.clone().unwrap_or(src.name.clone());
+            let src_name = cfg
+                .program
+                .as_deref()
+                .map_or(DEMO_NAME.to_string(), |p| p.display().to_string());
+            let name = cfg.program_name.clone().unwrap_or(src_name);
+            let text = std::sync::Arc::new(match cfg.program.as_deref() {
+                Some(p) => ProgramText::load(p)?,
+                None => ProgramText::of(DEMO.to_string()),
+            });
             let opts = program::Options {
                 dialect: streaming.dialect,
                 subroutine_dirs: streaming.subroutine_dirs.clone(),
@@ -616,23 +724,66 @@ pub fn run_streaming<S: Service>(
                 uncompensated: false,
                 extensions: streaming.extensions.clone(),
             };
-            let c = compile_watched(
-                &link,
-                (name.clone(), src.text, opts),
-                &cfg.machine,
-                cfg.period_ns,
-                streaming.hold_before_reading,
-            )
-            .map_err(|e| nothing_sent(cfg, &name, e))?;
-            dialect = c.dialect.map(|d| d.name().to_string());
-            max_scallop_mm = c.max_scallop_mm;
-            notes = c.notes;
-            (name, c.blocks, c.messages)
+            let hold = streaming.hold_before_reading;
+            let (machine, period_ns) = (cfg.machine.clone(), cfg.period_ns);
+            let step = crate::step::check::is_step_file(&name, text.as_str());
+            if step || streaming.repeat > 1 {
+                // Held whole: a STEP-NC part is planned whole, and a program run more
+                // than once is sent again from what is held.
+                let (t, n, o) = (text.clone(), name.clone(), opts.clone());
+                let c = watched(&link, hold, move || {
+                    compile_compact(&n, t.as_str(), &o, &machine, period_ns)
+                })
+                .map_err(|e| nothing_sent(cfg, &name, e))?;
+                dialect = c.dialect.map(|d| d.name().to_string());
+                max_scallop_mm = c.max_scallop_mm;
+                notes = c.notes;
+                (name, Sent::Held(c.blocks), c.messages)
+            } else {
+                // Checked whole first, window by window (nothing moves before the
+                // program is known good), then read and planned again as it is sent.
+                let (t, n, o) = (text.clone(), name.clone(), opts.clone());
+                let planned = watched(&link, hold, move || {
+                    check_streaming(
+                        t.as_str(),
+                        &o,
+                        &machine,
+                        period_ns,
+                        window::Stream {
+                            every: window::BATCH_MOVES,
+                            blocks: &mut |_, _| {},
+                            release: &mut |from, to| t.release(from, to),
+                        },
+                    )
+                    .map_err(|d| format_diagnostics(&n, &d))
+                })
+                .map_err(|e| nothing_sent(cfg, &name, e))?;
+                dialect = Some(planned.dialect.name().to_string());
+                notes = planned.notes.clone();
+                let messages = planned.messages.clone();
+                let opts = program::Options {
+                    dialect: Some(planned.dialect),
+                    ..opts
+                };
+                (
+                    name,
+                    Sent::Streamed {
+                        text,
+                        opts,
+                        planned,
+                    },
+                    messages,
+                )
+            }
         }
+    };
+    let block_count = match &sent_blocks {
+        Sent::Held(b) => b.len(),
+        Sent::Streamed { planned, .. } => planned.blocks,
     };
     tracing::info!(
         program = %name,
-        blocks = blocks.len(),
+        blocks = block_count,
         repeat = streaming.repeat,
         period_us = cfg.period_ns / 1000,
         "interpreter started"
@@ -647,15 +798,25 @@ pub fn run_streaming<S: Service>(
         &name,
     )
     .map_err(|e| format!("creating commands.log: {e}"))?;
-    let result = send(
-        &link,
-        repeated(&blocks, streaming.repeat, &cfg.machine),
-        Some(&mut log),
-        Duration::from_secs(20),
-        Pace {
-            throttle: streaming.throttle,
-        },
-    );
+    let pace = Pace {
+        throttle: streaming.throttle,
+    };
+    let result = match &sent_blocks {
+        Sent::Held(blocks) => send(
+            &link,
+            repeated(blocks, streaming.repeat, &cfg.machine),
+            Some(&mut log),
+            Duration::from_secs(20),
+            pace,
+        ),
+        Sent::Streamed { text, opts, .. } => send_streamed(
+            &link,
+            (text, opts),
+            (&cfg.machine, cfg.period_ns),
+            &mut log,
+            pace,
+        ),
+    };
     log.finish()
         .map_err(|e| format!("writing commands.log: {e}"))?;
     let interpolator_stopped = matches!(result, Ok((Finish::Fault, _)));
@@ -685,11 +846,7 @@ pub fn run_streaming<S: Service>(
         pid: std::process::id(),
         program: name,
         // Every block sent (all repeats); the blocks of one run when nothing was sent.
-        blocks: if sent > 0 {
-            sent as usize
-        } else {
-            blocks.len()
-        },
+        blocks: if sent > 0 { sent as usize } else { block_count },
         messages,
         notes,
         salvaged,
@@ -698,6 +855,57 @@ pub fn run_streaming<S: Service>(
     };
     write_summary(cfg, &summary)?;
     Ok(summary)
+}
+
+/// Reads and plans the program (checked already) window by window on a thread of its
+/// own, and sends each window's blocks as they come: the planning runs at most a few
+/// windows ahead of the sending, and every window ends where the machine is at rest, so
+/// a plan that falls behind makes the machine wait at a stop, never run short of a
+/// block mid-motion.
+fn send_streamed<S: Service>(
+    link: &Link<S>,
+    (text, opts): (&ProgramText, &program::Options),
+    (machine, period_ns): (&Machine, u64),
+    log: &mut CommandLog,
+    pace: Pace,
+) -> Result<(Finish, u64), shared::ipc::IpcError> {
+    let (tx, rx) = std::sync::mpsc::sync_channel::<(Vec<Block>, usize)>(2);
+    std::thread::scope(|scope| {
+        let planner = scope.spawn(move || {
+            check_streaming(
+                text.as_str(),
+                opts,
+                machine,
+                period_ns,
+                window::Stream {
+                    every: window::BATCH_MOVES,
+                    blocks: &mut |blocks, first| {
+                        // (The sending gone has stopped: the rest is not wanted.)
+                        let _ = tx.send((blocks, first));
+                    },
+                    release: &mut |from, to| text.release(from, to),
+                },
+            )
+        });
+        let blocks = rx.iter().flat_map(|(blocks, first)| {
+            blocks
+                .into_iter()
+                .enumerate()
+                .map(move |(i, b)| b.command((first + i) as u64))
+        });
+        let sent = send(link, blocks, Some(log), Duration::from_secs(20), pace);
+        match planner.join() {
+            // Checked once already: a second reading that is refused is a fault of
+            // ours; the blocks sent before it were good, and the machine stops at the
+            // end of the last (a window ends at rest).
+            Ok(Err(d)) if sent.is_ok() => Err(shared::ipc::IpcError(format!(
+                "the program, checked, was refused when read again to be sent: {}",
+                d.first().map_or(String::new(), |d| d.to_string())
+            ))),
+            Err(_) => Err(shared::ipc::IpcError("the planning thread panicked".into())),
+            _ => sent,
+        }
+    })
 }
 
 /// Writes `interpreter.json`, and the report when the launcher is dead (nobody else will

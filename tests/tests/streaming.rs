@@ -1,0 +1,129 @@
+//! Long programs through the real stack (issue #25): read, planned and sent window by
+//! window, every block sent once and in order, the run's time that of `cnc check
+//! --estimate`, and the processes' memory bounded whatever the program's length.
+
+use std::fmt::Write;
+use std::path::Path;
+use std::process::Command;
+use tests::{cnc_exe, report, temp_dir};
+
+/// A raster of `lines` lines of `G1` (rows of 200 short moves over a wavy Z, a 90°
+/// turn at each row's ends: a window ends at each of them).
+fn raster(lines: usize) -> String {
+    let mut s = String::from("G21 G90 G17\nG0 X0 Y0 Z5\nG1 Z0 F1200\n");
+    for i in 3..lines.saturating_sub(1) {
+        let (row, col) = (i / 200, i % 200);
+        let x = if row % 2 == 0 { col } else { 199 - col } as f64 * 0.5;
+        let y = (row % 400) as f64 * 0.5;
+        let z = -0.5 - 0.25 * (x * 0.1).sin() * (y * 0.07).cos();
+        let _ = writeln!(s, "G1 X{x:.3} Y{y:.3} Z{z:.4}");
+    }
+    s.push_str("M2\n");
+    s
+}
+
+/// `cnc check --estimate --json`'s cycles and `cnc check`'s block count.
+fn checked(prog: &Path) -> (u64, u64) {
+    let out = Command::new(cnc_exe())
+        .args(["check", "--estimate", "--json"])
+        .arg(prog)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let est: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let out = Command::new(cnc_exe())
+        .arg("check")
+        .arg(prog)
+        .output()
+        .unwrap();
+    let text = String::from_utf8_lossy(&out.stdout).to_string();
+    let blocks = text
+        .split(", ")
+        .find_map(|w| w.strip_suffix(" blocks\n").and_then(|n| n.parse().ok()))
+        .unwrap_or_else(|| panic!("no block count in {text:?}"));
+    (est["cycles"].as_u64().unwrap(), blocks)
+}
+
+/// Runs `prog` with the simulated clock; the run directory's report.
+fn run_sim(prog: &Path, dir: &Path) -> serde_json::Value {
+    let out = Command::new(cnc_exe())
+        .args(["run", "--clock", "sim", "--no-report", "--force", "--out"])
+        .arg(dir)
+        .arg(prog)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "the run failed:\n{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    report(dir)
+}
+
+/// The most resident memory (MiB) `report.json` saw `role` use.
+fn max_mib(rep: &serde_json::Value, role: &str) -> f64 {
+    rep["memory"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|m| m["role"] == role)
+        .unwrap_or_else(|| panic!("no memory of {role}: {}", rep["memory"]))["max_kib"]
+        .as_u64()
+        .unwrap() as f64
+        / 1024.0
+}
+
+/// 30 000 lines (150 windows) through the stack: every block sent once, in order, and
+/// logged; the run as long as the estimate, to the cycle.
+#[test]
+fn a_program_of_many_windows_runs_whole_and_in_order() {
+    let dir = temp_dir("stream-30k");
+    let prog = dir.join("raster.ngc");
+    std::fs::write(&prog, raster(30_000)).unwrap();
+    let (cycles, blocks) = checked(&prog);
+    let rep = run_sim(&prog, &dir.join("run"));
+    assert_eq!(rep["outcome"], "done", "{rep}");
+    assert_eq!(
+        rep["cycles"].as_u64(),
+        Some(cycles),
+        "run against --estimate"
+    );
+    assert_eq!(rep["blocks"].as_u64(), Some(blocks), "{rep}");
+    let log = shared::cmdlog::read(&dir.join("run/commands.log")).unwrap();
+    assert_eq!(log.blocks.len() as u64, blocks);
+    for (i, b) in log.blocks.iter().enumerate() {
+        assert_eq!(b.seq, i as u64, "block {i} of the log");
+    }
+    assert_eq!(rep["starvations"].as_u64(), Some(0), "{rep}");
+}
+
+/// A million lines through the stack (about 2.5 minutes here, release build):
+///
+/// ```sh
+/// cargo test --release -p tests --test streaming -- --ignored --nocapture
+/// ```
+///
+/// The interpreter, the interpolator and the servo-sim each stay under 100 MB resident.
+/// (The launcher is not held to it: after the run it folds the traces into the report,
+/// which still reads them whole.)
+#[test]
+#[ignore]
+fn a_million_lines_run_in_bounded_memory() {
+    let dir = temp_dir("stream-1m");
+    let prog = dir.join("raster.ngc");
+    std::fs::write(&prog, raster(1_000_000)).unwrap();
+    let (cycles, blocks) = checked(&prog);
+    let rep = run_sim(&prog, &dir.join("run"));
+    assert_eq!(rep["outcome"], "done", "{rep}");
+    assert_eq!(rep["cycles"].as_u64(), Some(cycles));
+    assert_eq!(rep["blocks"].as_u64(), Some(blocks));
+    for role in ["interpreter", "interpolator", "servo-sim"] {
+        let mib = max_mib(&rep, role);
+        println!("{role}: {mib:.1} MiB at most");
+        assert!(mib < 100.0, "{role} used {mib:.1} MiB");
+    }
+}
