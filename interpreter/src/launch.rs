@@ -753,7 +753,12 @@ impl Stack {
                 f.stopped_cycle
             ));
         }
-        if self.html {
+        if self.html && !report::contour_in_memory(dir) {
+            say_err(&format!(
+                "cnc: report.html not written: the run's command log and traces are more than the page reads ({} MB); report.json has the run's figures\n",
+                report::CONTOUR_MAX_BYTES >> 20
+            ));
+        } else if self.html {
             match crate::html::write(dir, None) {
                 Ok(page) => say(&format!("  report page  {}\n", page.display())),
                 Err(e) => say_err(&format!("cnc: report.html not written: {e}\n")),
@@ -770,11 +775,25 @@ fn toml_of(m: &shared::Machine) -> String {
     )
 }
 
-/// The last cycle number in a CSV trace (its last complete line).
+/// The last cycle number in a CSV trace (its last complete line), read from its end: a
+/// long run's trace is gigabytes.
 fn last_cycle_in(path: &Path) -> Option<u64> {
-    let text = std::fs::read_to_string(path).ok()?;
+    use std::io::{Read, Seek, SeekFrom};
+    let mut f = std::fs::File::open(path).ok()?;
+    let len = f.metadata().ok()?.len();
+    // A row is well under a kilobyte: the last complete one lies in the last few.
+    let from = len.saturating_sub(64 << 10);
+    f.seek(SeekFrom::Start(from)).ok()?;
+    let mut tail = Vec::new();
+    f.read_to_end(&mut tail).ok()?;
+    let text = String::from_utf8_lossy(&tail);
     let complete = &text[..text.rfind('\n')?];
-    complete.lines().last()?.split(',').next()?.parse().ok()
+    let last = complete.lines().last()?;
+    // (A tail that holds only the header, or begins inside a row: that row is cut.)
+    if from > 0 && !complete.contains('\n') {
+        return None;
+    }
+    last.split(',').next()?.parse().ok()
 }
 
 /// The process that was killed by a signal from outside (not by the launcher), if any,
@@ -1022,5 +1041,27 @@ mod tests {
         assert_eq!(super::utc_stamp(0), "19700101T000000Z");
         assert_eq!(super::utc_stamp(1_795_381_520), "20261122T210520Z");
         assert_eq!(super::utc_stamp(951_782_400), "20000229T000000Z");
+    }
+
+    /// The last complete row of a trace, read from its end: past a cut last row, in a
+    /// trace longer than the tail read, and none in one with no rows.
+    #[test]
+    fn the_last_cycle_of_a_trace_is_read_from_its_end() {
+        use std::fmt::Write;
+        let dir = std::env::temp_dir().join(format!("cnc-lastcycle-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let f = dir.join("setpoints.csv");
+        let mut s = String::from("cycle,t_ns,x_mm,y_mm,z_mm,line\n");
+        for c in 0..20_000 {
+            let _ = writeln!(s, "{c},{},1.000000,2.000000,3.000000,7", c * 1000);
+        }
+        std::fs::write(&f, format!("{s}20000,2000")).unwrap();
+        assert!(s.len() > 64 << 10);
+        assert_eq!(super::last_cycle_in(&f), Some(19_999));
+        std::fs::write(&f, "cycle,t_ns,x_mm,y_mm,z_mm,line\n").unwrap();
+        assert_eq!(super::last_cycle_in(&f), None);
+        std::fs::write(&f, "cycle,t_ns,x_mm,y_mm,z_mm,line\n0,0,0,0,0,1\n").unwrap();
+        assert_eq!(super::last_cycle_in(&f), Some(0));
+        std::fs::remove_dir_all(&dir).unwrap();
     }
 }

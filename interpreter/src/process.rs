@@ -9,6 +9,7 @@ use crate::report::InterpreterSummary;
 use crate::window::{self, Planned};
 use iceoryx2::prelude::Service;
 use shared::cmdlog::CommandLog;
+use shared::ipc::IpcError;
 use shared::protocol::{BlockKind, CommandBlock, FLAG_RAPID};
 use shared::Machine;
 use std::path::{Path, PathBuf};
@@ -809,7 +810,7 @@ pub fn run_streaming<S: Service>(
             Duration::from_secs(20),
             pace,
         ),
-        Sent::Streamed { text, opts, .. } => send_streamed(
+        Sent::Streamed { text, opts, .. } => send_streamed::<S>(
             &link,
             (text, opts),
             (&cfg.machine, cfg.period_ns),
@@ -861,21 +862,26 @@ pub fn run_streaming<S: Service>(
 /// own, and sends each window's blocks as they come: the planning runs at most a few
 /// windows ahead of the sending, and every window ends where the machine is at rest, so
 /// a plan that falls behind makes the machine wait at a stop, never run short of a
-/// block mid-motion.
+/// block mid-motion. Should the blocks stop coming before the program's end (a stop
+/// asked for, the launcher or the interpolator gone while a window is planned, or the
+/// second reading refused), a program end follows the last window sent, where the
+/// machine is at rest, and the planning is left to end with the process.
 fn send_streamed<S: Service>(
     link: &Link<S>,
-    (text, opts): (&ProgramText, &program::Options),
+    (text, opts): (&std::sync::Arc<ProgramText>, &program::Options),
     (machine, period_ns): (&Machine, u64),
     log: &mut CommandLog,
     pace: Pace,
-) -> Result<(Finish, u64), shared::ipc::IpcError> {
+) -> Result<(Finish, u64), IpcError> {
     let (tx, rx) = std::sync::mpsc::sync_channel::<(Vec<Block>, usize)>(2);
-    std::thread::scope(|scope| {
-        let planner = scope.spawn(move || {
+    let (text, opts, machine) = (text.clone(), opts.clone(), machine.clone());
+    let planner = std::thread::Builder::new()
+        .name("plan".into())
+        .spawn(move || {
             check_streaming(
                 text.as_str(),
-                opts,
-                machine,
+                &opts,
+                &machine,
                 period_ns,
                 window::Stream {
                     every: window::BATCH_MOVES,
@@ -886,26 +892,64 @@ fn send_streamed<S: Service>(
                     release: &mut |from, to| text.release(from, to),
                 },
             )
-        });
-        let blocks = rx.iter().flat_map(|(blocks, first)| {
+        })
+        .map_err(|e| IpcError(format!("starting the planning thread: {e}")))?;
+    // The next window as it comes; none once a stop is asked for, or the launcher or the
+    // interpolator is gone, while a long window is still being planned.
+    let mut came = false;
+    let windows = std::iter::from_fn(|| loop {
+        match rx.recv_timeout(PLAN_WATCH_EVERY) {
+            Ok(w) => return Some(w),
+            Err(std::sync::mpsc::RecvTimeoutError::Disconnected) => return None,
+            Err(std::sync::mpsc::RecvTimeoutError::Timeout) => {
+                let there = link.interpolator_there();
+                if shared::stop::requested() || shared::stop::launcher_gone() || (came && !there) {
+                    return None;
+                }
+                came |= there;
+            }
+        }
+    });
+    // The last block sent: its number, its line, and whether it ends the program.
+    let last: std::cell::Cell<Option<(u64, u32, bool)>> = std::cell::Cell::new(None);
+    let blocks = windows
+        .flat_map(|(blocks, first)| {
             blocks
                 .into_iter()
                 .enumerate()
                 .map(move |(i, b)| b.command((first + i) as u64))
+        })
+        .inspect(|b| {
+            let end = b.kind() == Some(BlockKind::ProgramEnd);
+            last.set(Some((b.seq, b.source_line, end)));
         });
-        let sent = send(link, blocks, Some(log), Duration::from_secs(20), pace);
+    let cut_short = std::iter::from_fn(|| match last.take() {
+        Some((seq, line, false)) => Some(CommandBlock::empty(BlockKind::ProgramEnd, seq + 1, line)),
+        _ => None,
+    });
+    let sent = send(
+        link,
+        blocks.chain(cut_short),
+        Some(log),
+        Duration::from_secs(20),
+        pace,
+    );
+    let ended = matches!(sent, Ok((Finish::Done, _)));
+    // Finished, the planning has handed its last window on: its answer is at hand.
+    if ended || planner.is_finished() {
         match planner.join() {
-            // Checked once already: a second reading that is refused is a fault of
-            // ours; the blocks sent before it were good, and the machine stops at the
-            // end of the last (a window ends at rest).
-            Ok(Err(d)) if sent.is_ok() => Err(shared::ipc::IpcError(format!(
-                "the program, checked, was refused when read again to be sent: {}",
-                d.first().map_or(String::new(), |d| d.to_string())
-            ))),
-            Err(_) => Err(shared::ipc::IpcError("the planning thread panicked".into())),
-            _ => sent,
+            // Checked once already: a second reading that is refused is a fault of ours.
+            Ok(Err(d)) => {
+                return Err(IpcError(format!(
+                    "the program, checked, was refused when read again to be sent (the machine stopped at the end of the last good stretch): {}",
+                    d.first().map_or(String::new(), |d| d.to_string())
+                )))
+            }
+            Err(_) => return Err(IpcError("the planning thread panicked".into())),
+            Ok(Ok(_)) => {}
         }
-    })
+    }
+    sent
 }
 
 /// Writes `interpreter.json`, and the report when the launcher is dead (nobody else will

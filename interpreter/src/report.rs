@@ -266,6 +266,31 @@ impl TraceFigures {
     }
 }
 
+/// The most bytes of command log and traces the contour and chord analysis reads: it
+/// holds them whole, at about 1.25 times their size (a run of 100 000 lines of `G1`,
+/// 583 MB of files, took the launcher to 720 MB; a million lines would be 7 GB, ten
+/// million would not fit). A longer run's report leaves those figures out ("contour
+/// error not computed") rather than fail at its end; its traces are all on disk.
+pub const CONTOUR_MAX_BYTES: u64 = 2 << 30;
+
+/// Whether the run in `dir` is short enough for the contour analysis
+/// ([`CONTOUR_MAX_BYTES`]).
+pub(crate) fn contour_in_memory(dir: &Path) -> bool {
+    let bytes: u64 = ["commands.log", "setpoints.csv", "feedback.csv"]
+        .iter()
+        .map(|f| std::fs::metadata(dir.join(f)).map_or(0, |m| m.len()))
+        .sum();
+    if bytes > CONTOUR_MAX_BYTES {
+        tracing::warn!(
+            "the run's command log and traces are {} MB, more than the contour analysis holds ({} MB): the report leaves out the contour and chord errors",
+            bytes >> 20,
+            CONTOUR_MAX_BYTES >> 20
+        );
+        return false;
+    }
+    true
+}
+
 /// Folds the per-process summaries of `dir` into a report. Missing parts (a process that
 /// died before writing its summary) are taken from the traces where they can be (the
 /// cycles, path and peak feed from `setpoints.csv`, the following error from
@@ -344,7 +369,9 @@ pub fn assemble(
     let traced = (ipol.is_none() || servo.is_none()).then(|| TraceFigures::read(dir, period_ns));
     let i = ipol.as_ref();
     // After every process has ended: the traces are complete and nothing runs in real time.
-    let traces = crate::contour::read_dir(dir).ok();
+    let traces = contour_in_memory(dir)
+        .then(|| crate::contour::read_dir(dir).ok())
+        .flatten();
     let contour = traces
         .as_ref()
         .map(|(blocks, t)| crate::contour::analyse(blocks, &t.traces()));
@@ -604,13 +631,34 @@ pub fn write_orphan_report(dir: &Path, program: &str, period_ns: u64) -> Result<
     rep.outcome = "fault".into();
     rep.write(&dir.join("report.json"))
         .map_err(|e| format!("writing report.json: {e}"))?;
-    crate::html::write(dir, None).map_err(|e| format!("writing report.html: {e}"))?;
+    if contour_in_memory(dir) {
+        crate::html::write(dir, None).map_err(|e| format!("writing report.html: {e}"))?;
+    }
     Ok(())
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A run whose log and traces are more than the analysis holds is not read (a
+    /// million lines of `G1` took the launcher to 7.2 GB at the end of the run).
+    #[test]
+    fn a_run_too_long_to_hold_leaves_the_contour_out() {
+        let dir = std::env::temp_dir().join(format!("cnc-contour-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        std::fs::write(
+            dir.join("setpoints.csv"),
+            "cycle,t_ns,x_mm,y_mm,z_mm,line\n",
+        )
+        .unwrap();
+        assert!(contour_in_memory(&dir));
+        // (Sparse: nothing is written.)
+        let log = std::fs::File::create(dir.join("commands.log")).unwrap();
+        log.set_len(CONTOUR_MAX_BYTES + 1).unwrap();
+        assert!(!contour_in_memory(&dir));
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
 
     /// A p99 of 278.6 µs reads 279 µs in the timing line, as in the deadline line (it
     /// read 278 there: cut, not rounded).
