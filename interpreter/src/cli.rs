@@ -452,18 +452,8 @@ pub fn main() -> ExitCode {
             let checked = if estimate {
                 process::check_estimated(text, &opts, &machine, period_ns, json, &mut read)
             } else {
-                process::check_streaming(
-                    text,
-                    &opts,
-                    &machine,
-                    period_ns,
-                    crate::window::Stream {
-                        every: crate::window::BATCH_MOVES,
-                        blocks: &mut |_, _| {},
-                        release: &mut read,
-                    },
-                )
-                .map(|p| (p, None))
+                process::check_windows(text, &opts, &machine, period_ns, &mut |_, _| {}, &mut read)
+                    .map(|p| (p, None))
             };
             if let Ok((planned, _)) = &checked {
                 eprint!("{}", process::format_notes(&src.name, &planned.notes));

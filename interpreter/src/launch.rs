@@ -417,16 +417,13 @@ fn run_inner(args: &RunArgs) -> Result<bool, String> {
                 // (The return moves between repeats left out of the bar's length.)
                 .map(|(p, e)| (p, e.and_then(|e| e.ok()).map(|e| e.cycles * repeat)))
         } else {
-            process::check_streaming(
+            process::check_windows(
                 text,
                 &opts,
                 &machine,
                 period_ns,
-                crate::window::Stream {
-                    every: crate::window::BATCH_MOVES,
-                    blocks: &mut |_, _| {},
-                    release: &mut release,
-                },
+                &mut |_, _| {},
+                &mut release,
             )
             .map(|p| (p, None))
         };

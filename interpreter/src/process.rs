@@ -158,24 +158,33 @@ pub fn check_with(
     period_ns: u64,
 ) -> Result<(Planned, Vec<Block>), Vec<Diagnostic>> {
     let mut all = Vec::new();
-    let planned = check_streaming(
-        text,
-        opts,
-        machine,
-        period_ns,
-        window::Stream {
-            every: window::BATCH_MOVES,
-            blocks: &mut |mut b, first| {
-                // (From block 0 again: the program is read again, see `window::plan`.)
-                if first == 0 {
-                    all.clear();
-                }
-                all.append(&mut b)
-            },
-            release: &mut |_, _| {},
-        },
-    )?;
+    let mut gather = |mut b: Vec<Block>, first: usize| {
+        // (From block 0 again: the program is read again, see `window::plan`.)
+        if first == 0 {
+            all.clear();
+        }
+        all.append(&mut b)
+    };
+    let planned = check_windows(text, opts, machine, period_ns, &mut gather, &mut |_, _| {})?;
     Ok((planned, all))
+}
+
+/// [`check_streaming`] a window of [`window::BATCH_MOVES`] at a time: each window's blocks
+/// handed to `blocks` (see [`window::Stream`]), `release` told of the text read.
+pub fn check_windows(
+    text: &str,
+    opts: &program::Options,
+    machine: &Machine,
+    period_ns: u64,
+    blocks: &mut dyn FnMut(Vec<Block>, usize),
+    release: &mut dyn FnMut(usize, usize),
+) -> Result<Planned, Vec<Diagnostic>> {
+    let stream = window::Stream {
+        every: window::BATCH_MOVES,
+        blocks,
+        release,
+    };
+    check_streaming(text, opts, machine, period_ns, stream)
 }
 
 /// [`check_with`], the blocks handed on window by window as [`window::Stream`] says
@@ -222,20 +231,9 @@ pub fn check_estimated(
         // not wanted then.
         let stepping = scope
             .spawn(move || crate::estimate::estimate_windows(&rx, machine, period_ns, per_line));
-        let planned = check_streaming(
-            text,
-            opts,
-            machine,
-            period_ns,
-            window::Stream {
-                every: window::BATCH_MOVES,
-                blocks: &mut |blocks, first| {
-                    // (The engine gone means it failed: its error is what is reported.)
-                    let _ = tx.send((blocks, first));
-                },
-                release,
-            },
-        );
+        // (The engine gone means it failed: its error is what is reported.)
+        let mut hand = |blocks, first| drop(tx.send((blocks, first)));
+        let planned = check_windows(text, opts, machine, period_ns, &mut hand, release);
         drop(tx);
         let est = stepping
             .join()
@@ -745,16 +743,14 @@ pub fn run_streaming<S: Service>(
                 // program is known good), then read and planned again as it is sent.
                 let (t, n, o) = (text.clone(), name.clone(), opts.clone());
                 let planned = watched(&link, hold, move || {
-                    check_streaming(
+                    let mut release = |from, to| t.release(from, to);
+                    check_windows(
                         t.as_str(),
                         &o,
                         &machine,
                         period_ns,
-                        window::Stream {
-                            every: window::BATCH_MOVES,
-                            blocks: &mut |_, _| {},
-                            release: &mut |from, to| t.release(from, to),
-                        },
+                        &mut |_, _| {},
+                        &mut release,
                     )
                     .map_err(|d| format_diagnostics(&n, &d))
                 })

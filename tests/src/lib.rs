@@ -230,3 +230,18 @@ pub fn assert_decelerated_on_the_diagonal(sp: &[Vec<f64>], info: &serde_json::Va
     // The jerk-limited stop ends inside a cycle: the last step is what is left of it.
     assert!(*d.last().unwrap() < 1e-3, "ends standing still: {d:?}");
 }
+
+/// `cnc check --estimate --json PROGRAM`'s answer, the command having succeeded.
+pub fn estimate_json(program: &Path) -> serde_json::Value {
+    let out = Command::new(cnc_exe())
+        .args(["check", "--estimate", "--json"])
+        .arg(program)
+        .output()
+        .expect("running cnc check");
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    serde_json::from_slice(&out.stdout).expect("the estimate as JSON")
+}

@@ -5,7 +5,7 @@
 use std::fmt::Write;
 use std::path::Path;
 use std::process::Command;
-use tests::{cnc_exe, report, temp_dir};
+use tests::{cnc_exe, estimate_json, report, temp_dir};
 
 /// A raster of `lines` lines of `G1` (rows of 200 short moves over a wavy Z, a 90°
 /// turn at each row's ends: a window ends at each of them).
@@ -24,17 +24,7 @@ fn raster(lines: usize) -> String {
 
 /// `cnc check --estimate --json`'s cycles and `cnc check`'s block count.
 fn checked(prog: &Path) -> (u64, u64) {
-    let out = Command::new(cnc_exe())
-        .args(["check", "--estimate", "--json"])
-        .arg(prog)
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    let est: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let est = estimate_json(prog);
     let out = Command::new(cnc_exe())
         .arg("check")
         .arg(prog)
@@ -64,6 +54,17 @@ fn run_sim(prog: &Path, dir: &Path) -> serde_json::Value {
     report(dir)
 }
 
+/// The run ended well, as long as `--estimate` said (`cycles`), every block sent.
+fn ran_as_checked(rep: &serde_json::Value, cycles: u64, blocks: u64) {
+    assert_eq!(rep["outcome"], "done", "{rep}");
+    assert_eq!(
+        rep["cycles"].as_u64(),
+        Some(cycles),
+        "run against --estimate"
+    );
+    assert_eq!(rep["blocks"].as_u64(), Some(blocks), "{rep}");
+}
+
 /// The most resident memory (MiB) `report.json` saw `role` use.
 fn max_mib(rep: &serde_json::Value, role: &str) -> f64 {
     rep["memory"]
@@ -86,13 +87,7 @@ fn a_program_of_many_windows_runs_whole_and_in_order() {
     std::fs::write(&prog, raster(30_000)).unwrap();
     let (cycles, blocks) = checked(&prog);
     let rep = run_sim(&prog, &dir.join("run"));
-    assert_eq!(rep["outcome"], "done", "{rep}");
-    assert_eq!(
-        rep["cycles"].as_u64(),
-        Some(cycles),
-        "run against --estimate"
-    );
-    assert_eq!(rep["blocks"].as_u64(), Some(blocks), "{rep}");
+    ran_as_checked(&rep, cycles, blocks);
     let log = shared::cmdlog::read(&dir.join("run/commands.log")).unwrap();
     assert_eq!(log.blocks.len() as u64, blocks);
     for (i, b) in log.blocks.iter().enumerate() {
@@ -118,9 +113,7 @@ fn a_million_lines_run_in_bounded_memory() {
     std::fs::write(&prog, raster(1_000_000)).unwrap();
     let (cycles, blocks) = checked(&prog);
     let rep = run_sim(&prog, &dir.join("run"));
-    assert_eq!(rep["outcome"], "done", "{rep}");
-    assert_eq!(rep["cycles"].as_u64(), Some(cycles));
-    assert_eq!(rep["blocks"].as_u64(), Some(blocks));
+    ran_as_checked(&rep, cycles, blocks);
     for role in ["interpreter", "interpolator", "servo-sim"] {
         let mib = max_mib(&rep, role);
         println!("{role}: {mib:.1} MiB at most");
