@@ -3,16 +3,20 @@
 //! function `cnc check` calls), and read and checked only ([`program::interpret`]), in
 //! lines per second.
 //!
-//! Three programs: plain `G1` lines, as CAM output for a 3-D surface is, a mix of
+//! Five programs: plain `G1` lines, as CAM output for a 3-D surface is, a mix of
 //! `G1`, `G2`, `G5.2 … G5.3` and `G6.2` blocks, and 50 000 lines of `G1`, `G2`, `G3`
-//! and `G5.2` that LinuxCNC's `rs274` reads too. `CHECK_BENCH_WRITE=DIR` also writes them
+//! and `G5.2` that LinuxCNC's `rs274` reads too, and one smooth spiral of short `G1`
+//! lines with no rest in it (under `G64`, and a fifth as long under `G64 P0.01`).
+//! `CHECK_BENCH_WRITE=DIR` also writes them
 //! to DIR (for timing LinuxCNC's `rs274` on the same text; see BENCHMARKS.md).
 //!
 //! `CHECK_BENCH_PLAIN_LINES=N` makes `plain_g1` N lines long instead of 100 000 (`mixed`
 //! walks off the longest travel beyond 136 000): `CHECK_BENCH_PLAIN_LINES=200000
 //! CHECK_BENCH_WRITE=DIR cargo bench -p interpreter --bench check -- none` writes the
 //! 200 000-line `plain_g1` that BENCHMARKS.md times against `rs274`, and benchmarks
-//! nothing.
+//! nothing. `spiral` (100 000 lines) and `spiral_blended` (a fifth of it under `G64
+//! P0.01`) are one smooth spiral with no rest, planned in windows cut at speed;
+//! `CHECK_BENCH_SPIRAL_LINES=N` makes `spiral` N lines long (and the other N / 5).
 //!
 //! Run: `cargo bench -p interpreter --bench check`.
 
@@ -34,8 +38,20 @@ fn bench(c: &mut Criterion) {
                 .unwrap_or_else(|e| panic!("CHECK_BENCH_PLAIN_LINES={n}: {e}"))
         })
         .unwrap_or(LINES);
+    let spiral_lines = std::env::var("CHECK_BENCH_SPIRAL_LINES")
+        .map(|n| {
+            n.parse()
+                .unwrap_or_else(|e| panic!("CHECK_BENCH_SPIRAL_LINES={n}: {e}"))
+        })
+        .unwrap_or(LINES);
     let mut programs = vec![
         ("plain_g1".to_string(), programs::plain_g1(plain_lines)),
+        // No rest from end to end: planned in windows cut at speed.
+        ("spiral".to_string(), programs::spiral(spiral_lines, None)),
+        (
+            "spiral_blended".to_string(),
+            programs::spiral(spiral_lines / 5, Some(0.01)),
+        ),
         ("mixed".to_string(), programs::mixed(LINES)),
         // What `rs274` reads too (issue #23's planning throughput), half as long: its
         // curves are planned block by block, a few seconds of it.

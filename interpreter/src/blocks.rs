@@ -1,9 +1,10 @@
 //! From moves to command blocks: lines and arcs as exact NURBS (degree 1 and rational
 //! quadratic), NURBS split exactly to block capacity, and the feed plan.
 //!
-//! The plan is a look-ahead over the blocks it is given: a whole window of the program,
-//! from one rest to another ([`crate::window`]), which the interpreter plans before any of
-//! it moves. Each motion block gets a speed cap (programmed feed, reduced where its
+//! The plan is a look-ahead over the blocks it is given: a window of the program, from
+//! one rest to another or as long as the machine's `plan_window_moves` and handed on up
+//! to a seam at speed ([`crate::window`]), which the interpreter plans before any of it
+//! moves. Each motion block gets a speed cap (programmed feed, reduced where its
 //! curvature demands it by the chord tolerance and the path's and axes' acceleration and
 //! jerk) and the tangential acceleration and jerk its S-curve may use; each junction a
 //! speed (exact stop at corners sharper than the machine's corner angle, limited at kinks
@@ -34,6 +35,7 @@ use crate::program::{Move, PathControl, Plane};
 use cache::PlanCache;
 use shared::nurbs::{self, SplitCurve, MAX_CTRL};
 use shared::path;
+use shared::path::sub;
 use shared::profile::Limits as Jerk;
 use shared::protocol::{BlockKind, CommandBlock, Helix, FLAG_RAPID, FLAG_STOP_AT_END};
 use shared::Machine;
@@ -341,10 +343,6 @@ pub fn build(moves: &[Move], machine: &Machine) -> Vec<Block> {
         }
     }
     out
-}
-
-fn sub(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
-    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
 }
 
 fn dot(a: [f64; 3], b: [f64; 3]) -> f64 {
@@ -2005,7 +2003,7 @@ pub fn plan_alone(b: &mut CommandBlock, machine: &Machine, feed: f64) {
 }
 
 /// Fills in lengths, feed caps, profile limits and start/end speeds of every motion
-/// block: a look-ahead over all of `blocks` (a window of the program from rest to rest,
+/// block: a look-ahead over all of `blocks` (a window of the program, ending at rest,
 /// see [`crate::window`]). Junction speeds (lowered where kinks are closer than two steps, see
 /// [`CloseKinks`]), then a backward pass with the jerk-limited distances of
 /// [`shared::profile`], make every block able to slow to its end speed; the

@@ -6,7 +6,8 @@
 //! * [`blocks`] turns moves into command blocks (everything as exact NURBS, split to block
 //!   capacity) and plans their feeds with look-ahead; [`window`] reads, builds, plans and
 //!   checks a program window by window, each window ending where the machine is at rest
-//!   whatever the plan, so that a long program is never held whole;
+//!   whatever the plan, or at speed in a long stretch with no rest, so that a long
+//!   program is never held whole;
 //! * [`publish`] streams the blocks to the interpolator with back-pressure and records
 //!   each one as sent in the command log ([`shared::cmdlog`]);
 //! * [`estimate`] steps the planned blocks through the interpolator's engine in-process

@@ -73,6 +73,8 @@ impl MappedText {
         // back behind: a long file is never resident whole.
         let bytes = mapped.bytes();
         let mut at = 0;
+        // Given back up to here (in 64 KiB, whole pages of every page size in use).
+        let mut released = 0;
         while at < len {
             let end = (at + VALIDATE_STRETCH).min(len);
             match std::str::from_utf8(&bytes[at..end]) {
@@ -82,7 +84,8 @@ impl MappedText {
                 Err(_) => return None,
             }
             if len > POPULATE_MAX_BYTES {
-                mapped.release(0, at);
+                mapped.release(released, at);
+                released = at & !0xffff;
             }
         }
         Some(mapped)

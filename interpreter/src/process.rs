@@ -691,6 +691,7 @@ pub fn run_streaming<S: Service>(
     let mut dialect = None;
     let mut max_scallop_mm = None;
     let mut notes = Vec::new();
+    let mut windows = (None, None);
     let (name, sent_blocks, messages) = match &cfg.replay {
         Some(log) => {
             let r = load_replay(log, cfg.salvage)?;
@@ -757,6 +758,7 @@ pub fn run_streaming<S: Service>(
                 .map_err(|e| nothing_sent(cfg, &name, e))?;
                 dialect = Some(planned.dialect.name().to_string());
                 notes = planned.notes.clone();
+                windows = (Some(planned.windows), Some(planned.at_speed));
                 let messages = planned.messages.clone();
                 let opts = program::Options {
                     dialect: Some(planned.dialect),
@@ -808,7 +810,7 @@ pub fn run_streaming<S: Service>(
         ),
         Sent::Streamed { text, opts, .. } => send_streamed::<S>(
             &link,
-            (text, opts),
+            (&name, text, opts),
             (&cfg.machine, cfg.period_ns),
             &mut log,
             pace,
@@ -849,6 +851,8 @@ pub fn run_streaming<S: Service>(
         salvaged,
         dialect,
         max_scallop_mm,
+        windows: windows.0,
+        windows_at_speed: windows.1,
     };
     write_summary(cfg, &summary)?;
     Ok(summary)
@@ -856,15 +860,17 @@ pub fn run_streaming<S: Service>(
 
 /// Reads and plans the program (checked already) window by window on a thread of its
 /// own, and sends each window's blocks as they come: the planning runs at most a few
-/// windows ahead of the sending, and every window ends where the machine is at rest, so
-/// a plan that falls behind makes the machine wait at a stop, never run short of a
-/// block mid-motion. Should the blocks stop coming before the program's end (a stop
-/// asked for, the launcher or the interpolator gone while a window is planned, or the
-/// second reading refused), a program end follows the last window sent, where the
-/// machine is at rest, and the planning is left to end with the process.
+/// windows ahead of the sending. A window ends where the machine is at rest, or at
+/// speed within a long stretch with no rest ([`crate::window`]); a plan that falls
+/// behind there makes the interpolator stop on the path by the end of the last block
+/// it holds (a starvation, counted), never run off it. Should the blocks stop coming
+/// before the program's end (a stop asked for, the launcher or the interpolator gone
+/// while a window is planned, or the second reading refused), a program end follows
+/// the last window sent, which the machine stops by, and the planning is left to end
+/// with the process.
 fn send_streamed<S: Service>(
     link: &Link<S>,
-    (text, opts): (&std::sync::Arc<ProgramText>, &program::Options),
+    (name, text, opts): (&str, &std::sync::Arc<ProgramText>, &program::Options),
     (machine, period_ns): (&Machine, u64),
     log: &mut CommandLog,
     pace: Pace,
@@ -938,7 +944,7 @@ fn send_streamed<S: Service>(
             Ok(Err(d)) => {
                 return Err(IpcError(format!(
                     "the program, checked, was refused when read again to be sent (the machine stopped at the end of the last good stretch): {}",
-                    d.first().map_or(String::new(), |d| d.to_string())
+                    format_diagnostics(name, &d[..d.len().min(1)]).trim_end()
                 )))
             }
             Err(_) => return Err(IpcError("the planning thread panicked".into())),
@@ -975,6 +981,8 @@ fn nothing_sent(cfg: &Config, program: &str, why: String) -> String {
             salvaged: None,
             dialect: None,
             max_scallop_mm: None,
+            windows: None,
+            windows_at_speed: None,
         };
         if let Err(e) = write_summary(cfg, &summary) {
             tracing::error!("{e}");

@@ -30,6 +30,13 @@ pub struct InterpreterSummary {
     /// A STEP-NC part's largest scallop height between passes (mm), as planned.
     #[serde(default)]
     pub max_scallop_mm: Option<f64>,
+    /// A program sent as it is planned: the windows it was planned in, and how many of
+    /// them were cut at speed (a stretch with no rest longer than the machine's
+    /// `plan_window_moves`); none when it was held whole.
+    #[serde(default)]
+    pub windows: Option<usize>,
+    #[serde(default)]
+    pub windows_at_speed: Option<usize>,
 }
 
 #[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]

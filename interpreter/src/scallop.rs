@@ -21,6 +21,7 @@
 
 use shared::nurbs::reference::piegl_tiller_surface;
 use shared::path;
+use shared::path::sub;
 use shared::protocol::CommandBlock;
 use std::collections::HashMap;
 
@@ -76,10 +77,6 @@ impl Centres {
 
 fn cell(p: [f64; 3]) -> [i64; 3] {
     p.map(|x| (x / REACH_MM).floor() as i64)
-}
-
-fn sub(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
-    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
 }
 
 fn dot(a: [f64; 3], b: [f64; 3]) -> f64 {

@@ -25,17 +25,47 @@
 //! The path mode in force where a window starts is put before its moves (a path-mode
 //! change makes no block), so that it blends and stops as the whole program would.
 //!
-//! A program with no such place for a long stretch (a smooth spiral of short lines, a
-//! long curve) is held as one window over that stretch: bounded memory there needs a
-//! window cut at speed, which this does not do yet.
-//!
 //! Windowed, the blocks are those of the whole program planned at once, bit for bit
 //! (`tests::windows_plan_as_the_whole_program`, every program of the repository on both
 //! machines, cut at every place it may be).
+//!
+//! # Windows cut at speed
+//!
+//! A stretch with no rest longer than the machine's look-ahead, `plan_window_moves`
+//! (4096 moves built in: a smooth spiral of short lines, CAM output under `G64`), is
+//! planned a window of that many moves at a time ([`Windows::plan_at_speed`]). Each
+//! window is planned as if the machine stopped at its end, and handed on only up to a
+//! seam the last quarter of the window or more before that end: a junction of two
+//! straight feed blocks where the plan holds the speed the junction allows (its second
+//! block starts below what braking within it allows). The backward pass there starts
+//! from that junction speed whatever comes after, so the blocks before it are the
+//! whole program's, bit for bit. The next window plans again from [`SEAM_CONTEXT`]
+//! moves before the seam (so that the seam's blocks have the same neighbours: a blend's
+//! chain, a run of close kinks), finds the seam's two blocks, and continues from them,
+//! its first block's start held to the speed handed on.
+//!
+//! * Where no junction in the window's middle holds its speed (a window shorter than
+//!   the plan's braking from the feed), a seam halfway is taken, handed on at the speed
+//!   planned there: lower than the whole program's plan, never higher. Such seams are
+//!   counted ([`Planned::rough_seams`]).
+//! * Where the window has no two straight blocks meeting (a long curve, every corner
+//!   blended), it is planned again once it is twice as long.
+//! * Safety does not hang on the seam: the interpolator can always stop by the end of
+//!   the last block it holds, so blocks that stop coming mid-motion make it stop on the
+//!   path (a starvation, counted), and a lower speed ahead is braked for as any limit.
+//!
+//! Measured: every program of the repository fits a window (they are planned whole, as
+//! before). A spiral of a million lines of `G1` (`cnc check --estimate`) is planned in
+//! 26 MB instead of 211 MB, with the same `--estimate --json` byte for byte, as are
+//! 200 000 lines of it under `G64 P0.01` and the 100 000-line `mixed` bench program
+//! (BENCHMARKS.md). `tests::a_stretch_with_no_rest_is_cut_at_speed` holds the bit-for-bit
+//! identity with a window of 1000 moves and the path's joins with one of 64.
 
-use crate::blocks::{self, check::Checker, Block};
+use crate::blocks::{self, check::Checker, Block, Plannable};
 use crate::parse::Diagnostic;
 use crate::program::{self, Move, PathControl};
+use shared::path::sub;
+use shared::protocol::{FLAG_RAPID, FLAG_STOP_AT_END};
 use shared::Machine;
 
 /// Moves read before the reader hands them over, and about the fewest a window holds
@@ -57,6 +87,13 @@ pub struct Planned {
     pub notes: Vec<(u32, String)>,
     /// How many windows it was planned in.
     pub windows: usize,
+    /// How many of them ended at speed (a stretch with no rest longer than the
+    /// machine's `plan_window_moves`).
+    pub at_speed: usize,
+    /// Of those, the ones where the next window's plan did not continue the plan handed
+    /// on exactly (it was held to the speed handed on, or planned the seam's two blocks
+    /// otherwise): the blocks there are not bit for bit those of the whole program.
+    pub rough_seams: usize,
 }
 
 /// How [`plan`] reads and where it hands the blocks.
@@ -124,6 +161,10 @@ fn plan_once(
         feeds: crate::process::FeedNotes::new(machine),
         hand,
         clean: true,
+        seam: None,
+        at_speed_from: machine.plan_window_moves as usize,
+        at_speed: 0,
+        rough_seams: 0,
     };
     let mut in_doubt = false;
     let read = {
@@ -157,6 +198,8 @@ fn plan_once(
         blocks: w.seq,
         notes: w.feeds.finish("move"),
         windows: w.windows,
+        at_speed: w.at_speed,
+        rough_seams: w.rough_seams,
     };
     Ok((planned, in_doubt))
 }
@@ -177,6 +220,20 @@ struct Windows<'a, 'h> {
     hand: &'h mut dyn FnMut(Vec<Block>, usize),
     /// Nothing wrong found so far (by the reader or the checks).
     clean: bool,
+    /// Where the last window handed on ended at speed: the next plan continues from it.
+    seam: Option<Seam>,
+    /// Moves `pending` holds, with no rest among them, before a window is cut at speed
+    /// (the machine's `plan_window_moves`, more while no seam is found).
+    at_speed_from: usize,
+    at_speed: usize,
+    rough_seams: usize,
+}
+
+/// The junction between two straight feed blocks where a window handed on ended at
+/// speed: the last block handed on, and the first of those planned again.
+struct Seam {
+    before: blocks::Straight,
+    after: blocks::Straight,
 }
 
 /// What the look for a window's end knows of the moves looked at so far.
@@ -223,6 +280,7 @@ impl Windows<'_, '_> {
         self.look();
         let cuts = std::mem::take(&mut self.scan.cuts);
         let Some(&(last, _)) = cuts.last() else {
+            self.plan_at_speed_while_long();
             return;
         };
         // Each window to its cut; what follows the last stays, the mode in force put
@@ -255,6 +313,15 @@ impl Windows<'_, '_> {
                 window.insert(0, m);
             }
             self.plan(window);
+        }
+        self.plan_at_speed_while_long();
+    }
+
+    /// [`Windows::plan_at_speed`] for as long as the moves held (with no rest among
+    /// them) are a window or more.
+    fn plan_at_speed_while_long(&mut self) {
+        while self.pending.len() >= self.at_speed_from {
+            self.plan_at_speed();
         }
     }
 
@@ -304,7 +371,8 @@ impl Windows<'_, '_> {
         s.upto = self.pending.len();
     }
 
-    /// Builds, plans and checks one window of moves, and hands its blocks on.
+    /// Builds, plans and checks one window of moves, ending at rest, and hands its
+    /// blocks on.
     fn plan(&mut self, window: Vec<Move>) {
         if window.is_empty() {
             return;
@@ -315,6 +383,209 @@ impl Windows<'_, '_> {
             return;
         }
         blocks::plan_and(&mut blocks, self.machine, self.period_ns, |_, _| {});
+        let Some(from) = self.continued(&mut blocks) else {
+            return;
+        };
+        self.at_speed_from = self.machine.plan_window_moves as usize;
+        blocks.drain(..from);
+        self.hand_on(blocks);
+    }
+
+    /// Plans the moves held, a stretch with no rest in it as long as the machine's
+    /// look-ahead, and hands on its blocks up to a seam between two straight feed
+    /// blocks, the last quarter of the window or more before its end, where the plan
+    /// holds the speed the junction allows (so that what follows the seam does not
+    /// bear on it): the plan of the window's end, a stop, reaches no further back.
+    /// Where none holds its junction's speed, a seam halfway is taken, handed on at
+    /// the speed planned there (lower than the whole program's plan). The moves from
+    /// [`SEAM_CONTEXT`] before the seam on are held for the next window, which plans
+    /// them again and continues from the seam ([`Windows::continued`]).
+    ///
+    /// Where the window has no such seam (a long curve, or every corner blended), it
+    /// is planned again once it is twice as long.
+    fn plan_at_speed(&mut self) {
+        // (A batch read may hold more than a window.)
+        let n = self.pending.len().min(self.at_speed_from);
+        let mut blocks = blocks::build(&self.pending[..n], self.machine);
+        blocks::plan_and(&mut blocks, self.machine, self.period_ns, |_, _| {});
+        let from = match self.seam {
+            Some(_) => match self.seam_in(&blocks) {
+                Ok(j) => j,
+                Err(()) => {
+                    self.lost_seam(&blocks);
+                    return;
+                }
+            },
+            None => 0,
+        };
+        let Some((k, s)) = self.seam_after(&blocks, from, n) else {
+            self.at_speed_from = n * 2;
+            return;
+        };
+        let (&Block::Straight(before), &Block::Straight(after)) = (&blocks[k - 1], &blocks[k])
+        else {
+            unreachable!("a seam is between two straight blocks")
+        };
+        if from > 0 {
+            self.continue_at(&mut blocks, from);
+        }
+        blocks.truncate(k);
+        blocks.drain(..from);
+        self.hand_on(blocks);
+        self.seam = Some(Seam { before, after });
+        self.at_speed += 1;
+        // The moves from the context's start on stay, the mode in force there first.
+        let c = s - SEAM_CONTEXT.min(s - 1);
+        let mode = self.pending[..c]
+            .iter()
+            .rev()
+            .find(|m| matches!(m, Move::PathMode { .. }))
+            .cloned();
+        let mut rest = self.pending.split_off(c);
+        let off = usize::from(mode.is_some());
+        if let Some(m) = mode {
+            rest.insert(0, m);
+        }
+        let shift = |i: usize| i - c + off;
+        self.scan.upto = shift(self.scan.upto);
+        self.scan.last = self.scan.last.map(|(i, m)| (shift(i), m));
+        self.pending = rest;
+        // The next window holds half a window's moves beyond what this one planned.
+        let window = self.machine.plan_window_moves as usize;
+        self.at_speed_from = window.max(n - c + off + window / 2);
+    }
+
+    /// The first block of `blocks` (a window planned from the moves held, the seam's
+    /// context first) the next handed on, where there is a seam: the one after it,
+    /// continued from it ([`Windows::continue_at`]). `None` when the seam is not found
+    /// (a fault of ours: reported, and nothing more handed on).
+    fn continued(&mut self, blocks: &mut [Block]) -> Option<usize> {
+        if self.seam.is_none() {
+            return Some(0);
+        }
+        match self.seam_in(blocks) {
+            Ok(j) => {
+                self.continue_at(blocks, j);
+                Some(j)
+            }
+            Err(()) => {
+                self.lost_seam(blocks);
+                None
+            }
+        }
+    }
+
+    /// Where the seam is in `blocks`: the index of its second block.
+    fn seam_in(&self, blocks: &[Block]) -> Result<usize, ()> {
+        let Some(seam) = &self.seam else {
+            return Ok(0);
+        };
+        (1..blocks.len())
+            .find(|&j| match (&blocks[j - 1], &blocks[j]) {
+                (Block::Straight(a), Block::Straight(b)) => {
+                    a.from == seam.before.from
+                        && a.to == seam.before.to
+                        && b.from == seam.after.from
+                        && b.to == seam.after.to
+                        && a.source_line == seam.before.source_line
+                        && b.source_line == seam.after.source_line
+                }
+                _ => false,
+            })
+            .ok_or(())
+    }
+
+    /// Block `j` of `blocks`, the seam's second, continued from the block handed on
+    /// before it: its start held to the speed that one ends at. Counted rough where the
+    /// two blocks are planned otherwise than in the window before.
+    fn continue_at(&mut self, blocks: &mut [Block], j: usize) {
+        let Some(seam) = self.seam.take() else {
+            return;
+        };
+        let handed_end = seam.before.end_feed_mm_per_min;
+        let &Block::Straight(a) = &blocks[j - 1] else {
+            return;
+        };
+        let Block::Straight(b) = &mut blocks[j] else {
+            return;
+        };
+        let same = |x: &blocks::Straight, y: &blocks::Straight| {
+            x.feed_mm_per_min == y.feed_mm_per_min
+                && x.length_mm == y.length_mm
+                && x.acc_mm_per_s2 == y.acc_mm_per_s2
+                && x.jerk_mm_per_s3 == y.jerk_mm_per_s3
+        };
+        let exact =
+            same(&a, &seam.before) && same(b, &seam.after) && b.start_feed_mm_per_min == handed_end;
+        if !exact {
+            self.rough_seams += 1;
+        }
+        // (The interpolator never passes a speed limit it holds, and can always stop
+        // by the end of what it holds: a start below the speed handed on is braked for
+        // like any limit ahead.)
+        b.start_feed_mm_per_min = b.start_feed_mm_per_min.min(handed_end);
+    }
+
+    /// The seam handed on is not in the window planned after it: reported, and the
+    /// handing on stops (the interpolator stops at the end of what it was handed).
+    fn lost_seam(&mut self, blocks: &[Block]) {
+        let line = self.seam.as_ref().map_or(0, |s| s.after.source_line);
+        self.checker.internal(
+            line,
+            format!(
+                "the plan cut at speed before this line could not be continued: its \
+                 next window has no such junction ({} blocks): a fault of ours",
+                blocks.len()
+            ),
+        );
+        self.clean = false;
+        self.seam = None;
+    }
+
+    /// A seam in `blocks` after block `from` (see [`Windows::plan_at_speed`]): the
+    /// index of its second block and of the move it begins.
+    fn seam_after(&self, blocks: &[Block], from: usize, moves: usize) -> Option<(usize, usize)> {
+        let n = blocks.len();
+        let (lo, hi) = (from + (n - from) / 4, from + (n - from) * 3 / 4);
+        let straight = |b: &Block| match b {
+            Block::Straight(s) if s.flags & (FLAG_RAPID | FLAG_STOP_AT_END) == 0 => Some(*s),
+            _ => None,
+        };
+        let at = |k: usize| -> Option<(blocks::Straight, blocks::Straight)> {
+            let (a, b) = (straight(&blocks[k - 1])?, straight(&blocks[k])?);
+            (a.to == b.from).then_some((a, b))
+        };
+        // Its move: the one straight move that starts where the block does, on its line.
+        let move_of = |b: &blocks::Straight| {
+            let mut found = self.pending[..moves].iter().enumerate().filter(|(_, m)| {
+                matches!(m, Move::Line { line, from, rapid: false, .. }
+                    if *from == b.from && *line == b.source_line)
+            });
+            match (found.next(), found.next()) {
+                (Some((s, _)), None) if s > SEAM_CONTEXT => Some(s),
+                _ => None,
+            }
+        };
+        // The latest seam whose plan holds the junction's speed: its second block
+        // starts below what braking within it to its end allows.
+        let held = (lo.max(from + 1)..hi).rev().find_map(|k| {
+            let (_, b) = at(k)?;
+            let (start, end, _) = b.planned_mm_s();
+            let pinned = start < b.limits().reachable_speed(end, b.length_mm);
+            pinned.then(|| move_of(&b).map(|s| (k, s))).flatten()
+        });
+        held.or_else(|| {
+            (lo.max(from + 1)..(from + (n - from) / 2).max(lo.max(from + 1)))
+                .rev()
+                .find_map(|k| move_of(&at(k)?.1).map(|s| (k, s)))
+        })
+    }
+
+    /// Checks `blocks`, the next of the program, and hands them on.
+    fn hand_on(&mut self, blocks: Vec<Block>) {
+        if blocks.is_empty() {
+            return;
+        }
         for (i, b) in blocks.iter().enumerate() {
             self.checker.block(self.seq + i, b);
         }
@@ -327,6 +598,11 @@ impl Windows<'_, '_> {
         }
     }
 }
+
+/// Moves before a seam that the next window plans again, so that its seam's two blocks
+/// are built and planned with the same neighbours (a `G64 P` blend's chain of corners,
+/// a run of close kinks) as in the window that handed the first on.
+const SEAM_CONTEXT: usize = 64;
 
 /// Is the junction between motion `p` (in path mode `p_mode`) and the straight move
 /// `k` after it a rest of every plan? `only_modes`: only path-mode changes lie between
@@ -384,10 +660,6 @@ fn at_rest(
     // (The planner's own test is `cos < corner_cos` on the blocks' tangents, each a
     // rounding or two from these.)
     cos < corner_cos - 1e-9
-}
-
-fn sub(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
-    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
 }
 
 #[cfg(test)]

@@ -28,8 +28,14 @@ pub struct Machine {
     pub max_period_us: u64,
     /// Look-ahead window of the interpolator, in blocks: it holds this many blocks ahead
     /// of the one it runs and always keeps a speed from which it can stop by the end of
-    /// the last one it holds (the planner itself looks over the whole program).
+    /// the last one it holds.
     pub lookahead_blocks: u32,
+    /// The planner's look-ahead, in moves: a stretch of the program with no rest in it
+    /// longer than this is planned about this many moves at a time, each window cut at
+    /// speed where the plan allows (the interpreter's `window` module). Written (and
+    /// hashed) only when not the built-in value, so older runs' machines hash as before.
+    #[serde(skip_serializing_if = "Machine::plan_window_is_default")]
+    pub plan_window_moves: u32,
     /// Per-axis limits: the planner keeps every axis's share of the path motion within
     /// them.
     pub axes: Axes,
@@ -185,6 +191,7 @@ impl Default for Machine {
             min_period_us: 100,
             max_period_us: 10_000,
             lookahead_blocks: 256,
+            plan_window_moves: PLAN_WINDOW_MOVES,
             axes: Axes::default(),
             servo: Servo::default(),
         }
@@ -371,6 +378,12 @@ impl Machine {
                 self.lookahead_blocks
             ));
         }
+        if !(PLAN_WINDOW_MIN..=PLAN_WINDOW_MAX).contains(&self.plan_window_moves) {
+            return Err(format!(
+                "plan_window_moves must be from {PLAN_WINDOW_MIN} to {PLAN_WINDOW_MAX}, got {}",
+                self.plan_window_moves
+            ));
+        }
         let budget = (self.min_period_us * 1000 / 2 / SUBSTEP_NS).min(MAX_SUBSTEPS as u64);
         let s = &self.servo;
         if s.substeps == 0 || s.substeps as u64 > budget {
@@ -447,6 +460,12 @@ impl Machine {
             }
             out.push_str(line);
             out.push('\n');
+            // (Not written at the built-in value, which the file still shows.)
+            if key == "lookahead_blocks" && Machine::plan_window_is_default(&self.plan_window_moves)
+            {
+                out.push_str(&format!("# {}\n", key_doc("plan_window_moves")));
+                out.push_str(&format!("plan_window_moves = {PLAN_WINDOW_MOVES}\n"));
+            }
         }
         out
     }
@@ -455,6 +474,10 @@ impl Machine {
     /// own `[axes.*.servo]` keys.
     pub fn axis_servo(&self, i: usize) -> Servo {
         self.axes.as_array()[i].servo.apply(&self.servo)
+    }
+
+    fn plan_window_is_default(moves: &u32) -> bool {
+        *moves == PLAN_WINDOW_MOVES
     }
 
     /// Fingerprint of this machine (FNV-1a of its canonical TOML): what a command log
@@ -617,6 +640,20 @@ const VISCOUS: Range = range(0.0, 1e9, "N per mm/s");
 const COULOMB: Range = range(0.0, 1e9, "N");
 const GAIN: Range = range(0.0, 1.0, "(0 = off, 1 = on)");
 
+/// The planner's look-ahead built in, in moves ([`Machine::plan_window_moves`]): every
+/// program of the repository has fewer between two rests, so they are planned whole.
+pub const PLAN_WINDOW_MOVES: u32 = 4096;
+/// The fewest and most moves a plan window may be set to.
+pub const PLAN_WINDOW_MIN: u32 = 64;
+pub const PLAN_WINDOW_MAX: u32 = 10_000_000;
+
+fn key_doc(key: &str) -> &'static str {
+    KEY_DOCS
+        .iter()
+        .find(|(k, _)| *k == key)
+        .map_or("", |(_, d)| d)
+}
+
 /// One comment per key of the default machine file.
 const KEY_DOCS: &[(&str, &str)] = &[
     (
@@ -646,6 +683,10 @@ const KEY_DOCS: &[(&str, &str)] = &[
     (
         "lookahead_blocks",
         "blocks the interpolator holds ahead; it can always stop by the last one",
+    ),
+    (
+        "plan_window_moves",
+        "moves the planner looks ahead over a stretch with no rest; a longer one is cut at speed",
     ),
     ("axes.x.max_vel_mm_per_min", "X axis velocity limit, mm/min"),
     (

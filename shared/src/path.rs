@@ -235,6 +235,11 @@ fn add_helix(h: &Helix, ctrl: &[[f64; 4]], u: f64, e: &mut CurvePoint) {
     e.d2[n] = h.mm_per_rad * ddphi;
 }
 
+/// `a - b`, axis by axis.
+pub fn sub(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
+    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
+}
+
 /// Euclidean norm of a 3-vector.
 pub fn norm(v: [f64; 3]) -> f64 {
     (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt()

@@ -120,3 +120,78 @@ fn a_million_lines_run_in_bounded_memory() {
         assert!(mib < 100.0, "{role} used {mib:.1} MiB");
     }
 }
+
+/// 8 000 short lines of one smooth spiral with no rest between them, run with a plan
+/// window of 1 000 moves (cut at speed, 8 to 10 times) and with one holding the whole
+/// program: the same blocks logged and the same set-points, bit for bit, and the run
+/// as long as the estimate.
+#[test]
+fn a_stretch_with_no_rest_runs_cut_at_speed_as_planned_whole() {
+    let dir = temp_dir("stream-at-speed");
+    let prog = dir.join("spiral.ngc");
+    let mut s = String::from("G21 G90 G17\nG0 X0 Y0 Z0\nG64\nG1 F3000\n");
+    for i in 1..=8000 {
+        let t = f64::from(i) * 0.015;
+        let r = 3.0 + 0.4 * t;
+        let _ = writeln!(
+            s,
+            "G1 X{:.4} Y{:.4} Z{:.4}",
+            r * t.cos(),
+            r * t.sin(),
+            -0.001 * t
+        );
+    }
+    s.push_str("M2\n");
+    std::fs::write(&prog, s).unwrap();
+    let mut runs = Vec::new();
+    for (name, moves) in [("window", 1000), ("whole", 10_000_000)] {
+        let machine = dir.join(format!("{name}.toml"));
+        std::fs::write(&machine, format!("plan_window_moves = {moves}\n")).unwrap();
+        let run = dir.join(name);
+        let out = Command::new(cnc_exe())
+            .args([
+                "run",
+                "--clock",
+                "sim",
+                "--no-report",
+                "--force",
+                "--machine",
+            ])
+            .arg(&machine)
+            .arg("--out")
+            .arg(&run)
+            .arg(&prog)
+            .output()
+            .unwrap();
+        assert!(
+            out.status.success(),
+            "{name}: {}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        let rep = report(&run);
+        assert_eq!(rep["outcome"], "done", "{rep}");
+        assert_eq!(rep["starvations"].as_u64(), Some(0), "{rep}");
+        let interp: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(run.join("interpreter.json")).unwrap())
+                .unwrap();
+        let at_speed = interp["windows_at_speed"].as_u64().unwrap();
+        assert!(
+            if moves == 1000 {
+                (8..=12).contains(&at_speed)
+            } else {
+                at_speed == 0
+            },
+            "{name}: {interp}"
+        );
+        let log = shared::cmdlog::read(&run.join("commands.log")).unwrap();
+        let setpoints = std::fs::read(run.join("setpoints.csv")).unwrap();
+        runs.push((rep["cycles"].as_u64().unwrap(), log.blocks, setpoints));
+    }
+    let (window, whole) = (&runs[0], &runs[1]);
+    assert_eq!(window.0, whole.0, "cycles");
+    assert_eq!(window.1.len(), whole.1.len(), "blocks");
+    for (i, (a, b)) in window.1.iter().zip(&whole.1).enumerate() {
+        assert!(shared::cmdlog::same_bits(a, b), "block {i}:\n{a:?}\n{b:?}");
+    }
+    assert!(window.2 == whole.2, "the set-points differ");
+}

@@ -29,6 +29,34 @@ pub fn plain_g1(lines: usize) -> String {
     s
 }
 
+/// One smooth spiral of `lines` lines of `G1` under `G64` (or `G64 P<blend>`), each
+/// about 0.05 mm long at F3000 and turning 1.1° at the start, less further out: no rest
+/// from its first line to its last, so it is planned in windows cut at speed. A million
+/// lines stay within ±30 mm. (Not among `tests/check_golden.rs`'s programs.)
+#[allow(dead_code)]
+pub fn spiral(lines: usize, blend: Option<f64>) -> String {
+    let mode = blend.map_or("G64".to_string(), |p| format!("G64 P{p}"));
+    let mut s = format!(
+        "G21 G90 G17
+G0 X0 Y0 Z0
+{mode}
+G1 F3000
+"
+    );
+    for i in 1..lines.saturating_sub(4) {
+        let t = i as f64 * 0.0005;
+        let r = 2.0 + 0.05 * t;
+        let _ = writeln!(
+            s,
+            "G1 X{:.4} Y{:.4}",
+            r * (t * 40.0).cos(),
+            r * (t * 40.0).sin()
+        );
+    }
+    s.push_str("M2\n");
+    s
+}
+
 /// Groups of a line, an arc, a `G5.2` NURBS of six lines and a `G6.2` NURBS of nine,
 /// each group starting and ending on the X axis, shifted along it; at most `lines`
 /// lines.

@@ -7,6 +7,7 @@ use super::Move;
 use super::Plane;
 use shared::machine::MIN_FEED_MM_PER_MIN;
 use shared::nurbs;
+use shared::path::sub;
 
 /// Turns the inverse-time `feed` (1/min) of each feed move into mm/min. A move whose
 /// feed comes out below [`MIN_FEED_MM_PER_MIN`] is returned as its length and feed (the
@@ -69,10 +70,6 @@ pub(super) fn length_mm(m: &Move) -> f64 {
         }
         _ => 0.0,
     }
-}
-
-fn sub(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
-    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
 }
 
 #[cfg(test)]
