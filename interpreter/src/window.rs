@@ -33,26 +33,37 @@
 //!
 //! A stretch with no rest longer than the machine's look-ahead, `plan_window_moves`
 //! (4096 moves built in: a smooth spiral of short lines, CAM output under `G64`), is
-//! planned a window of that many moves at a time ([`Windows::plan_at_speed`]). Each
+//! planned a window of that many moves at a time (`Windows::plan_at_speed`). Each
 //! window is planned as if the machine stopped at its end, and handed on only up to a
 //! seam the last quarter of the window or more before that end: a junction of two
 //! straight feed blocks where the plan holds the speed the junction allows (its second
 //! block starts below what braking within it allows). The backward pass there starts
-//! from that junction speed whatever comes after, so the blocks before it are the
-//! whole program's, bit for bit. The next window plans again from [`SEAM_CONTEXT`]
-//! moves before the seam (so that the seam's blocks have the same neighbours: a blend's
-//! chain, a run of close kinks), finds the seam's two blocks, and continues from them,
-//! its first block's start held to the speed handed on.
+//! from that junction speed whatever comes after. The next window plans again from
+//! some way before the seam (`Windows::context_start`: 64 moves at least, and two
+//! steps plus twice the stopping distance at the highest feed, so that the seam's
+//! blocks have the same neighbours: a run of close kinks, a `G64 P` blend's weighing),
+//! finds the seam's two blocks, and continues from them, its first block's start held
+//! to the speed handed on.
 //!
 //! * Where no junction in the window's middle holds its speed (a window shorter than
 //!   the plan's braking from the feed), a seam halfway is taken, handed on at the speed
-//!   planned there: lower than the whole program's plan, never higher. Such seams are
-//!   counted ([`Planned::rough_seams`]).
+//!   planned there.
+//! * Where the next window has not the seam's two blocks (a corner next to it blended
+//!   otherwise), or a pass read since comes back to the seam's move, the moves are
+//!   planned again from the seam's move, whose first block starts where the last one
+//!   handed on ends. Such seams, and those whose two blocks are planned otherwise the
+//!   second time, are counted ([`Planned::rough_seams`]).
 //! * Where the window has no two straight blocks meeting (a long curve, every corner
-//!   blended), it is planned again once it is twice as long.
+//!   blended), it is planned again once it is twice as long; the interpolator may
+//!   meanwhile come to the end of what it was handed and stop there on the path.
 //! * Safety does not hang on the seam: the interpolator can always stop by the end of
 //!   the last block it holds, so blocks that stop coming mid-motion make it stop on the
 //!   path (a starvation, counted), and a lower speed ahead is braked for as any limit.
+//!
+//! The blocks before a seam are the whole program's bit for bit where nothing else
+//! reaches across it: on lines (what was measured below, and what the tests hold).
+//! The share rounds of curves near a seam, or a blend chain longer than the context,
+//! may plan them otherwise than the whole program would (still a valid plan).
 //!
 //! Measured: every program of the repository fits a window (they are planned whole, as
 //! before). A spiral of a million lines of `G1` (`cnc check --estimate`) is planned in
@@ -234,6 +245,8 @@ struct Windows<'a, 'h> {
 struct Seam {
     before: blocks::Straight,
     after: blocks::Straight,
+    /// The index in the moves held of the move the second begins.
+    move_at: usize,
 }
 
 /// What the look for a window's end knows of the moves looked at so far.
@@ -377,18 +390,38 @@ impl Windows<'_, '_> {
         if window.is_empty() {
             return;
         }
-        let mut blocks = blocks::build(&window, self.machine);
+        let (mut blocks, from, rough) = self.planned(&window);
         drop(window);
-        if blocks.is_empty() {
-            return;
-        }
-        blocks::plan_and(&mut blocks, self.machine, self.period_ns, |_, _| {});
-        let Some(from) = self.continued(&mut blocks) else {
-            return;
-        };
+        self.seam = None;
+        self.rough_seams += usize::from(rough);
         self.at_speed_from = self.machine.plan_window_moves as usize;
         blocks.drain(..from);
         self.hand_on(blocks);
+    }
+
+    /// `moves` (the moves held, from their start) built and planned, the first block
+    /// to hand on, and whether the seam before them is rough: where a window was cut at
+    /// speed before them, the first is the seam's second block, continued from the
+    /// block handed on before it ([`Windows::continue_at`]). Should the seam not be
+    /// there (its corner blended otherwise, planned with less before it), the moves are
+    /// planned again from the seam's move, whose first block starts where the last
+    /// handed on ends (rough). The seam stays until what follows it is handed on.
+    fn planned(&self, moves: &[Move]) -> (Vec<Block>, usize, bool) {
+        let mut blocks = blocks::build(moves, self.machine);
+        blocks::plan_and(&mut blocks, self.machine, self.period_ns, |_, _| {});
+        let Some(seam) = &self.seam else {
+            return (blocks, 0, false);
+        };
+        if let Some(j) = self.seam_in(&blocks, moves) {
+            let exact = continue_at(seam, &mut blocks, j);
+            return (blocks, j, !exact);
+        }
+        let at = seam.move_at.min(moves.len());
+        let mut again: Vec<Move> = mode_before(moves, at).into_iter().collect();
+        again.extend_from_slice(&moves[at..]);
+        let mut blocks = blocks::build(&again, self.machine);
+        blocks::plan_and(&mut blocks, self.machine, self.period_ns, |_, _| {});
+        (blocks, 0, true)
     }
 
     /// Plans the moves held, a stretch with no rest in it as long as the machine's
@@ -397,27 +430,18 @@ impl Windows<'_, '_> {
     /// holds the speed the junction allows (so that what follows the seam does not
     /// bear on it): the plan of the window's end, a stop, reaches no further back.
     /// Where none holds its junction's speed, a seam halfway is taken, handed on at
-    /// the speed planned there (lower than the whole program's plan). The moves from
-    /// [`SEAM_CONTEXT`] before the seam on are held for the next window, which plans
-    /// them again and continues from the seam ([`Windows::continued`]).
+    /// the speed planned there. The moves from some way before the seam on
+    /// ([`Windows::context_start`]) are held for the next window, which plans them
+    /// again and continues from the seam ([`Windows::planned`]).
     ///
     /// Where the window has no such seam (a long curve, or every corner blended), it
     /// is planned again once it is twice as long.
     fn plan_at_speed(&mut self) {
         // (A batch read may hold more than a window.)
         let n = self.pending.len().min(self.at_speed_from);
-        let mut blocks = blocks::build(&self.pending[..n], self.machine);
-        blocks::plan_and(&mut blocks, self.machine, self.period_ns, |_, _| {});
-        let from = match self.seam {
-            Some(_) => match self.seam_in(&blocks) {
-                Ok(j) => j,
-                Err(()) => {
-                    self.lost_seam(&blocks);
-                    return;
-                }
-            },
-            None => 0,
-        };
+        let moves = std::mem::take(&mut self.pending);
+        let (mut blocks, from, rough) = self.planned(&moves[..n]);
+        self.pending = moves;
         let Some((k, s)) = self.seam_after(&blocks, from, n) else {
             self.at_speed_from = n * 2;
             return;
@@ -426,21 +450,14 @@ impl Windows<'_, '_> {
         else {
             unreachable!("a seam is between two straight blocks")
         };
-        if from > 0 {
-            self.continue_at(&mut blocks, from);
-        }
         blocks.truncate(k);
         blocks.drain(..from);
         self.hand_on(blocks);
-        self.seam = Some(Seam { before, after });
         self.at_speed += 1;
+        self.rough_seams += usize::from(rough);
         // The moves from the context's start on stay, the mode in force there first.
-        let c = s - SEAM_CONTEXT.min(s - 1);
-        let mode = self.pending[..c]
-            .iter()
-            .rev()
-            .find(|m| matches!(m, Move::PathMode { .. }))
-            .cloned();
+        let c = self.context_start(s);
+        let mode = mode_before(&self.pending, c);
         let mut rest = self.pending.split_off(c);
         let off = usize::from(mode.is_some());
         if let Some(m) = mode {
@@ -450,96 +467,61 @@ impl Windows<'_, '_> {
         self.scan.upto = shift(self.scan.upto);
         self.scan.last = self.scan.last.map(|(i, m)| (shift(i), m));
         self.pending = rest;
+        self.seam = Some(Seam {
+            before,
+            after,
+            move_at: shift(s),
+        });
         // The next window holds half a window's moves beyond what this one planned.
         let window = self.machine.plan_window_moves as usize;
         self.at_speed_from = window.max(n - c + off + window / 2);
     }
 
-    /// The first block of `blocks` (a window planned from the moves held, the seam's
-    /// context first) the next handed on, where there is a seam: the one after it,
-    /// continued from it ([`Windows::continue_at`]). `None` when the seam is not found
-    /// (a fault of ours: reported, and nothing more handed on).
-    fn continued(&mut self, blocks: &mut [Block]) -> Option<usize> {
-        if self.seam.is_none() {
-            return Some(0);
-        }
-        match self.seam_in(blocks) {
-            Ok(j) => {
-                self.continue_at(blocks, j);
-                Some(j)
-            }
-            Err(()) => {
-                self.lost_seam(blocks);
-                None
+    /// Where the moves the next window plans again begin, before the seam's move `s`:
+    /// [`SEAM_CONTEXT`] moves back at least, and as far as the path reaches that bears
+    /// on the seam's blocks: two steps at the highest feed (a run of close kinks) and
+    /// twice the distance to stop from it (what a `G64 P` blend's weighing looks at).
+    fn context_start(&self, s: usize) -> usize {
+        let m = self.machine;
+        let v = m.max_feed_mm_per_min / 60.0;
+        let reach = 2.0 * v * self.period_ns as f64 * 1e-9 + v * v / m.path_acc_mm_per_s2;
+        let mut length = 0.0;
+        let mut c = s;
+        while c > 1 && (s - c < SEAM_CONTEXT || length < reach) {
+            c -= 1;
+            if let Move::Line { from, to, .. } = &self.pending[c] {
+                length += shared::path::norm(sub(*to, *from));
             }
         }
+        c
     }
 
-    /// Where the seam is in `blocks`: the index of its second block.
-    fn seam_in(&self, blocks: &[Block]) -> Result<usize, ()> {
-        let Some(seam) = &self.seam else {
-            return Ok(0);
-        };
-        (1..blocks.len())
-            .find(|&j| match (&blocks[j - 1], &blocks[j]) {
-                (Block::Straight(a), Block::Straight(b)) => {
-                    a.from == seam.before.from
-                        && a.to == seam.before.to
-                        && b.from == seam.after.from
-                        && b.to == seam.after.to
-                        && a.source_line == seam.before.source_line
-                        && b.source_line == seam.after.source_line
-                }
-                _ => false,
-            })
-            .ok_or(())
-    }
-
-    /// Block `j` of `blocks`, the seam's second, continued from the block handed on
-    /// before it: its start held to the speed that one ends at. Counted rough where the
-    /// two blocks are planned otherwise than in the window before.
-    fn continue_at(&mut self, blocks: &mut [Block], j: usize) {
-        let Some(seam) = self.seam.take() else {
-            return;
-        };
-        let handed_end = seam.before.end_feed_mm_per_min;
-        let &Block::Straight(a) = &blocks[j - 1] else {
-            return;
-        };
-        let Block::Straight(b) = &mut blocks[j] else {
-            return;
-        };
-        let same = |x: &blocks::Straight, y: &blocks::Straight| {
-            x.feed_mm_per_min == y.feed_mm_per_min
-                && x.length_mm == y.length_mm
-                && x.acc_mm_per_s2 == y.acc_mm_per_s2
-                && x.jerk_mm_per_s3 == y.jerk_mm_per_s3
-        };
-        let exact =
-            same(&a, &seam.before) && same(b, &seam.after) && b.start_feed_mm_per_min == handed_end;
-        if !exact {
-            self.rough_seams += 1;
+    /// Where the seam is in `blocks`: the index of its second block, a straight block
+    /// on the seam's line starting at the seam's point, after a straight block on the
+    /// line before ending there.
+    ///
+    /// The seam's move is the only one of the moves held until then that starts at
+    /// that point on that line ([`Windows::seam_after`]); should one read since do so
+    /// too (a pass gone over again), the seam is not looked for: what is found could
+    /// be that one, and the moves are planned again from the seam's.
+    fn seam_in(&self, blocks: &[Block], moves: &[Move]) -> Option<usize> {
+        let seam = self.seam.as_ref()?;
+        let again = moves.iter().skip(seam.move_at + 1).any(|m| {
+            matches!(m, Move::Line { line, from, .. }
+                if *from == seam.after.from && *line == seam.after.source_line)
+        });
+        if again {
+            return None;
         }
-        // (The interpolator never passes a speed limit it holds, and can always stop
-        // by the end of what it holds: a start below the speed handed on is braked for
-        // like any limit ahead.)
-        b.start_feed_mm_per_min = b.start_feed_mm_per_min.min(handed_end);
-    }
-
-    /// The seam handed on is not in the window planned after it: reported, and the
-    /// handing on stops (the interpolator stops at the end of what it was handed).
-    fn lost_seam(&mut self, blocks: &[Block]) {
-        let line = self.seam.as_ref().map_or(0, |s| s.after.source_line);
-        self.checker.internal(
-            line,
-            format!(
-                "the plan cut at speed before this line could not be continued: its \
-                 next window has no such junction ({} blocks): a fault of ours",
-                blocks.len()
-            ),
-        );
-        self.clean = false;
-        self.seam = None;
+        (1..blocks.len()).find(|&j| match (&blocks[j - 1], &blocks[j]) {
+            (Block::Straight(a), Block::Straight(b)) => {
+                a.to == seam.after.from
+                    && b.from == seam.after.from
+                    && a.source_line == seam.before.source_line
+                    && b.source_line == seam.after.source_line
+            }
+            _ => false,
+        })
     }
 
     /// A seam in `blocks` after block `from` (see [`Windows::plan_at_speed`]): the
@@ -555,16 +537,30 @@ impl Windows<'_, '_> {
             let (a, b) = (straight(&blocks[k - 1])?, straight(&blocks[k])?);
             (a.to == b.from).then_some((a, b))
         };
-        // Its move: the one straight move that starts where the block does, on its line.
-        let move_of = |b: &blocks::Straight| {
-            let mut found = self.pending[..moves].iter().enumerate().filter(|(_, m)| {
-                matches!(m, Move::Line { line, from, rapid: false, .. }
-                    if *from == b.from && *line == b.source_line)
-            });
-            match (found.next(), found.next()) {
-                (Some((s, _)), None) if s > SEAM_CONTEXT => Some(s),
-                _ => None,
+        // Its move: the one straight move that starts where the block does, on its line
+        // (none where a path is gone over again, as a repeated pass is).
+        let mut starts: std::collections::HashMap<(u32, [u64; 3]), Option<usize>> =
+            std::collections::HashMap::new();
+        for (i, m) in self.pending[..moves].iter().enumerate() {
+            if let Move::Line {
+                line,
+                from,
+                rapid: false,
+                ..
+            } = m
+            {
+                starts
+                    .entry((*line, from.map(f64::to_bits)))
+                    .and_modify(|e| *e = None)
+                    .or_insert(Some(i));
             }
+        }
+        let move_of = |b: &blocks::Straight| {
+            starts
+                .get(&(b.source_line, b.from.map(f64::to_bits)))
+                .copied()
+                .flatten()
+                .filter(|&s| s > SEAM_CONTEXT)
         };
         // The latest seam whose plan holds the junction's speed: its second block
         // starts below what braking within it to its end allows.
@@ -599,10 +595,47 @@ impl Windows<'_, '_> {
     }
 }
 
-/// Moves before a seam that the next window plans again, so that its seam's two blocks
-/// are built and planned with the same neighbours (a `G64 P` blend's chain of corners,
-/// a run of close kinks) as in the window that handed the first on.
+/// The fewest moves before a seam that the next window plans again
+/// ([`Windows::context_start`]).
 const SEAM_CONTEXT: usize = 64;
+
+/// Block `j` of `blocks`, the second of `seam`, continued from the block handed on
+/// before it: its start held to the speed that one ends at. Whether the two blocks are
+/// planned as in the window before (exact).
+fn continue_at(seam: &Seam, blocks: &mut [Block], j: usize) -> bool {
+    let handed_end = seam.before.end_feed_mm_per_min;
+    let &Block::Straight(a) = &blocks[j - 1] else {
+        return false;
+    };
+    let Block::Straight(b) = &mut blocks[j] else {
+        return false;
+    };
+    let same = |x: &blocks::Straight, y: &blocks::Straight| {
+        x.from == y.from
+            && x.to == y.to
+            && x.feed_mm_per_min == y.feed_mm_per_min
+            && x.length_mm == y.length_mm
+            && x.acc_mm_per_s2 == y.acc_mm_per_s2
+            && x.jerk_mm_per_s3 == y.jerk_mm_per_s3
+    };
+    let exact =
+        same(&a, &seam.before) && same(b, &seam.after) && b.start_feed_mm_per_min == handed_end;
+    // (What the interpolator runs by is the end speed of the block before: this keeps
+    // the block's own figures consistent. It never passes a speed limit it holds and
+    // can always stop by the end of what it holds, so a lower speed ahead is braked for
+    // like any limit.)
+    b.start_feed_mm_per_min = b.start_feed_mm_per_min.min(handed_end);
+    exact
+}
+
+/// The path mode in force at move `at` of `moves` (the last set before it), if any.
+fn mode_before(moves: &[Move], at: usize) -> Option<Move> {
+    moves[..at]
+        .iter()
+        .rev()
+        .find(|m| matches!(m, Move::PathMode { .. }))
+        .cloned()
+}
 
 /// Is the junction between motion `p` (in path mode `p_mode`) and the straight move
 /// `k` after it a rest of every plan? `only_modes`: only path-mode changes lie between

@@ -302,6 +302,7 @@ fn spiral(n: usize, head: &str) -> String {
 /// joins, and what [`Planned`] says, the most blocks handed on at once, how many blocks
 /// differ from the whole plan's, and the machining time against the whole plan's.
 struct AtSpeed {
+    blocks: usize,
     at_speed: usize,
     rough: usize,
     most: usize,
@@ -328,6 +329,7 @@ fn at_speed(text: &str, machine: &Machine, moves: u32) -> AtSpeed {
     };
     let (p, most) = p.expect("planned");
     AtSpeed {
+        blocks: cut.len(),
         at_speed: p.at_speed,
         rough: p.rough_seams,
         most,
@@ -371,6 +373,85 @@ fn a_stretch_with_no_rest_is_cut_at_speed() {
     // Blended corners: a seam only where two lines meet unblended.
     let (_, lcnc) = &machines()[1];
     let a = at_speed(&spiral(1500, "G64 P0.01"), lcnc, 256);
+    assert!(a.blocks > 2000, "{} blocks: blends kept", a.blocks);
     assert!(a.at_speed >= 1, "{} windows at speed", a.at_speed);
     assert_eq!((a.rough, a.differ), (0, 0));
+}
+
+/// A contour gone over again and again with no rest (an O-word `repeat`): a seam is
+/// chosen only where its move's start and line are its own among the moves read so
+/// far, and a later pass may come back to it. The next window then does not look for
+/// it (what it found could be the later pass) and plans again from the seam's move:
+/// the path joins, the seam is rough, and the plan differs from the whole one only
+/// there.
+#[test]
+fn a_pass_gone_over_again_is_never_taken_for_the_seam() {
+    let mut s = String::from("G21 G90 G17\nG0 X2 Y0 Z0\nG64\nG1 F3000\no100 repeat [12]\n");
+    for i in 1..=100 {
+        let t = f64::from(i) * std::f64::consts::TAU / 100.0;
+        let _ = writeln!(s, "G1 X{:.4} Y{:.4}", 2.0 * t.cos(), 2.0 * t.sin());
+    }
+    s.push_str("o100 endrepeat\nM2\n");
+    let (_, machine) = &machines()[0];
+    let a = at_speed(&s, machine, 64);
+    assert!(a.at_speed >= 1, "{} at speed", a.at_speed);
+    assert_eq!(a.rough, a.at_speed);
+    assert!(a.differ <= 2 * a.at_speed, "{} blocks differ", a.differ);
+}
+
+/// Where the next window has not the seam's two blocks (its corner blended otherwise),
+/// the moves are planned again from the seam's move: the blocks handed on start where
+/// the last handed on ended, and the seam is counted rough.
+#[test]
+fn a_seam_not_found_again_is_planned_from_its_move() {
+    let text = spiral(400, "G64");
+    let machine = Machine::default();
+    let prog = program::interpret(&text).unwrap();
+    let moves = prog.moves;
+    let mut handed: Vec<Block> = Vec::new();
+    let mut hand = |b: Vec<Block>, _| handed.extend(b);
+    let mut w = Windows {
+        machine: &machine,
+        period_ns: PERIOD_NS,
+        pending: Vec::new(),
+        scan: Scan::default(),
+        seq: 0,
+        windows: 0,
+        checker: Checker::new(&text, &machine),
+        feeds: crate::process::FeedNotes::new(&machine),
+        hand: &mut hand,
+        clean: true,
+        seam: None,
+        at_speed_from: usize::MAX,
+        at_speed: 0,
+        rough_seams: 0,
+    };
+    // A seam whose blocks are nowhere (their line numbers are not the program's), at
+    // the move of index 150.
+    let Move::Line { from, .. } = moves[150].clone() else {
+        panic!("{:?}", moves[150])
+    };
+    let ghost = blocks::Straight::new(99_999, from, from, false, 1000.0);
+    w.seam = Some(Seam {
+        before: ghost,
+        after: ghost,
+        move_at: 150,
+    });
+    w.plan(moves.clone());
+    assert_eq!(w.rough_seams, 1);
+    assert!(w.seam.is_none());
+    drop(w);
+    let Block::Straight(first) = &handed[0] else {
+        panic!("{:?}", handed[0])
+    };
+    assert_eq!(
+        first.from, from,
+        "the first block starts at the seam's move"
+    );
+    let whole = {
+        let mut b = blocks::build(&moves[150..], &machine);
+        blocks::plan(&mut b, &machine, PERIOD_NS);
+        b
+    };
+    assert_eq!(handed.len(), whole.len());
 }
