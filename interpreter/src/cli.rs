@@ -244,6 +244,11 @@ pub enum Role {
         /// What the program may do beyond its dialect (see `cnc run --dialect-extension`).
         #[arg(long = "dialect-extension")]
         extensions: Vec<crate::program::dialect::Extension>,
+        /// The launcher's check of the program (`checked.json`), taken instead of
+        /// checking it again where the program's digest, the machine and the period
+        /// are those it checked.
+        #[arg(long)]
+        checked: Option<PathBuf>,
     },
     Interpolator(interpolator::cli::Args),
     ServoSim(servo_sim::cli::Args),
@@ -610,6 +615,7 @@ pub fn main() -> ExitCode {
             subroutine_path,
             tool_table,
             extensions,
+            checked,
         }) => run_interpreter_streaming(
             &common,
             program,
@@ -624,6 +630,7 @@ pub fn main() -> ExitCode {
                 subroutine_dirs: subroutine_path,
                 tool_table,
                 extensions,
+                checked,
             },
         ),
         Command::Role(Role::Interpolator(args)) => match interpolator::cli::run(&args) {

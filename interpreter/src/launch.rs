@@ -392,6 +392,9 @@ fn run_inner(args: &RunArgs) -> Result<bool, String> {
     // engine stepped along as the program is checked (a STEP-NC part is planned whole).
     let progress = progress_wanted();
     let repeat = u64::from(args.repeat.max(1));
+    // What the interpreter process may take instead of checking again (a program sent as
+    // it is planned: not a STEP-NC part, not repeated).
+    let mut handed = None;
     let checked: Result<Option<u64>, String> = if crate::step::check::is_step_file(&src.name, text)
     {
         process::compile_compact(&src.name, text, &opts, &machine, period_ns).map(|c| {
@@ -430,6 +433,19 @@ fn run_inner(args: &RunArgs) -> Result<bool, String> {
         planned
             .map(|(p, cycles)| {
                 eprint!("{}", process::format_notes(&src.name, &p.notes));
+                if args.repeat <= 1 {
+                    let digest = mapped.as_ref().map_or_else(
+                        || crate::checked::digest(text.as_bytes(), &mut |_, _| {}),
+                        |m| m.digest(),
+                    );
+                    handed = crate::checked::Checked::of(
+                        &p,
+                        digest,
+                        opts.tools.is_some(),
+                        &machine,
+                        period_ns,
+                    );
+                }
                 cycles
             })
             .map_err(|d| process::format_diagnostics(&src.name, &d))
@@ -470,6 +486,11 @@ fn run_inner(args: &RunArgs) -> Result<bool, String> {
     }
     for e in &args.extensions {
         input.extend(["--dialect-extension".into(), e.to_string()]);
+    }
+    if let Some(c) = &handed {
+        let path = dir.join(crate::checked::FILE);
+        c.write(&path)?;
+        input.extend(["--checked".into(), path.display().to_string()]);
     }
     if let Some(path) = &args.tool_table {
         let copy = dir.join("tool.tbl");

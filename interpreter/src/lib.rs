@@ -21,12 +21,14 @@
 //! * [`cam`] writes part programs of exact NURBS moves from geometry (`cnc cam`): an
 //!   ellipse or its fitted offset, and the curves of a CAD STEP file ([`step::curves`]);
 //! * [`process`] is the interpreter process; [`launch`] starts all three processes for
-//!   `cnc run` and folds their summaries into the run's [`report`]; [`replay`] runs a
+//!   `cnc run` (handing its check of the program on, [`checked`]) and folds their
+//!   summaries into the run's [`report`]; [`replay`] runs a
 //!   command log again (`cnc replay`) and prints one (`cnc log show`).
 
 pub mod blocks;
 mod brent;
 pub mod cam;
+pub mod checked;
 pub mod cli;
 pub mod contour;
 pub mod estimate;

@@ -96,6 +96,17 @@ impl MappedText {
         None
     }
 
+    /// The text's [`crate::checked::digest`], a long file's pages given back behind as
+    /// when it was opened.
+    pub fn digest(&self) -> u64 {
+        let long = self.len > POPULATE_MAX_BYTES;
+        crate::checked::digest(self.bytes(), &mut |from, to| {
+            if long {
+                self.release(from, to);
+            }
+        })
+    }
+
     fn bytes(&self) -> &[u8] {
         // SAFETY: `len` readable bytes at `ptr`, mapped for as long as `self` lives.
         unsafe { std::slice::from_raw_parts(self.ptr, self.len) }

@@ -493,6 +493,9 @@ pub struct Streaming {
     pub tool_table: Option<PathBuf>,
     /// What the program may do beyond its dialect (`--dialect-extension`).
     pub extensions: Vec<program::dialect::Extension>,
+    /// The launcher's check of the program ([`crate::checked`]), taken instead of
+    /// checking again where it holds for this reading.
+    pub checked: Option<PathBuf>,
 }
 
 impl Default for Streaming {
@@ -505,6 +508,7 @@ impl Default for Streaming {
             subroutine_dirs: Vec::new(),
             tool_table: None,
             extensions: Vec::new(),
+            checked: None,
         }
     }
 }
@@ -664,6 +668,14 @@ impl ProgramText {
             .map_or(self.read.as_str(), |m| m.as_str())
     }
 
+    /// Its [`crate::checked::digest`].
+    pub fn digest(&self) -> u64 {
+        self.mapped.as_ref().map_or_else(
+            || crate::checked::digest(self.read.as_bytes(), &mut |_, _| {}),
+            |m| m.digest(),
+        )
+    }
+
     /// Gives back the pages of bytes `from..to` (see
     /// [`crate::mapped::MappedText::release`]).
     pub fn release(&self, from: usize, to: usize) {
@@ -692,6 +704,7 @@ pub fn run_streaming<S: Service>(
     let mut max_scallop_mm = None;
     let mut notes = Vec::new();
     let mut windows = (None, None);
+    let mut checked_by = None;
     let (name, sent_blocks, messages) = match &cfg.replay {
         Some(log) => {
             let r = load_replay(log, cfg.salvage)?;
@@ -742,20 +755,62 @@ pub fn run_streaming<S: Service>(
             } else {
                 // Checked whole first, window by window (nothing moves before the
                 // program is known good), then read and planned again as it is sent.
-                let (t, n, o) = (text.clone(), name.clone(), opts.clone());
-                let planned = watched(&link, hold, move || {
-                    let mut release = |from, to| t.release(from, to);
-                    check_windows(
-                        t.as_str(),
-                        &o,
-                        &machine,
-                        period_ns,
-                        &mut |_, _| {},
-                        &mut release,
-                    )
-                    .map_err(|d| format_diagnostics(&n, &d))
-                })
-                .map_err(|e| nothing_sent(cfg, &name, e))?;
+                // The launcher's check is taken instead where it holds for this text.
+                let trusted = streaming
+                    .checked
+                    .as_deref()
+                    .filter(|_| opts.tools.is_none())
+                    .and_then(|path| {
+                        let taken = crate::checked::Checked::read(path).and_then(|c| {
+                            c.planned_for(text.digest(), &machine, period_ns)
+                        });
+                        match taken {
+                            Ok(p) => {
+                                tracing::info!(
+                                    "the launcher's check of the program taken: its copy is the text checked"
+                                );
+                                Some(p)
+                            }
+                            Err(why) => {
+                                tracing::warn!(
+                                    "the launcher's check not taken, the program is checked again: {why}"
+                                );
+                                None
+                            }
+                        }
+                    });
+                checked_by = Some(if trusted.is_some() {
+                    "launcher"
+                } else {
+                    "interpreter"
+                });
+                // (Read with no subroutine directory: the check read no file.)
+                let opts = match trusted {
+                    Some(_) => program::Options {
+                        subroutine_dirs: Vec::new(),
+                        ..opts
+                    },
+                    None => opts,
+                };
+                let planned = match trusted {
+                    Some(p) => p,
+                    None => {
+                        let (t, n, o) = (text.clone(), name.clone(), opts.clone());
+                        watched(&link, hold, move || {
+                            let mut release = |from, to| t.release(from, to);
+                            check_windows(
+                                t.as_str(),
+                                &o,
+                                &machine,
+                                period_ns,
+                                &mut |_, _| {},
+                                &mut release,
+                            )
+                            .map_err(|d| format_diagnostics(&n, &d))
+                        })
+                        .map_err(|e| nothing_sent(cfg, &name, e))?
+                    }
+                };
                 dialect = Some(planned.dialect.name().to_string());
                 notes = planned.notes.clone();
                 windows = (Some(planned.windows), Some(planned.at_speed));
@@ -853,6 +908,7 @@ pub fn run_streaming<S: Service>(
         max_scallop_mm,
         windows: windows.0,
         windows_at_speed: windows.1,
+        checked_by: checked_by.map(str::to_string),
     };
     write_summary(cfg, &summary)?;
     Ok(summary)
@@ -983,6 +1039,7 @@ fn nothing_sent(cfg: &Config, program: &str, why: String) -> String {
             max_scallop_mm: None,
             windows: None,
             windows_at_speed: None,
+            checked_by: None,
         };
         if let Err(e) = write_summary(cfg, &summary) {
             tracing::error!("{e}");

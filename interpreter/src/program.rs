@@ -195,6 +195,9 @@ pub struct Program {
     /// The program turns cutter radius compensation on (`G41`, `G42`, `G41.1`,
     /// `G42.1`; under [`Options::uncompensated`] too, though it was not applied).
     pub compensated: bool,
+    /// How many subroutine files it read (called by O-words, found in
+    /// [`Options::subroutine_dirs`]).
+    pub subroutine_files: usize,
 }
 
 /// How to read a program beyond its text.
@@ -526,6 +529,7 @@ fn interpret_lines(
     errors.extend(flow_errors);
     // Subroutine files join the program after its own lines.
     let (files, missing) = subfile::load(&o_words, &opts.subroutine_dirs);
+    prog.subroutine_files = files.len();
     // About a move a line in the programs that are long (CAM output): one allocation,
     // not a list copied each time it doubles (mapped at once, see `pages`).
     match &batches {

@@ -37,6 +37,10 @@ pub struct InterpreterSummary {
     pub windows: Option<usize>,
     #[serde(default)]
     pub windows_at_speed: Option<usize>,
+    /// A program sent as it is planned: whose check it was sent on, `launcher` (the
+    /// launcher's, taken: [`crate::checked`]) or `interpreter` (its own).
+    #[serde(default)]
+    pub checked_by: Option<String>,
 }
 
 #[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]

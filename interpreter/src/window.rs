@@ -105,6 +105,8 @@ pub struct Planned {
     /// on exactly (it was held to the speed handed on, or planned the seam's two blocks
     /// otherwise): the blocks there are not bit for bit those of the whole program.
     pub rough_seams: usize,
+    /// How many subroutine files it read ([`program::Program::subroutine_files`]).
+    pub subroutine_files: usize,
 }
 
 /// How [`plan`] reads and where it hands the blocks.
@@ -211,6 +213,7 @@ fn plan_once(
         windows: w.windows,
         at_speed: w.at_speed,
         rough_seams: w.rough_seams,
+        subroutine_files: prog.subroutine_files,
     };
     Ok((planned, in_doubt))
 }

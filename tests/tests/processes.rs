@@ -393,4 +393,11 @@ fn run_reads_subroutines_from_their_own_files() {
     assert_eq!(rep["outcome"], "done", "{rep:#}");
     let len = rep["path_length_mm"].as_f64().unwrap();
     assert!((len - 20.0).abs() < 1e-9, "a 5 mm square: {len} mm");
+    // A file beside the program could change between the launcher's check and the
+    // interpreter's reading: the interpreter checks for itself (`interpreter::checked`).
+    let summary: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(run.join("interpreter.json")).unwrap())
+            .unwrap();
+    assert_eq!(summary["checked_by"], "interpreter", "{summary:#}");
+    assert!(!run.join("checked.json").exists());
 }

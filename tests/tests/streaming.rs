@@ -94,6 +94,11 @@ fn a_program_of_many_windows_runs_whole_and_in_order() {
         assert_eq!(b.seq, i as u64, "block {i} of the log");
     }
     assert_eq!(rep["starvations"].as_u64(), Some(0), "{rep}");
+    // Sent on the launcher's check, not checked twice (`interpreter::checked`).
+    let summary: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("run/interpreter.json")).unwrap())
+            .unwrap();
+    assert_eq!(summary["checked_by"], "launcher", "{summary:#}");
 }
 
 /// A million lines through the stack (about 2.5 minutes here, release build):

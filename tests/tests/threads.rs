@@ -3,6 +3,8 @@
 
 use iceoryx2::prelude::local;
 use interpolator::rt::sched::SchedMode;
+use interpreter::checked::Checked;
+use interpreter::process::Streaming;
 use shared::clock::ClockMode;
 use shared::Machine;
 use std::path::Path;
@@ -13,7 +15,7 @@ fn run_stack(
     dir: &Path,
     program: &str,
 ) -> (interpolator::summary::Summary, servo_sim::run::Summary) {
-    let (i, ipol, servo) = start_stack(dir, program, Duration::from_secs(20), None);
+    let (i, ipol, servo) = start_stack(dir, program, Duration::from_secs(20), Streaming::default());
     let i = i.join().unwrap().unwrap();
     assert_eq!(i.outcome, "done", "{i:?}");
     (
@@ -24,14 +26,21 @@ fn run_stack(
 
 type Joined<T, E> = std::thread::JoinHandle<Result<T, E>>;
 
+/// The interpreter waits `hold` before it reads the program (a long plan).
+fn held(hold: Duration) -> Streaming {
+    Streaming {
+        hold_before_reading: Some(hold),
+        ..Default::default()
+    }
+}
+
 /// The three roles on threads: the interpolator and the drives give up on a stack that
-/// never starts after `start_timeout`; the interpreter waits `hold` before it reads the
-/// program (a long plan).
+/// never starts after `start_timeout`; the interpreter streams as `streaming` says.
 fn start_stack(
     dir: &Path,
     program: &str,
     start_timeout: Duration,
-    hold: Option<Duration>,
+    streaming: Streaming,
 ) -> (
     Joined<interpreter::report::InterpreterSummary, String>,
     Joined<interpolator::summary::Summary, interpolator::rt::cycle::RunError>,
@@ -81,10 +90,6 @@ fn start_stack(
     let ipol =
         std::thread::spawn(move || interpolator::rt::cycle::run::<local::Service>(&ipol_cfg));
     let interp = std::thread::spawn(move || {
-        let streaming = interpreter::process::Streaming {
-            hold_before_reading: hold,
-            ..Default::default()
-        };
         interpreter::process::run_streaming::<local::Service>(&interp_cfg, streaming)
     });
     (interp, ipol, servo)
@@ -101,7 +106,7 @@ fn a_program_that_plans_longer_than_the_start_timeouts_still_runs() {
         &dir,
         "G1 X5 F3000\nM2\n",
         Duration::from_secs(1),
-        Some(Duration::from_secs(4)),
+        held(Duration::from_secs(4)),
     );
     let i = i.join().unwrap().unwrap();
     assert_eq!(i.outcome, "done", "{i:?}");
@@ -126,7 +131,7 @@ fn an_interpreter_that_leaves_before_its_first_block_ends_the_wait_at_once() {
         "G1 X5 F3000\nG1 X\nM2\n",
         Duration::from_secs(60),
         // (Long enough for the interpolator to see the interpreter come on a loaded machine.)
-        Some(Duration::from_secs(2)),
+        held(Duration::from_secs(2)),
     );
     let e = i.join().unwrap().unwrap_err();
     assert!(e.contains(":2:"), "{e}");
@@ -142,6 +147,96 @@ fn an_interpreter_that_leaves_before_its_first_block_ends_the_wait_at_once() {
     );
     // The drives look once every 20 ms; generous for a loaded machine.
     assert!(t.elapsed() < Duration::from_secs(20), "{:?}", t.elapsed());
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// The record `cnc run` writes of its check of `program` (`checked.json` in `dir`).
+fn launchers_check(dir: &Path, program: &str) -> std::path::PathBuf {
+    let machine = Machine::default();
+    let opts = interpreter::program::Options::default();
+    let planned = interpreter::process::check_windows(
+        program,
+        &opts,
+        &machine,
+        1_000_000,
+        &mut |_, _| {},
+        &mut |_, _| {},
+    )
+    .expect("the launcher checks a good program");
+    let digest = interpreter::checked::digest(program.as_bytes(), &mut |_, _| {});
+    let path = dir.join(interpreter::checked::FILE);
+    Checked::of(&planned, digest, false, &machine, 1_000_000)
+        .expect("no file read")
+        .write(&path)
+        .unwrap();
+    path
+}
+
+#[test]
+fn the_launchers_check_is_taken_for_the_text_it_checked() {
+    let dir = temp_dir("thr-checked");
+    let program = "(MSG, hello)\nG1 X5 F3000\nG1 Y5\nM2\n";
+    let checked = launchers_check(&dir, program);
+    let (i, ipol, servo) = start_stack(
+        &dir,
+        program,
+        Duration::from_secs(20),
+        Streaming {
+            checked: Some(checked),
+            ..Default::default()
+        },
+    );
+    let i = i.join().unwrap().unwrap();
+    assert_eq!(i.outcome, "done", "{i:?}");
+    assert_eq!(i.checked_by.as_deref(), Some("launcher"));
+    // What the check found, in the interpreter's summary as when it checks itself.
+    assert_eq!(i.messages, vec![(1, "hello".to_string())]);
+    assert_eq!((i.dialect.as_deref(), i.blocks), (Some("linuxcnc"), 3));
+    assert_eq!(ipol.join().unwrap().unwrap().outcome, "done");
+    assert_eq!(servo.join().unwrap().unwrap().outcome, "done");
+    let (_, sp) = csv(&dir.join("setpoints.csv"));
+    assert_eq!(&sp.last().unwrap()[2..4], &[5.0, 5.0]);
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn a_copy_that_is_not_the_text_checked_is_checked_again_before_any_motion() {
+    // The launcher checked a good program; the interpreter's copy has since changed, and
+    // a line far into it (past the first windows, each ending at a dwell) is bad. Taken
+    // on trust, the first windows would move the machine and the bad line stop it
+    // mid-program: the digest differs, so the interpreter checks the copy itself and
+    // refuses it before anything is sent.
+    let dir = temp_dir("thr-not-checked");
+    let program = |last: &str| {
+        let mut p = String::from("G1 X5 F3000\n");
+        for i in 0..3000 {
+            p.push_str(&format!("G1 Y{}\nG4 P0.01\n", (i % 2) * 5));
+        }
+        p.push_str(last);
+        p.push_str("M2\n");
+        p
+    };
+    let checked = launchers_check(&dir, &program("G1 X6\n"));
+    let (i, ipol, servo) = start_stack(
+        &dir,
+        &program("G1 X\n"),
+        Duration::from_secs(60),
+        Streaming {
+            checked: Some(checked),
+            // (Long enough for the interpolator to see the interpreter come on a loaded
+            // machine, as above.)
+            ..held(Duration::from_secs(2))
+        },
+    );
+    let e = i.join().unwrap().unwrap_err();
+    assert!(e.contains(":6002:"), "{e}");
+    assert!(!e.contains("read again"), "{e}");
+    let e = ipol.join().unwrap().unwrap_err();
+    assert!(e.to_string().starts_with("the interpreter left"), "{e}");
+    let _ = servo.join().unwrap();
+    let rows =
+        std::fs::read_to_string(dir.join("setpoints.csv")).map_or(0, |t| t.lines().skip(1).count());
+    assert_eq!(rows, 0, "set-points sent");
     let _ = std::fs::remove_dir_all(&dir);
 }
 
