@@ -207,6 +207,27 @@ impl Block {
         }
     }
 
+    /// Where a motion block starts and ends: its first and last control points (a
+    /// block's knots are clamped); `None` for any other block.
+    pub fn ends(&self) -> Option<([f64; 3], [f64; 3])> {
+        match self {
+            Block::Straight(s) => Some((s.from, s.to)),
+            Block::Whole(b) if b.kind == BlockKind::Motion as u32 && b.n_ctrl >= 2 => {
+                let xyz = |p: [f64; 4]| [p[0], p[1], p[2]];
+                Some((xyz(b.ctrl[0]), xyz(b.ctrl[b.n_ctrl as usize - 1])))
+            }
+            Block::Whole(_) => None,
+        }
+    }
+
+    /// The planned start and end feeds, mm/min, as they are sent.
+    pub fn planned_feeds(&self) -> (f64, f64) {
+        match self {
+            Block::Straight(s) => (s.start_feed_mm_per_min, s.end_feed_mm_per_min),
+            Block::Whole(b) => (b.start_feed_mm_per_min, b.end_feed_mm_per_min),
+        }
+    }
+
     /// The `FLAG_*` bits, to set or clear.
     pub fn flags_mut(&mut self) -> &mut u32 {
         match self {

@@ -433,9 +433,10 @@ fn a_seam_not_found_again_is_planned_from_its_move() {
     };
     let ghost = blocks::Straight::new(99_999, from, from, false, 1000.0);
     w.seam = Some(Seam {
-        before: ghost,
-        after: ghost,
+        before: Block::Straight(ghost),
+        after: Block::Straight(ghost),
         move_at: 150,
+        anchor: Anchor::Start,
     });
     w.plan(moves.clone());
     assert_eq!(w.rough_seams, 1);
@@ -454,4 +455,124 @@ fn a_seam_not_found_again_is_planned_from_its_move() {
         b
     };
     assert_eq!(handed.len(), whole.len());
+}
+
+/// A chain of `n` cubic `G5.2` curves along a sine wave, each its own move, joined with
+/// the same tangent (no rest, no straight move anywhere).
+fn wave(n: usize) -> String {
+    let mut s = String::from("G21 G90 G17\nG0 X0 Y0 Z0\nG64\nF3000\n");
+    let y = |x: f64| (0.7 * x).sin();
+    let dy = |x: f64| 0.7 * (0.7 * x).cos();
+    for i in 0..n {
+        let (x0, x1) = (i as f64 * 0.5, i as f64 * 0.5 + 0.5);
+        let h = 0.5 / 3.0;
+        let _ = writeln!(s, "G5.2 X{:.6} Y{:.6} P1 L4", x0 + h, y(x0) + h * dy(x0));
+        let _ = writeln!(s, "X{:.6} Y{:.6} P1", x1 - h, y(x1) - h * dy(x1));
+        let _ = writeln!(s, "X{:.6} Y{:.6} P1", x1, y(x1));
+        s.push_str("G5.3\n");
+    }
+    s.push_str("M2\n");
+    s
+}
+
+/// A zigzag of `n` lines turning 60° at each corner, every corner blended under
+/// `G64 P0.05`: no two straight moves meet whole anywhere.
+fn zigzag(n: usize) -> String {
+    let mut s = String::from("G21 G90 G17\nG0 X0 Y0 Z0\nG64 P0.05\nG1 F3000\n");
+    for i in 1..=n {
+        let _ = writeln!(s, "G1 X{:.4} Y{:.4}", i as f64 * 0.3, (i % 2) as f64 * 0.2);
+    }
+    s.push_str("M2\n");
+    s
+}
+
+/// Stretches with no rest where no two straight moves meet whole: a chain of curves
+/// (each its own move, joined with the same tangent), and a zigzag whose every corner
+/// `G64 P` blends (each line a blend of its corner with the next, cut where the next
+/// blend starts). Each is cut at speed, at the start of a curve or on a line, a window
+/// at a time, the blocks the whole program's bit for bit but where a seam is rough.
+/// Before, either was held whole (one window of 801 and 1 002 blocks).
+#[test]
+fn a_long_curve_and_a_chain_of_blends_are_cut_at_speed() {
+    for (mname, machine) in machines() {
+        for (pname, text) in [("wave", wave(800)), ("zigzag", zigzag(1000))] {
+            let a = at_speed(&text, &machine, 200);
+            assert!(a.at_speed >= 4, "{mname} {pname}: {} at speed", a.at_speed);
+            assert!(a.most <= 200, "{mname} {pname}: {} blocks at once", a.most);
+            // Curves' share rounds may reach across a seam: a rough seam there plans a
+            // few blocks otherwise (one of nine on the wave on the built-in machine, 22
+            // blocks, 0.9997 of the time), still a plan of its own, the path joined.
+            assert!(a.rough <= 1, "{mname} {pname}: {} rough seams", a.rough);
+            assert!(a.differ == 0 || a.rough > 0, "{mname} {pname}");
+            assert!(
+                (a.time_ratio - 1.0).abs() < 1e-3,
+                "{mname} {pname}: {} of the whole plan's time",
+                a.time_ratio
+            );
+        }
+    }
+}
+
+/// Where the next window has not the seam's two blocks and the seam lies on a line (a
+/// blend starting inside it), the moves are planned again from the seam on: the line
+/// from the seam's point, then the rest. The blocks handed on start there.
+#[test]
+fn a_seam_on_a_line_not_found_again_is_planned_from_its_point() {
+    let text = zigzag(400);
+    let machine = Machine::default();
+    let moves = program::interpret(&text).unwrap().moves;
+    let mut handed: Vec<Block> = Vec::new();
+    let mut hand = |b: Vec<Block>, _| handed.extend(b);
+    let mut w = Windows {
+        machine: &machine,
+        period_ns: PERIOD_NS,
+        pending: Vec::new(),
+        scan: Scan::default(),
+        seq: 0,
+        windows: 0,
+        checker: Checker::new(&text, &machine),
+        feeds: crate::process::FeedNotes::new(&machine),
+        hand: &mut hand,
+        clean: true,
+        seam: None,
+        at_speed_from: usize::MAX,
+        at_speed: 0,
+        rough_seams: 0,
+    };
+    // A seam a third of the way along the line of move 150, whose blocks are nowhere
+    // (their line numbers are not the program's).
+    let Move::Line { from, to, .. } = moves[150].clone() else {
+        panic!("{:?}", moves[150])
+    };
+    let p = [0, 1, 2].map(|i| from[i] + (to[i] - from[i]) / 3.0);
+    let ghost = Block::Straight(blocks::Straight::new(99_999, p, p, false, 1000.0));
+    w.seam = Some(Seam {
+        before: ghost.clone(),
+        after: ghost,
+        move_at: 150,
+        anchor: Anchor::On,
+    });
+    w.plan(moves.clone());
+    assert_eq!(w.rough_seams, 1);
+    drop(w);
+    assert_eq!(
+        handed[0].ends().map(|e| e.0),
+        Some(p),
+        "the first block starts at the seam's point"
+    );
+    let mut rest = vec![mode_before(&moves, 150).unwrap()];
+    let mut on = moves[150].clone();
+    if let Move::Line { from, .. } = &mut on {
+        *from = p;
+    }
+    rest.push(on);
+    rest.extend_from_slice(&moves[151..]);
+    let mut whole = blocks::build(&rest, &machine);
+    blocks::plan(&mut whole, &machine, PERIOD_NS);
+    let (a, b) = (commands(&handed), commands(&whole));
+    assert_eq!(a.len(), b.len());
+    assert!(a
+        .iter()
+        .zip(&b)
+        .all(|(x, y)| shared::cmdlog::same_bits(x, y)));
 }
