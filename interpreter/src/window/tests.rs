@@ -402,6 +402,31 @@ fn a_pass_gone_over_again_is_never_taken_for_the_seam() {
 /// Where the next window has not the seam's two blocks (its corner blended otherwise),
 /// the moves are planned again from the seam's move: the blocks handed on start where
 /// the last handed on ended, and the seam is counted rough.
+/// Windows over `text` handing their blocks to `hand`, none planned at speed unless a
+/// test plans it.
+fn windows_of<'a, 'h>(
+    text: &'a str,
+    machine: &'a Machine,
+    hand: &'h mut dyn FnMut(Vec<Block>, usize),
+) -> Windows<'a, 'h> {
+    Windows {
+        machine,
+        period_ns: PERIOD_NS,
+        pending: Vec::new(),
+        scan: Scan::default(),
+        seq: 0,
+        windows: 0,
+        checker: Checker::new(text, machine),
+        feeds: crate::process::FeedNotes::new(machine),
+        hand,
+        clean: true,
+        seam: None,
+        at_speed_from: usize::MAX,
+        at_speed: 0,
+        rough_seams: 0,
+    }
+}
+
 #[test]
 fn a_seam_not_found_again_is_planned_from_its_move() {
     let text = spiral(400, "G64");
@@ -410,22 +435,7 @@ fn a_seam_not_found_again_is_planned_from_its_move() {
     let moves = prog.moves;
     let mut handed: Vec<Block> = Vec::new();
     let mut hand = |b: Vec<Block>, _| handed.extend(b);
-    let mut w = Windows {
-        machine: &machine,
-        period_ns: PERIOD_NS,
-        pending: Vec::new(),
-        scan: Scan::default(),
-        seq: 0,
-        windows: 0,
-        checker: Checker::new(&text, &machine),
-        feeds: crate::process::FeedNotes::new(&machine),
-        hand: &mut hand,
-        clean: true,
-        seam: None,
-        at_speed_from: usize::MAX,
-        at_speed: 0,
-        rough_seams: 0,
-    };
+    let mut w = windows_of(&text, &machine, &mut hand);
     // A seam whose blocks are nowhere (their line numbers are not the program's), at
     // the move of index 150.
     let Move::Line { from, .. } = moves[150].clone() else {
@@ -523,22 +533,7 @@ fn a_seam_on_a_line_not_found_again_is_planned_from_its_point() {
     let moves = program::interpret(&text).unwrap().moves;
     let mut handed: Vec<Block> = Vec::new();
     let mut hand = |b: Vec<Block>, _| handed.extend(b);
-    let mut w = Windows {
-        machine: &machine,
-        period_ns: PERIOD_NS,
-        pending: Vec::new(),
-        scan: Scan::default(),
-        seq: 0,
-        windows: 0,
-        checker: Checker::new(&text, &machine),
-        feeds: crate::process::FeedNotes::new(&machine),
-        hand: &mut hand,
-        clean: true,
-        seam: None,
-        at_speed_from: usize::MAX,
-        at_speed: 0,
-        rough_seams: 0,
-    };
+    let mut w = windows_of(&text, &machine, &mut hand);
     // A seam a third of the way along the line of move 150, whose blocks are nowhere
     // (their line numbers are not the program's).
     let Move::Line { from, to, .. } = moves[150].clone() else {
