@@ -67,6 +67,12 @@ pub fn digest(bytes: &[u8], release: &mut dyn FnMut(usize, usize)) -> u64 {
     h.digest()
 }
 
+/// The digest of a program's text: `mapped`'s (its pages given back behind) where the
+/// file is mapped, else `text`'s.
+pub(crate) fn digest_of(mapped: Option<&crate::mapped::MappedText>, text: &str) -> u64 {
+    mapped.map_or_else(|| digest(text.as_bytes(), &mut |_, _| {}), |m| m.digest())
+}
+
 fn hex(digest: u64) -> String {
     format!("{digest:016x}")
 }

@@ -434,10 +434,7 @@ fn run_inner(args: &RunArgs) -> Result<bool, String> {
             .map(|(p, cycles)| {
                 eprint!("{}", process::format_notes(&src.name, &p.notes));
                 if args.repeat <= 1 {
-                    let digest = mapped.as_ref().map_or_else(
-                        || crate::checked::digest(text.as_bytes(), &mut |_, _| {}),
-                        |m| m.digest(),
-                    );
+                    let digest = crate::checked::digest_of(mapped.as_ref(), text);
                     handed = crate::checked::Checked::of(
                         &p,
                         digest,

@@ -670,10 +670,7 @@ impl ProgramText {
 
     /// Its [`crate::checked::digest`].
     pub fn digest(&self) -> u64 {
-        self.mapped.as_ref().map_or_else(
-            || crate::checked::digest(self.read.as_bytes(), &mut |_, _| {}),
-            |m| m.digest(),
-        )
+        crate::checked::digest_of(self.mapped.as_ref(), &self.read)
     }
 
     /// Gives back the pages of bytes `from..to` (see

@@ -170,22 +170,7 @@ fn plan_once(
     hand: &mut dyn FnMut(Vec<Block>, usize),
     release: &mut dyn FnMut(usize, usize),
 ) -> Result<(Planned, bool), Vec<Diagnostic>> {
-    let mut w = Windows {
-        machine,
-        period_ns,
-        pending: Vec::new(),
-        scan: Scan::default(),
-        seq: 0,
-        windows: 0,
-        checker: Checker::new(text, machine),
-        feeds: crate::process::FeedNotes::new(machine),
-        hand,
-        clean: true,
-        seam: None,
-        at_speed_from: machine.plan_window_moves as usize,
-        at_speed: 0,
-        rough_seams: 0,
-    };
+    let mut w = Windows::new(text, machine, period_ns, hand);
     let mut in_doubt = false;
     let read = {
         let mut sink = |moves: Vec<Move>, r: program::Read| {
@@ -336,6 +321,33 @@ struct Scan {
     cuts: Vec<(usize, Option<Move>)>,
 }
 
+impl<'a, 'h> Windows<'a, 'h> {
+    /// Nothing read yet of `text`; blocks handed to `hand`.
+    fn new(
+        text: &'a str,
+        machine: &'a Machine,
+        period_ns: u64,
+        hand: &'h mut dyn FnMut(Vec<Block>, usize),
+    ) -> Self {
+        Windows {
+            machine,
+            period_ns,
+            pending: Vec::new(),
+            scan: Scan::default(),
+            seq: 0,
+            windows: 0,
+            checker: Checker::new(text, machine),
+            feeds: crate::process::FeedNotes::new(machine),
+            hand,
+            clean: true,
+            seam: None,
+            at_speed_from: machine.plan_window_moves as usize,
+            at_speed: 0,
+            rough_seams: 0,
+        }
+    }
+}
+
 impl Windows<'_, '_> {
     /// Takes the moves read next, and plans every window they complete.
     fn take(&mut self, moves: Vec<Move>) {
@@ -365,8 +377,8 @@ impl Windows<'_, '_> {
         };
         // Each window to its cut; what follows the last stays, the mode in force put
         // before it.
-        let mut rest = self.pending.split_off(last);
-        let mut done = std::mem::take(&mut self.pending);
+        let mode = cuts.last().and_then(|(_, m)| m.clone());
+        let mut done = self.keep_from(last, mode);
         let mut windows = Vec::with_capacity(cuts.len());
         for &(at, _) in cuts.iter().rev() {
             windows.push(done.split_off(at));
@@ -377,17 +389,6 @@ impl Windows<'_, '_> {
         windows.pop();
         // `windows[0]` is what came before the first cut, `windows[k]` starts at cut
         // `k - 1`.
-        let mode = cuts.last().and_then(|(_, m)| m.clone());
-        let off = usize::from(mode.is_some());
-        if let Some(m) = mode {
-            rest.insert(0, m);
-        }
-        // What was looked at keeps its place in what is left (the motion last looked
-        // at is at the last cut or after it).
-        let shift = |i: usize| i - last + off;
-        self.scan.upto = shift(self.scan.upto);
-        self.scan.last = self.scan.last.map(|(i, c)| (shift(i), c));
-        self.pending = rest;
         for (k, mut window) in windows.into_iter().enumerate() {
             if let Some(Some(m)) = k.checked_sub(1).map(|c| cuts[c].1.clone()) {
                 window.insert(0, m);
@@ -395,6 +396,21 @@ impl Windows<'_, '_> {
             self.plan(window);
         }
         self.plan_at_speed_while_long();
+    }
+
+    /// Keeps the moves held from `at` on, `mode` (the path mode in force there) put
+    /// before them, what was looked at keeping its place (the motion last looked at is
+    /// at `at` or after it); gives back the moves before `at`.
+    fn keep_from(&mut self, at: usize, mode: Option<Move>) -> Vec<Move> {
+        let mut rest = self.pending.split_off(at);
+        let off = usize::from(mode.is_some());
+        if let Some(m) = mode {
+            rest.insert(0, m);
+        }
+        let shift = |i: usize| i - at + off;
+        self.scan.upto = shift(self.scan.upto);
+        self.scan.last = self.scan.last.map(|(i, m)| (shift(i), m));
+        std::mem::replace(&mut self.pending, rest)
     }
 
     /// [`Windows::plan_at_speed`] for as long as the moves held (with no rest among
@@ -529,19 +545,12 @@ impl Windows<'_, '_> {
         // The moves from the context's start on stay, the mode in force there first.
         let c = self.context_start(s);
         let mode = mode_before(&self.pending, c);
-        let mut rest = self.pending.split_off(c);
         let off = usize::from(mode.is_some());
-        if let Some(m) = mode {
-            rest.insert(0, m);
-        }
-        let shift = |i: usize| i - c + off;
-        self.scan.upto = shift(self.scan.upto);
-        self.scan.last = self.scan.last.map(|(i, m)| (shift(i), m));
-        self.pending = rest;
+        self.keep_from(c, mode);
         self.seam = Some(Seam {
             before,
             after,
-            move_at: shift(s),
+            move_at: s - c + off,
             anchor,
         });
         // The next window holds half a window's moves beyond what this one planned.

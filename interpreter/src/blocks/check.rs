@@ -134,20 +134,6 @@ impl<'a> Checker<'a> {
         }
     }
 
-    /// A fault of ours found at `line` (`internal`).
-    pub fn internal(&mut self, line: u32, message: String) {
-        self.found.push((
-            Diagnostic {
-                file: None,
-                line,
-                col: 1,
-                rule: "internal",
-                message,
-            },
-            None,
-        ));
-    }
-
     /// No problem found so far.
     pub fn is_clean(&self) -> bool {
         self.found.is_empty()

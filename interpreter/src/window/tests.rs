@@ -13,44 +13,9 @@ type Outcome = (Vec<CommandBlock>, Vec<String>, usize, Vec<(u32, String)>);
 /// The blocks and the problems of `text` read `every` moves at a time, and the number of
 /// windows it was planned in.
 fn planned(text: &str, opts: &Options, machine: &Machine, every: usize) -> Outcome {
-    let mut all = Vec::new();
-    let mut seqs = Vec::new();
-    let got = crate::process::check_streaming(
-        text,
-        opts,
-        machine,
-        PERIOD_NS,
-        Stream {
-            every,
-            blocks: &mut |mut b, first| {
-                // Read again from the start (a Fanuc program's dwell in doubt).
-                if first == 0 {
-                    all.clear();
-                    seqs.clear();
-                }
-                seqs.push((first, b.len()));
-                all.append(&mut b);
-            },
-            release: &mut |_, _| {},
-        },
-    );
-    // The windows follow each other, each numbered from the end of the one before.
-    let mut next = 0;
-    for (first, n) in &seqs {
-        assert_eq!(*first, next, "windows out of order: {seqs:?}");
-        next += n;
-    }
-    match got {
-        Ok(p) => {
-            assert_eq!(p.blocks, all.len());
-            (commands(&all), Vec::new(), p.windows, p.notes)
-        }
-        Err(d) => (
-            Vec::new(),
-            d.iter().map(|d| d.to_string()).collect(),
-            0,
-            Vec::new(),
-        ),
+    match planned_at(text, opts, machine, every) {
+        (blocks, bad, Some((p, _))) => (blocks, bad, p.windows, p.notes),
+        (blocks, bad, None) => (blocks, bad, 0, Vec::new()),
     }
 }
 
@@ -249,9 +214,12 @@ fn planned_at(
         Stream {
             every,
             blocks: &mut |mut b, first| {
+                // Read again from the start (a Fanuc program's dwell in doubt).
                 if first == 0 {
                     all.clear();
                 }
+                // The windows follow each other, each numbered from the end of the one
+                // before.
                 assert_eq!(first, all.len(), "windows out of order");
                 most = most.max(b.len());
                 all.append(&mut b);
@@ -260,7 +228,10 @@ fn planned_at(
         },
     );
     match got {
-        Ok(p) => (commands(&all), Vec::new(), Some((p, most))),
+        Ok(p) => {
+            assert_eq!(p.blocks, all.len());
+            (commands(&all), Vec::new(), Some((p, most)))
+        }
         Err(d) => (Vec::new(), d.iter().map(|d| d.to_string()).collect(), None),
     }
 }
@@ -410,20 +381,8 @@ fn windows_of<'a, 'h>(
     hand: &'h mut dyn FnMut(Vec<Block>, usize),
 ) -> Windows<'a, 'h> {
     Windows {
-        machine,
-        period_ns: PERIOD_NS,
-        pending: Vec::new(),
-        scan: Scan::default(),
-        seq: 0,
-        windows: 0,
-        checker: Checker::new(text, machine),
-        feeds: crate::process::FeedNotes::new(machine),
-        hand,
-        clean: true,
-        seam: None,
         at_speed_from: usize::MAX,
-        at_speed: 0,
-        rough_seams: 0,
+        ..Windows::new(text, machine, PERIOD_NS, hand)
     }
 }
 
