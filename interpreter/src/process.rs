@@ -868,13 +868,15 @@ pub fn run_streaming<S: Service>(
             pace,
         ),
     };
+    // What was sent before an error ended the sending: the blocks logged, each as it went.
+    let logged = log.blocks();
     log.finish()
         .map_err(|e| format!("writing commands.log: {e}"))?;
     let interpolator_stopped = matches!(result, Ok((Finish::Fault, _)));
     let (fault, sent) = match result {
         Ok((Finish::Done, n)) => (None, n),
         Ok((Finish::Fault, n)) => (Some("the interpolator stopped with a fault".to_string()), n),
-        Err(e) => (Some(e.to_string()), 0),
+        Err(e) => (Some(e.to_string()), logged),
     };
     match &fault {
         None => tracing::info!(

@@ -98,6 +98,8 @@ pub struct Header {
 
 pub struct CommandLog {
     out: BufWriter<File>,
+    /// Blocks appended so far.
+    blocks: u64,
 }
 
 impl CommandLog {
@@ -123,7 +125,7 @@ impl CommandLog {
         h.extend_from_slice(&crc.to_le_bytes());
         out.write_all(&h)?;
         out.flush()?;
-        Ok(CommandLog { out })
+        Ok(CommandLog { out, blocks: 0 })
     }
 
     pub fn append(&mut self, b: &CommandBlock) -> std::io::Result<()> {
@@ -132,7 +134,15 @@ impl CommandLog {
         self.out.write_all(&crc32c(payload).to_le_bytes())?;
         self.out.write_all(payload)?;
         // Handed to the kernel at once: a killed interpreter loses no block it sent.
-        self.out.flush()
+        self.out.flush()?;
+        self.blocks += 1;
+        Ok(())
+    }
+
+    /// How many blocks have been appended (each block is appended as it is sent, so this
+    /// is the count sent, also when the sending ended in an error).
+    pub fn blocks(&self) -> u64 {
+        self.blocks
     }
 
     /// Flushes and syncs to disk.

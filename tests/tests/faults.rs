@@ -192,6 +192,55 @@ fn killed_interpolator_is_noticed_and_the_drives_hold() {
     kill_mid_run("interpolator");
 }
 
+/// The interpreter's summary counts the blocks it sent when the sending ends in an error
+/// (the interpolator killed while blocks were still to go): the blocks of the command log,
+/// not the program's. It said the program's count, and its log `blocks_sent=0`.
+#[test]
+fn a_killed_interpolator_leaves_the_count_of_blocks_sent_in_the_interpreters_summary() {
+    let dir = temp_dir("kill-count");
+    // 3000 zigzag moves of about 1 mm at F3000: far more blocks than the queue holds.
+    let mut text = String::from("G21 G90\nF3000\n");
+    for i in 1..=3000 {
+        text.push_str(&format!("G1 X{} Y{:.1}\n", i % 2, i as f64 * 0.2));
+    }
+    text.push_str("M2\n");
+    let prog = write_program(&dir, &text);
+    let run = dir.join("run");
+    let mut child = Command::new(cnc_exe())
+        .args(["run", "--sched", "other", "--no-report", "--out"])
+        .arg(&run)
+        .arg(&prog)
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    wait_until("the run to move", Duration::from_secs(60), || {
+        std::fs::metadata(run.join("setpoints.csv")).map_or(0, |m| m.len()) > 20_000
+    });
+    let pid = role_pids(child.id())
+        .into_iter()
+        .find(|(r, _)| r == "interpolator")
+        .expect("no interpolator process")
+        .1;
+    // SAFETY: kill(2) on a process this test's child started.
+    assert_eq!(unsafe { libc::kill(pid as i32, libc::SIGKILL) }, 0);
+    wait_exit(&mut child, "cnc run to end");
+    let logged = shared::cmdlog::read(&run.join("commands.log"))
+        .expect("the command log reads clean")
+        .blocks
+        .len();
+    let interp: Value =
+        serde_json::from_str(&std::fs::read_to_string(run.join("interpreter.json")).unwrap())
+            .unwrap();
+    assert_eq!(interp["outcome"], "fault", "{interp:#}");
+    assert!(
+        logged > 0 && logged < 3000,
+        "killed with blocks still to send: {logged} logged"
+    );
+    assert_eq!(interp["blocks"].as_u64(), Some(logged as u64), "{interp:#}");
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
 /// A valid one-block line from the origin, to be spoiled field by field.
 fn good_block() -> CommandBlock {
     tests::line_block(0, 1)
