@@ -54,6 +54,9 @@ pub struct Checked {
     pub windows: usize,
     pub windows_at_speed: usize,
     pub rough_seams: usize,
+    /// ([`Planned::short_windows`]; absent in records older than it.)
+    #[serde(default)]
+    pub short_windows: usize,
 }
 
 /// The digest of `bytes` (see the module page), `release` told of each stretch of them
@@ -100,6 +103,7 @@ impl Checked {
             windows: planned.windows,
             windows_at_speed: planned.at_speed,
             rough_seams: planned.rough_seams,
+            short_windows: planned.short_windows,
         })
     }
 
@@ -150,6 +154,7 @@ impl Checked {
             windows: self.windows,
             at_speed: self.windows_at_speed,
             rough_seams: self.rough_seams,
+            short_windows: self.short_windows,
             subroutine_files: 0,
         })
     }

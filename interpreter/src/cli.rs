@@ -462,6 +462,7 @@ pub fn main() -> ExitCode {
             };
             if let Ok((planned, _)) = &checked {
                 eprint!("{}", process::format_notes(&src.name, &planned.notes));
+                eprint!("{}", process::format_windows(&src.name, planned, &machine));
             }
             match checked {
                 Ok((planned, Some(est))) => match est {

@@ -433,6 +433,7 @@ fn run_inner(args: &RunArgs) -> Result<bool, String> {
         planned
             .map(|(p, cycles)| {
                 eprint!("{}", process::format_notes(&src.name, &p.notes));
+                eprint!("{}", process::format_windows(&src.name, &p, &machine));
                 if args.repeat <= 1 {
                     let digest = crate::checked::digest_of(mapped.as_ref(), text);
                     handed = crate::checked::Checked::of(

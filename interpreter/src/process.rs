@@ -343,6 +343,19 @@ pub fn format_notes(name: &str, notes: &[(u32, String)]) -> String {
         .collect()
 }
 
+/// What the planning in windows says to the user: where the machine's look-ahead
+/// (`plan_window_moves`) is too short for the feed ([`Planned::short_windows`]), a
+/// note naming the machine file's key; nothing otherwise.
+pub fn format_windows(name: &str, planned: &Planned, machine: &Machine) -> String {
+    if planned.short_windows == 0 {
+        return String::new();
+    }
+    format!(
+        "{name}: note: the look-ahead (plan_window_moves = {} in the machine file) is shorter than the braking from the feed in {} of the {} windows planned at speed: the feed drops towards the end of each so the machine can stop within what it holds, and the program takes longer than with a longer look-ahead\n",
+        machine.plan_window_moves, planned.short_windows, planned.at_speed
+    )
+}
+
 /// A program ready to send: its blocks and what the reports say about it. The blocks are
 /// [`CommandBlock`]s for [`compile_source`], and held compact ([`Block`]: a straight move
 /// in its few numbers, not the 1.6 kB payload) for [`compile_compact`], which the
@@ -628,7 +641,7 @@ enum Sent {
     Streamed {
         text: std::sync::Arc<ProgramText>,
         opts: program::Options,
-        planned: Planned,
+        planned: Box<Planned>,
     },
 }
 
@@ -701,6 +714,7 @@ pub fn run_streaming<S: Service>(
     let mut max_scallop_mm = None;
     let mut notes = Vec::new();
     let mut windows = (None, None);
+    let mut seams = (None, None);
     let mut checked_by = None;
     let (name, sent_blocks, messages) = match &cfg.replay {
         Some(log) => {
@@ -811,6 +825,7 @@ pub fn run_streaming<S: Service>(
                 dialect = Some(planned.dialect.name().to_string());
                 notes = planned.notes.clone();
                 windows = (Some(planned.windows), Some(planned.at_speed));
+                seams = (Some(planned.rough_seams), Some(planned.short_windows));
                 let messages = planned.messages.clone();
                 let opts = program::Options {
                     dialect: Some(planned.dialect),
@@ -821,7 +836,7 @@ pub fn run_streaming<S: Service>(
                     Sent::Streamed {
                         text,
                         opts,
-                        planned,
+                        planned: Box::new(planned),
                     },
                     messages,
                 )
@@ -907,6 +922,8 @@ pub fn run_streaming<S: Service>(
         max_scallop_mm,
         windows: windows.0,
         windows_at_speed: windows.1,
+        rough_seams: seams.0,
+        short_windows: seams.1,
         checked_by: checked_by.map(str::to_string),
     };
     write_summary(cfg, &summary)?;
@@ -1038,6 +1055,8 @@ fn nothing_sent(cfg: &Config, program: &str, why: String) -> String {
             max_scallop_mm: None,
             windows: None,
             windows_at_speed: None,
+            rough_seams: None,
+            short_windows: None,
             checked_by: None,
         };
         if let Err(e) = write_summary(cfg, &summary) {

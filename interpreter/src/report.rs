@@ -37,6 +37,13 @@ pub struct InterpreterSummary {
     pub windows: Option<usize>,
     #[serde(default)]
     pub windows_at_speed: Option<usize>,
+    /// Of the windows cut at speed, those planned otherwise than the whole program
+    /// would be at the seam ([`crate::window::Planned::rough_seams`]), and those shorter
+    /// than the braking from the feed ([`crate::window::Planned::short_windows`]).
+    #[serde(default)]
+    pub rough_seams: Option<usize>,
+    #[serde(default)]
+    pub short_windows: Option<usize>,
     /// A program sent as it is planned: whose check it was sent on, `launcher` (the
     /// launcher's, taken: [`crate::checked`]) or `interpreter` (its own).
     #[serde(default)]

@@ -71,19 +71,18 @@ fn next_run_works_and_the_dead_node_is_gone(dir: &Path, killed_pid: u32) {
     );
 }
 
-fn kill_mid_run(role: &str) {
-    let dir = temp_dir(&format!("kill-{role}"));
-    let prog = write_program(&dir, DIAGONAL);
-    let run = dir.join("run");
-    let mut child = Command::new(cnc_exe())
+/// `cnc run` of `prog` into `run`, moving for a while (500 set-points written, 25 mm
+/// along at F3000), then its `role` process killed without warning: the launcher and the
+/// killed process's pid.
+fn killed_mid_run(prog: &Path, run: &Path, role: &str) -> (Child, u32) {
+    let child = Command::new(cnc_exe())
         .args(["run", "--sched", "other", "--no-report", "--out"])
-        .arg(&run)
-        .arg(&prog)
+        .arg(run)
+        .arg(prog)
         .stdout(Stdio::piped())
         .stderr(Stdio::piped())
         .spawn()
         .unwrap();
-    // Moving for a while (500 set-points written, 25 mm along), then kill without warning.
     wait_until("the run to move", Duration::from_secs(60), || {
         std::fs::metadata(run.join("setpoints.csv")).map_or(0, |m| m.len()) > 20_000
     });
@@ -94,6 +93,14 @@ fn kill_mid_run(role: &str) {
         .1;
     // SAFETY: kill(2) on a process this test's child started.
     assert_eq!(unsafe { libc::kill(pid as i32, libc::SIGKILL) }, 0);
+    (child, pid)
+}
+
+fn kill_mid_run(role: &str) {
+    let dir = temp_dir(&format!("kill-{role}"));
+    let prog = write_program(&dir, DIAGONAL);
+    let run = dir.join("run");
+    let (mut child, pid) = killed_mid_run(&prog, &run, role);
     let status = wait_exit(&mut child, "cnc run to end");
     let out = child.wait_with_output().unwrap();
     let stdout = String::from_utf8_lossy(&out.stdout);
@@ -206,24 +213,7 @@ fn a_killed_interpolator_leaves_the_count_of_blocks_sent_in_the_interpreters_sum
     text.push_str("M2\n");
     let prog = write_program(&dir, &text);
     let run = dir.join("run");
-    let mut child = Command::new(cnc_exe())
-        .args(["run", "--sched", "other", "--no-report", "--out"])
-        .arg(&run)
-        .arg(&prog)
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .unwrap();
-    wait_until("the run to move", Duration::from_secs(60), || {
-        std::fs::metadata(run.join("setpoints.csv")).map_or(0, |m| m.len()) > 20_000
-    });
-    let pid = role_pids(child.id())
-        .into_iter()
-        .find(|(r, _)| r == "interpolator")
-        .expect("no interpolator process")
-        .1;
-    // SAFETY: kill(2) on a process this test's child started.
-    assert_eq!(unsafe { libc::kill(pid as i32, libc::SIGKILL) }, 0);
+    let (mut child, _) = killed_mid_run(&prog, &run, "interpolator");
     wait_exit(&mut child, "cnc run to end");
     let logged = shared::cmdlog::read(&run.join("commands.log"))
         .expect("the command log reads clean")

@@ -276,6 +276,7 @@ struct AtSpeed {
     blocks: usize,
     at_speed: usize,
     rough: usize,
+    short: usize,
     most: usize,
     differ: usize,
     time_ratio: f64,
@@ -303,6 +304,7 @@ fn at_speed(text: &str, machine: &Machine, moves: u32) -> AtSpeed {
         blocks: cut.len(),
         at_speed: p.at_speed,
         rough: p.rough_seams,
+        short: p.short_windows,
         most,
         differ,
         time_ratio: t(&cut) / t(&whole),
@@ -311,38 +313,44 @@ fn at_speed(text: &str, machine: &Machine, moves: u32) -> AtSpeed {
 
 /// A stretch with no rest far longer than the plan window (a spiral of short lines,
 /// each turning below the corner angle, or blended under `G64 P`) is planned a window
-/// at a time, each cut at speed: never more than a window handed on at once (before,
-/// the whole stretch was one window). With a window longer than the plan's braking
-/// from the feed (the seams at junction speed), the blocks are the whole program's bit
-/// for bit; with a window too short for it (64 moves of 0.2 mm at 50 mm/s on the
-/// built-in machine), the path still joins at every seam and the plan is at most 8 %
-/// slower (7.7 % measured).
+/// at a time, each cut at speed where the plan holds its junction's speed, before the
+/// window's final braking: the blocks are the whole program's bit for bit. Where the
+/// braking takes more moves than the window (3000 lines of 0.2 mm on the built-in
+/// machine, whose jerk lets a block of 0.04 mm change its speed by 1.5 mm/min), the
+/// window grows until it takes the braking in, up to `GROW_MAX` times: before, a seam
+/// was taken inside the braking, each window slowed the next, and the plan of a window
+/// of 64 moves was 7.7 % slower than the whole one (20 000 lines in windows of 512:
+/// 16 %; of 64: 102 %).
 #[test]
 fn a_stretch_with_no_rest_is_cut_at_speed() {
     let g64 = spiral(3000, "G64");
     for (mname, machine) in machines() {
         let a = at_speed(&g64, &machine, 1000);
-        assert!(a.at_speed >= 2, "{mname}: {} windows at speed", a.at_speed);
-        assert!(a.most <= 1000, "{mname}: {} blocks at once", a.most);
-        assert_eq!((a.rough, a.differ), (0, 0), "{mname}");
+        assert!(a.at_speed >= 1, "{mname}: {} windows at speed", a.at_speed);
+        assert!(
+            a.most <= GROW_MAX * 1000,
+            "{mname}: {} blocks at once",
+            a.most
+        );
+        assert_eq!((a.rough, a.differ, a.short), (0, 0, 0), "{mname}");
     }
     let (_, builtin) = &machines()[0];
     let a = at_speed(&g64, builtin, 64);
+    assert!(a.at_speed >= 1, "{} windows at speed", a.at_speed);
+    // (The next window holds half a window beyond the last: at most two grown ones.)
+    assert!(a.most <= 2 * GROW_MAX * 64, "{} blocks at once", a.most);
+    assert_eq!((a.rough, a.differ), (0, 0), "the whole plan's blocks");
+    assert_eq!(a.time_ratio, 1.0);
+    // LinuxCNC's machine (no jerk limit) brakes within a few moves: its windows of 64
+    // stay short.
+    let (_, lcnc) = &machines()[1];
+    let a = at_speed(&g64, lcnc, 64);
     assert!(a.at_speed >= 40, "{} windows at speed", a.at_speed);
     // (A seam keeps 64 moves before it to plan again: a window this short waits for
     // twice as many.)
     assert!(a.most <= 128, "{} blocks at once", a.most);
-    assert!(
-        a.rough > 0 && a.differ > 0,
-        "a window too short to plan as the whole"
-    );
-    assert!(
-        (1.0..1.08).contains(&a.time_ratio),
-        "{} of the whole plan's time",
-        a.time_ratio
-    );
+    assert_eq!((a.rough, a.differ, a.short), (0, 0, 0));
     // Blended corners: a seam only where two lines meet unblended.
-    let (_, lcnc) = &machines()[1];
     let a = at_speed(&spiral(1500, "G64 P0.01"), lcnc, 256);
     assert!(a.blocks > 2000, "{} blocks: blends kept", a.blocks);
     assert!(a.at_speed >= 1, "{} windows at speed", a.at_speed);
