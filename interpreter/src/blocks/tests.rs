@@ -861,3 +861,34 @@ fn the_curvature_rate_of_a_circle_is_its_closed_form() {
         assert!(err < 1e-12, "{u}: {got:?} vs {want:?} ({err:e})");
     }
 }
+
+/// Machining time of `text` on the built-in machine, planned whole (`cnc check
+/// --estimate`).
+fn time_s(text: &str) -> f64 {
+    let b = planned(text);
+    crate::estimate::estimate(&b, &Machine::default(), 1_000_000)
+        .expect("the estimate")
+        .time_s
+}
+
+/// A braking over many short blocks is one braking, as the interpolator runs it with its
+/// acceleration carried across their ends, not a braking from rest acceleration to rest
+/// acceleration in each block: 40 mm of `G1` at F3000 cut into 1000 collinear lines of
+/// 0.04 mm takes within 6 % of the one line's time (0.908 s against 0.865 s measured;
+/// the rest is the interpolator folding the limits beyond its 16 nearest into one). Each
+/// block braking by itself (the built-in machine's jerk lets a 0.04 mm block at 28 mm/s
+/// change its speed by 1.5 mm/min) made it 1.563 s.
+#[test]
+fn a_braking_over_short_lines_is_one_braking() {
+    let one = time_s("G21 G90\nG1 X0 Y0 F3000\nG1 X40\nM2\n");
+    let mut cut = String::from("G21 G90\nG1 X0 Y0 F3000\n");
+    for i in 1..=1000 {
+        cut.push_str(&format!("G1 X{:.4}\n", i as f64 * 0.04));
+    }
+    cut.push_str("M2\n");
+    let chopped = time_s(&cut);
+    assert!(
+        chopped <= 1.06 * one,
+        "1000 lines {chopped} s, one line {one} s"
+    );
+}
