@@ -2760,13 +2760,12 @@ fn backward<B: Plannable>(
         let through = chain
             .filter(|_| {
                 let curve_before = i > 0 && is_curve(&blocks[i - 1]);
-                !is_curve(&blocks[i]) && !curve_before
-            })
-            .filter(|_| {
-                blocks.get(i + 1).is_some_and(|b| {
+                // (The block after is a motion: the chain ends at anything else.)
+                let next_no_lower = blocks.get(i + 1).is_some_and(|b| {
                     let l = b.limits();
-                    b.is_motion() && l.acc >= lim_i.acc && l.jerk >= lim_i.jerk
-                })
+                    l.acc >= lim_i.acc && l.jerk >= lim_i.jerk
+                });
+                !is_curve(&blocks[i]) && !curve_before && next_no_lower
             })
             .map(|c| Chain {
                 way_mm: c.way_mm + len,
@@ -2779,7 +2778,7 @@ fn backward<B: Plannable>(
         let own = if entry < end[i] || (entry == end[i] && entry != 0.0) {
             entry
         } else {
-            let lim = blocks[i].limits();
+            let lim = lim_i;
             let reach = lim.reachable_speed(end[i], len);
             // Where the braking reaches the block's acceleration, the jerk binds only its
             // two ends (`a/j`), and a raised jerk buys little: left as it is (relaxing
