@@ -40,6 +40,7 @@ use shared::profile::Limits as Jerk;
 use shared::protocol::{BlockKind, CommandBlock, Helix, FLAG_RAPID, FLAG_STOP_AT_END};
 use shared::Machine;
 use std::f64::consts::{FRAC_PI_2, PI};
+use std::rc::Rc;
 
 pub mod blend;
 mod cache;
@@ -482,6 +483,19 @@ const LOWER_BISECTIONS: usize = 10;
 /// the chord tolerance (exact form: a chord `c` of a circle of radius `r` deviates
 /// `r - sqrt(r² - c²/4)`). The tangential limits are what is left at the cap speed.
 fn shape(g: Geometry, machine: &Machine, period_s: f64, feed_mm_s: f64, share: f64) -> Shape {
+    shape_from(g, None, machine, period_s, feed_mm_s, share)
+}
+
+/// [`shape`] from a curve's samples taken already (`sampled`; for a surface block, or
+/// none, they are taken here).
+fn shape_from(
+    g: Geometry,
+    sampled: Option<&Sampled>,
+    machine: &Machine,
+    period_s: f64,
+    feed_mm_s: f64,
+    share: f64,
+) -> Shape {
     let axes = machine.axes.as_array();
     let a_path = machine.path_acc_mm_per_s2;
     let j_path = machine.path_jerk_mm_per_s3;
@@ -497,81 +511,82 @@ fn shape(g: Geometry, machine: &Machine, period_s: f64, feed_mm_s: f64, share: f
         _ => (1.0, 0.0),
     };
     let feed_mm_s = feed_mm_s * ratio;
-    let (one_pt, one_dk);
-    let sampled: Samples;
-    let (pts, dk, jumps): (&[Frame], &[[f64; 3]], &[f64]) = match g {
+    let taken: Sampled;
+    let sampled: &Sampled = match (g, sampled) {
+        (Geometry::Curve(_), Some(s)) if !surface => s,
         // A straight segment has one tangent and no curvature: one sample says it all
         // (the samples below would each find the same, at a hundred times the cost).
-        Geometry::Straight(d) => {
+        (Geometry::Straight(d), _) => {
             let len = path::norm(d);
-            if len > 0.0 {
-                one_pt = [(d.map(|x| x / len), [0.0; 3])];
-                one_dk = [[0.0; 3]];
-                (&one_pt, &one_dk, &[])
+            taken = if len > 0.0 {
+                Sampled::new((
+                    vec![(d.map(|x| x / len), [0.0; 3])],
+                    vec![[0.0; 3]],
+                    vec![],
+                    vec![],
+                ))
             } else {
-                (&[], &[], &[])
-            }
+                Sampled::new((vec![], vec![], vec![], vec![]))
+            };
+            &taken
         }
-        Geometry::Curve(b) => {
-            sampled = if surface {
+        (Geometry::Curve(b), _) => {
+            taken = Sampled::new(if surface {
                 surface_samples(b)
             } else {
                 samples(b, false)
-            };
-            (&sampled.0, &sampled.1, &sampled.2)
+            });
+            &taken
         }
     };
-    let first = pts.first().copied().unwrap_or(([1.0, 0.0, 0.0], [0.0; 3]));
-    let last = pts.last().copied().unwrap_or(first);
-    let dk_first = dk.first().copied().unwrap_or([0.0; 3]);
-    let dk_last = dk.last().copied().unwrap_or(dk_first);
+    let (figs, jumps) = (&sampled.figures[..], &sampled.jumps[..]);
+    let ((first, dk_first), (last, dk_last)) = (sampled.first, sampled.last);
     let mut v = feed_mm_s;
     for jump in jumps {
         if *jump > 1e-9 {
             v = v.min((share * j_path * period_s / (SAMPLED_STEP * jump)).sqrt());
         }
     }
-    for ((t, k), dk) in pts.iter().zip(dk) {
-        let kappa = path::norm(*k);
+    for f in figs {
+        let kappa = f.kappa;
         if kappa > 1e-12 {
             let rho = 1.0 / kappa;
             let tol = machine.chord_tolerance_mm.min(rho);
             let chord = 2.0 * (tol * (2.0 * rho - tol)).sqrt();
             v = v.min(chord / period_s).min((share * a_path / kappa).sqrt());
         }
-        let dkn = path::norm(*dk);
-        if dkn > 1e-12 {
-            v = min_cbrt(v, share * j_path / dkn);
+        if f.dkn > 1e-12 {
+            v = min_cbrt(v, share * j_path / f.dkn);
         }
         for (i, ax) in axes.iter().enumerate() {
-            if t[i].abs() > 1e-12 {
-                v = v.min(ax.max_vel_mm_per_min / 60.0 / t[i].abs());
+            if f.t[i] > 1e-12 {
+                v = v.min(ax.max_vel_mm_per_min / 60.0 / f.t[i]);
             }
-            if k[i].abs() > 1e-12 {
-                v = v.min((share * ax.max_acc_mm_per_s2 / k[i].abs()).sqrt());
+            if f.k[i] > 1e-12 {
+                v = v.min((share * ax.max_acc_mm_per_s2 / f.k[i]).sqrt());
             }
-            if dk[i].abs() > 1e-12 {
-                v = min_cbrt(v, share * ax.max_jerk_mm_per_s3 / dk[i].abs());
+            if f.dk[i] > 1e-12 {
+                v = min_cbrt(v, share * ax.max_jerk_mm_per_s3 / f.dk[i]);
             }
         }
     }
     // What the cap speed leaves to the profile along the path.
     let leftover = |v: f64| {
         let mut acc = a_path;
-        for ((t, k), dk) in pts.iter().zip(dk) {
-            let kappa = path::norm(*k);
+        for f in figs {
+            let (kappa, t, k, dk) = (f.kappa, &f.t, &f.k, &f.dk);
             let an = v * v * kappa;
             acc = acc.min((a_path * a_path - an * an).max(0.0).sqrt());
-            let jn = v * v * v * path::norm(*dk);
+            let jn = v * v * v * f.dkn;
             if kappa > 1e-12 {
                 acc = acc.min((j_path - jn) / (6.0 * v * kappa));
             }
             for (i, ax) in axes.iter().enumerate() {
-                if t[i].abs() > 1e-12 {
-                    acc = acc.min((ax.max_acc_mm_per_s2 - v * v * k[i].abs()) / t[i].abs());
-                    if k[i].abs() > 1e-12 {
-                        let jn_i = v * v * v * dk[i].abs();
-                        acc = acc.min((ax.max_jerk_mm_per_s3 - jn_i) / (6.0 * v * k[i].abs()));
+                if t[i] > 1e-12 {
+                    acc = acc.min((ax.max_acc_mm_per_s2 - v * v * k[i]) / t[i]);
+                    if k[i] > 1e-12 {
+                        let jn_i = v * v * v * dk[i];
+                        acc = acc.min((ax.max_jerk_mm_per_s3 - jn_i) / (6.0 * v * k[i]));
                     }
                 }
             }
@@ -582,13 +597,13 @@ fn shape(g: Geometry, machine: &Machine, period_s: f64, feed_mm_s: f64, share: f
         let acc_total = acc;
         let acc = acc - ratio_slope * (v / ratio) * (v / ratio);
         let mut jerk = j_path;
-        for ((t, k), dk) in pts.iter().zip(dk) {
-            let kappa = path::norm(*k);
-            jerk = jerk.min(j_path - 3.0 * v * acc_total * kappa - v * v * v * path::norm(*dk));
+        for f in figs {
+            let (t, k, dk) = (&f.t, &f.k, &f.dk);
+            jerk = jerk.min(j_path - 3.0 * v * acc_total * f.kappa - v * v * v * f.dkn);
             for (i, ax) in axes.iter().enumerate() {
-                if t[i].abs() > 1e-12 {
-                    let other = 3.0 * v * acc_total * k[i].abs() + v * v * v * dk[i].abs();
-                    jerk = jerk.min((ax.max_jerk_mm_per_s3 - other) / t[i].abs());
+                if t[i] > 1e-12 {
+                    let other = 3.0 * v * acc_total * k[i] + v * v * v * dk[i];
+                    jerk = jerk.min((ax.max_jerk_mm_per_s3 - other) / t[i]);
                 }
             }
         }
@@ -676,6 +691,7 @@ fn shape(g: Geometry, machine: &Machine, period_s: f64, feed_mm_s: f64, share: f
 /// keeps every limit with `lim.jerk`; the jerk then what `3·v·a·|k|` and `v³·|dk/ds|`
 /// leave at those speeds. Neither is less than `lim`'s nor (unless `lim`'s is) above
 /// `ceiling`, what the junctions' loads leave the block.
+#[cfg(test)]
 #[allow(clippy::too_many_arguments)]
 fn relaxed_limits(
     b: &CommandBlock,
@@ -686,23 +702,15 @@ fn relaxed_limits(
     len: f64,
     ceiling: Jerk,
 ) -> Jerk {
-    let (pts, dk, _, at) = samples(b, true);
-    relaxed_at(
-        (&pts, &dk, &at),
-        machine,
-        cap,
-        lim,
-        (start, end),
-        len,
-        ceiling,
-    )
+    let ends = (start, end);
+    relaxed_at(&Sampled::of(b).figures, machine, cap, lim, ends, len, ceiling)
 }
 
-/// [`relaxed_limits`] from the block's samples, taken once by a caller that asks for
-/// several planned speeds.
+/// [`relaxed_limits`] from the figures of the block's samples, taken once by a caller
+/// that asks for several planned speeds.
 #[allow(clippy::too_many_arguments)]
 fn relaxed_at(
-    samples: (&[Frame], &[[f64; 3]], &[[f64; 2]]),
+    figures: &[Figure],
     machine: &Machine,
     cap: f64,
     lim: Jerk,
@@ -711,11 +719,12 @@ fn relaxed_at(
     ceiling: Jerk,
 ) -> Jerk {
     let env = Envelope {
-        samples,
+        figures,
         machine,
         cap,
         ends,
         len,
+        binding: Default::default(),
     };
     let top = machine
         .axes
@@ -728,7 +737,7 @@ fn relaxed_at(
     // envelope's highest, or [`braking_relaxed`] raised the jerk to what that
     // acceleration leaves at speeds up to at least the planned start; not asked again,
     // as a limit it binds exactly may round either way.)
-    if samples.0.is_empty() {
+    if figures.is_empty() {
         return lim;
     }
     let acc = if lim.acc.partial_cmp(&top) == Some(std::cmp::Ordering::Less) {
@@ -748,32 +757,107 @@ fn relaxed_at(
 /// of the length each stands for) with the speeds it can have there: within its `cap`,
 /// entered at `ends.0` and left at `ends.1` at most (mm/s), `len` mm long.
 struct Envelope<'a> {
-    samples: (&'a [Frame], &'a [[f64; 3]], &'a [[f64; 2]]),
+    figures: &'a [Figure],
     machine: &'a Machine,
     cap: f64,
     ends: (f64, f64),
     len: f64,
+    /// The sample that last failed [`Envelope::fits`], looked at first the next time: a
+    /// bisection's failing trials nearly always fail there, and then at once.
+    binding: std::cell::Cell<usize>,
+}
+
+/// One sample of a curve block as [`Envelope`] weighs it: the norms and each axis's
+/// share of its tangent, curvature and curvature rate, and the least and most share
+/// of the block's length before it (widened by [`Envelope::MARGIN`]). Worked out once a
+/// block ([`figures`]), not at every speed tried: the bisections of
+/// [`relaxed_at`] and the braking search ask for them twenty times and more.
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct Figure {
+    kappa: f64,
+    dkn: f64,
+    t: [f64; 3],
+    k: [f64; 3],
+    dk: [f64; 3],
+    lo: f64,
+    hi: f64,
+}
+
+/// A curve block's samples as the planner keeps them ([`PlanCache`]): each one's
+/// [`Figure`], the first and last (frame and curvature rate, for the junctions) and the
+/// curvature jumps at its knots.
+pub(crate) struct Sampled {
+    pub(crate) figures: Vec<Figure>,
+    pub(crate) jumps: Vec<f64>,
+    pub(crate) first: (Frame, [f64; 3]),
+    pub(crate) last: (Frame, [f64; 3]),
+}
+
+impl Sampled {
+    /// The samples of curve `b` with their places ([`samples`]).
+    pub(crate) fn of(b: &CommandBlock) -> Self {
+        Self::new(samples(b, true))
+    }
+
+    /// From samples as [`samples`] gives them (without places, or places not one a
+    /// sample, each sample's place is the whole block).
+    fn new((pts, dk, jumps, at): Samples) -> Self {
+        let first = pts.first().copied().unwrap_or(([1.0, 0.0, 0.0], [0.0; 3]));
+        let last = pts.last().copied().unwrap_or(first);
+        let dk_first = dk.first().copied().unwrap_or([0.0; 3]);
+        let dk_last = dk.last().copied().unwrap_or(dk_first);
+        let figures = if at.len() == pts.len() {
+            figures(&pts, &dk, &at)
+        } else {
+            figures(&pts, &dk, &vec![[0.0, 1.0]; pts.len()])
+        };
+        Sampled {
+            figures,
+            jumps,
+            first: (first, dk_first),
+            last: (last, dk_last),
+        }
+    }
+
+    /// Bytes it holds.
+    pub(crate) fn bytes(&self) -> usize {
+        std::mem::size_of::<Self>()
+            + std::mem::size_of_val(&self.figures[..])
+            + std::mem::size_of_val(&self.jumps[..])
+    }
+}
+
+/// Each sample's [`Figure`] (`at`: the samples' places, as [`samples`] gives them with
+/// `places`; none without).
+fn figures(pts: &[Frame], dk: &[[f64; 3]], at: &[[f64; 2]]) -> Vec<Figure> {
+    pts.iter()
+        .zip(dk)
+        .zip(at)
+        .map(|((&(t, k), &dk), x)| Figure {
+            kappa: path::norm(k),
+            dkn: path::norm(dk),
+            t: t.map(f64::abs),
+            k: k.map(f64::abs),
+            dk: dk.map(f64::abs),
+            lo: (x[0] - Envelope::MARGIN).max(0.0),
+            hi: (x[1] + Envelope::MARGIN).min(1.0),
+        })
+        .collect()
 }
 
 impl Envelope<'_> {
     /// A margin on each place for the chords' shortfall against the arc.
     const MARGIN: f64 = 0.01;
 
-    /// Each sample with the highest speed the profile can have there when it changes
-    /// its speed by `a` at most.
-    fn each(&self, a: f64) -> impl Iterator<Item = ((&Frame, &[f64; 3]), f64)> + '_ {
-        let (pts, dk, at) = self.samples;
+    /// The highest speed the profile can have at sample `f` when it changes its speed
+    /// by `a` at most. (`√` is monotone and rounds exactly, so one root of the lower
+    /// square is the lower of the two roots, bit for bit.)
+    #[inline(always)]
+    fn speed(&self, f: &Figure, a: f64) -> f64 {
         let ((start, end), len, cap) = (self.ends, self.len, self.cap);
-        pts.iter().zip(dk).zip(at).map(move |(p, x)| {
-            let (lo, hi) = (
-                (x[0] - Self::MARGIN).max(0.0),
-                (x[1] + Self::MARGIN).min(1.0),
-            );
-            let v = cap
-                .min((start * start + 2.0 * a * hi * len).sqrt())
-                .min((end * end + 2.0 * a * (1.0 - lo) * len).sqrt());
-            (p, v)
-        })
+        let up = start * start + 2.0 * a * f.hi * len;
+        let down = end * end + 2.0 * a * (1.0 - f.lo) * len;
+        cap.min(up.min(down).sqrt())
     }
 
     /// Whether a profile changing its speed by `a` at most, with the jerk `j`, keeps the
@@ -782,24 +866,38 @@ impl Envelope<'_> {
         let m = self.machine;
         let (a_path, j_path) = (m.path_acc_mm_per_s2, m.path_jerk_mm_per_s3);
         let axes = m.axes.as_array();
-        self.each(a).all(|(((t, k), dk), v)| {
-            let kappa = path::norm(*k);
-            let an = v * v * kappa;
-            let jn = v * v * v * path::norm(*dk);
+        let keeps = |f: &Figure| {
+            let v = self.speed(f, a);
+            let an = v * v * f.kappa;
+            let jn = v * v * v * f.dkn;
             if a * a + an * an > a_path * a_path
-                || 6.0 * v * kappa * a + jn > j_path
-                || j + 3.0 * v * a * kappa + jn > j_path
+                || 6.0 * v * f.kappa * a + jn > j_path
+                || j + 3.0 * v * a * f.kappa + jn > j_path
             {
                 return false;
             }
             axes.iter().enumerate().all(|(i, ax)| {
-                let (ti, ki, dki) = (t[i].abs(), k[i].abs(), dk[i].abs());
+                let (ti, ki, dki) = (f.t[i], f.k[i], f.dk[i]);
                 let jn_i = v * v * v * dki;
                 a * ti + v * v * ki <= ax.max_acc_mm_per_s2
                     && 6.0 * v * ki * a + jn_i <= ax.max_jerk_mm_per_s3
                     && j * ti + 3.0 * v * a * ki + jn_i <= ax.max_jerk_mm_per_s3
             })
-        })
+        };
+        if self
+            .figures
+            .get(self.binding.get())
+            .is_some_and(|f| !keeps(f))
+        {
+            return false;
+        }
+        match self.figures.iter().position(|f| !keeps(f)) {
+            Some(i) => {
+                self.binding.set(i);
+                false
+            }
+            None => true,
+        }
     }
 
     /// The jerk the profile may use with the acceleration `a`: what `3·v·a·|k|` and
@@ -810,13 +908,14 @@ impl Envelope<'_> {
         let j_path = m.path_jerk_mm_per_s3;
         let axes = m.axes.as_array();
         let mut jerk = j_path;
-        for (((t, k), dk), v) in self.each(a) {
-            let jn = v * v * v * path::norm(*dk);
-            jerk = jerk.min(j_path - 3.0 * v * a * path::norm(*k) - jn);
+        for f in self.figures {
+            let v = self.speed(f, a);
+            let jn = v * v * v * f.dkn;
+            jerk = jerk.min(j_path - 3.0 * v * a * f.kappa - jn);
             for (i, ax) in axes.iter().enumerate() {
-                if t[i].abs() > 1e-12 {
-                    let other = 3.0 * v * a * k[i].abs() + v * v * v * dk[i].abs();
-                    jerk = jerk.min((ax.max_jerk_mm_per_s3 - other) / t[i].abs());
+                if f.t[i] > 1e-12 {
+                    let other = 3.0 * v * a * f.k[i] + v * v * v * f.dk[i];
+                    jerk = jerk.min((ax.max_jerk_mm_per_s3 - other) / f.t[i]);
                 }
             }
         }
@@ -2064,7 +2163,7 @@ pub fn plan_and<B: Plannable>(
             &mut cache,
             |_, _| {},
         );
-        relax(blocks, machine, &ceiling, &mut memo, false);
+        relax(blocks, machine, &ceiling, &mut memo, &mut cache, false);
         last_ceiling = ceiling;
         times(blocks)
     };
@@ -2101,8 +2200,6 @@ pub fn plan_and<B: Plannable>(
         shares = trial;
         before = if kept { after } else { round(blocks, &shares) };
     }
-    // (The rounds' shapes and lengths are done with.)
-    drop(cache);
     // The jerk once, on the plan kept (but for the blocks braking by their jerk, which
     // `braking_relaxed` gives theirs in every round): in every round it doubled the
     // planning's cost (nearly every curve block sampled again each round) for the same
@@ -2112,7 +2209,7 @@ pub fn plan_and<B: Plannable>(
     // a tenfold negligible gain, it saved a twentieth of that and lost a third of the
     // gain (the butterfly at F6000 on the built-in machine 13.888 -> 13.945 / 13.914 s).
     let mut fresh = vec![None; blocks.len()];
-    relax(blocks, machine, &last_ceiling, &mut fresh, true);
+    relax(blocks, machine, &last_ceiling, &mut fresh, &mut cache, true);
     // (Last to first, as the backward pass hands them over.)
     for (i, b) in blocks.iter().enumerate().rev() {
         done(i, b);
@@ -2181,9 +2278,10 @@ fn relax<B: Plannable>(
     machine: &Machine,
     ceiling: &[Jerk],
     memo: &mut [Option<RelaxMemo>],
+    cache: &mut PlanCache,
     jerk: bool,
 ) {
-    for ((b, &ceiling), memo) in blocks.iter_mut().zip(ceiling).zip(memo) {
+    for (i, ((b, &ceiling), memo)) in blocks.iter_mut().zip(ceiling).zip(memo).enumerate() {
         if !is_curve(b) {
             continue;
         }
@@ -2220,7 +2318,15 @@ fn relax<B: Plannable>(
         let relaxed = match memo {
             Some((k, relaxed)) if *k == key => *relaxed,
             _ => {
-                let relaxed = relaxed_limits(c, machine, cap, lim, (start, end), len, ceiling);
+                let relaxed = relaxed_at(
+                    &cache.samples(i, c).figures,
+                    machine,
+                    cap,
+                    lim,
+                    (start, end),
+                    len,
+                    ceiling,
+                );
                 *memo = Some((key, relaxed));
                 relaxed
             }
@@ -2557,7 +2663,7 @@ fn plan_split<B: Plannable>(
             }
         }
     }
-    backward(blocks, &mut end, machine, &ceiling, memo, done);
+    backward(blocks, &mut end, machine, &ceiling, memo, cache, done);
     ceiling
     // No forward pass: the interpolator accelerates as fast as its limits allow by
     // itself, along the whole path at once. A forward pass (each block's end speed
@@ -2590,6 +2696,7 @@ impl Braking {
         b: &mut B,
         machine: &Machine,
         memo: Option<&mut Option<BrakeMemo>>,
+        samples: impl FnOnce(&CommandBlock) -> Rc<Sampled>,
     ) -> f64 {
         let lim = b.limits();
         let key = [
@@ -2607,7 +2714,7 @@ impl Braking {
         let (v, given) = match memo {
             Some(Some((k, v, given))) if *k == key => (*v, *given),
             memo => {
-                let found = braking_relaxed(b, machine, self);
+                let found = braking_relaxed(b, machine, self, samples);
                 if let Some(m) = memo {
                     *m = Some((key, found.0, found.1));
                 }
@@ -2641,7 +2748,12 @@ const BRAKING_STEPS: usize = 2;
 /// cap. Returns the entry and the limits to give the block; `reach`, the entry from
 /// which it can brake under its limits as they are, and none where it is not a curve
 /// or gains nothing.
-fn braking_relaxed<B: Plannable>(b: &B, machine: &Machine, brake: &Braking) -> (f64, Option<Jerk>) {
+fn braking_relaxed<B: Plannable>(
+    b: &B,
+    machine: &Machine,
+    brake: &Braking,
+    samples: impl FnOnce(&CommandBlock) -> Rc<Sampled>,
+) -> (f64, Option<Jerk>) {
     let &Braking {
         ceiling,
         next,
@@ -2656,8 +2768,8 @@ fn braking_relaxed<B: Plannable>(b: &B, machine: &Machine, brake: &Braking) -> (
         return (reach, None);
     };
     let (lim, len, feed) = (b.limits(), b.length_mm(), b.feed_mm_per_min());
-    let (pts, dk, _, at) = samples(c, true);
-    if pts.is_empty() {
+    let sampled = samples(c);
+    if sampled.figures.is_empty() {
         return (reach, None);
     }
     let most = raised_within(lim, ceiling, machine).jerk;
@@ -2665,11 +2777,12 @@ fn braking_relaxed<B: Plannable>(b: &B, machine: &Machine, brake: &Braking) -> (
     // (with those limits): it falls as `v` rises, since the limits do.
     let from = |v: f64| {
         let env = Envelope {
-            samples: (&pts, &dk, &at),
+            figures: &sampled.figures,
             machine,
             cap: feed / 60.0,
             ends: (v, end),
             len,
+            binding: Default::default(),
         };
         let l = Jerk {
             jerk: env.jerk_left(lim.acc).min(most).max(lim.jerk),
@@ -2723,6 +2836,7 @@ fn backward<B: Plannable>(
     machine: &Machine,
     ceiling: &[Jerk],
     memo: &mut [Option<BrakeMemo>],
+    cache: &mut PlanCache,
     mut done: impl FnMut(usize, &B),
 ) {
     let n = blocks.len();
@@ -2802,7 +2916,9 @@ fn backward<B: Plannable>(
                     entry,
                     reach,
                 };
-                brake.apply(&mut blocks[i], machine, memo.get_mut(i))
+                brake.apply(&mut blocks[i], machine, memo.get_mut(i), |c| {
+                    cache.samples(i, c)
+                })
             }
         };
         // The start the braking through allows, where that is more than the block's own

@@ -12,14 +12,22 @@
 //! 340 bytes. What is returned is the same as working it out again, bit for bit: the
 //! cache changes the cost, never the plan.
 //!
-//! The samples themselves (a few kilobytes a block) are not kept: [`relax`](super::relax)
-//! and the braking search still take them where they need them. Kept for those too
-//! within a budget of 64 MiB, they saved a fifth more of `cnc check`'s time on the
-//! bench's `curves` program but cost 128 MB more memory for 10 000 lines.
+//! Each curve block's [`samples`](super::samples) (its frames, curvature rates and their
+//! places along it, with their [`Figure`](super::Figure)s: a few kilobytes a block) are kept too, within [`SAMPLES_BUDGET`]
+//! bytes: [`shape`](super::shape), [`relax`](super::relax) in every round and the
+//! braking search of the backward pass in every round took them afresh, four to five
+//! times a curve block, and sampling was more than half of `cnc check` on curves. A plan
+//! is one window of the program ([`crate::window`]), so the budget is rarely reached;
+//! past it, the samples are taken afresh where asked, as before.
 
-use super::{shape, Geometry, Shape};
+use super::{shape, shape_from, Geometry, Sampled, Shape};
 use shared::path;
+use shared::protocol::CommandBlock;
 use shared::Machine;
+use std::rc::Rc;
+
+/// Most bytes of samples one plan keeps (see the module page).
+pub(super) const SAMPLES_BUDGET: usize = 64 << 20;
 
 /// See the module page.
 pub(super) struct PlanCache {
@@ -28,6 +36,10 @@ pub(super) struct PlanCache {
     /// Each curve block's shapes asked for, with the feed (mm/s) and share each was
     /// worked out for (as bits).
     shapes: Vec<[Option<Box<Kept>>; 2]>,
+    /// Each curve block's samples, taken with their places (`samples(b, true)`).
+    samples: Vec<Option<Rc<Sampled>>>,
+    /// Bytes of the samples kept.
+    kept_bytes: usize,
 }
 
 /// A shape with the feed (mm/s) and share it was worked out for, as bits.
@@ -39,7 +51,25 @@ impl PlanCache {
         PlanCache {
             lengths: vec![f64::NAN; n],
             shapes: (0..n).map(|_| [None, None]).collect(),
+            samples: vec![None; n],
+            kept_bytes: 0,
         }
+    }
+
+    /// The samples of block `i`, whose curve is `c`, with their places ([`samples`]).
+    pub(super) fn samples(&mut self, i: usize, c: &CommandBlock) -> Rc<Sampled> {
+        if let Some(Some(kept)) = self.samples.get(i) {
+            return Rc::clone(kept);
+        }
+        let taken = Rc::new(Sampled::of(c));
+        let bytes = taken.bytes();
+        if let Some(slot) = self.samples.get_mut(i) {
+            if self.kept_bytes + bytes <= SAMPLES_BUDGET {
+                self.kept_bytes += bytes;
+                *slot = Some(Rc::clone(&taken));
+            }
+        }
+        taken
     }
 
     /// The length of block `i`, whose curve is `c` ([`path::length`]).
@@ -75,7 +105,14 @@ impl PlanCache {
         if let Some(kept) = slots.iter().flatten().find(|k| k.0 == key) {
             return kept.1;
         }
-        let found = shape(g, machine, period_s, feed_mm_s, share);
+        let found = match g {
+            Geometry::Curve(c) if !c.is_surface() => {
+                let sampled = self.samples(i, c);
+                shape_from(g, Some(&sampled), machine, period_s, feed_mm_s, share)
+            }
+            _ => shape(g, machine, period_s, feed_mm_s, share),
+        };
+        let slots = &mut self.shapes[i];
         // An empty slot, else the first (a third key: never met, as a block's feed and
         // the two shares are all there are).
         let slot = match slots.iter().position(Option::is_none) {
