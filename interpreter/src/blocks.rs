@@ -703,7 +703,15 @@ fn relaxed_limits(
     ceiling: Jerk,
 ) -> Jerk {
     let ends = (start, end);
-    relaxed_at(&Sampled::of(b).figures, machine, cap, lim, ends, len, ceiling)
+    relaxed_at(
+        &Sampled::of(b).figures,
+        machine,
+        cap,
+        lim,
+        ends,
+        len,
+        ceiling,
+    )
 }
 
 /// [`relaxed_limits`] from the figures of the block's samples, taken once by a caller
@@ -2208,8 +2216,9 @@ pub fn plan_and<B: Plannable>(
     // 866 M -> 1152 M instructions). Held to blocks that cannot reach their cap, or to
     // a tenfold negligible gain, it saved a twentieth of that and lost a third of the
     // gain (the butterfly at F6000 on the built-in machine 13.888 -> 13.945 / 13.914 s).
-    let mut fresh = vec![None; blocks.len()];
-    relax(blocks, machine, &last_ceiling, &mut fresh, &mut cache, true);
+    // (The rounds' relaxations are kept in `memo` with what each was found from, so a
+    // block relaxed the same in the round kept is not worked out again.)
+    relax(blocks, machine, &last_ceiling, &mut memo, &mut cache, true);
     // (Last to first, as the backward pass hands them over.)
     for (i, b) in blocks.iter().enumerate().rev() {
         done(i, b);
