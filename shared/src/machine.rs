@@ -372,9 +372,10 @@ impl Machine {
                 self.min_period_us, self.max_period_us
             ));
         }
-        if !(2..=4096).contains(&self.lookahead_blocks) {
+        if !(LOOKAHEAD_MIN..=LOOKAHEAD_MAX).contains(&self.lookahead_blocks) {
             return Err(format!(
-                "lookahead_blocks must be from 2 to 4096, got {}",
+                "lookahead_blocks must be from {LOOKAHEAD_MIN} to {LOOKAHEAD_MAX}, got {} \
+                 (with fewer blocks in hand the interpolator can break an axis's jerk)",
                 self.lookahead_blocks
             ));
         }
@@ -640,6 +641,16 @@ const VISCOUS: Range = range(0.0, 1e9, "N per mm/s");
 const COULOMB: Range = range(0.0, 1e9, "N");
 const GAIN: Range = range(0.0, 1.0, "(0 = off, 1 = on)");
 
+/// The fewest blocks the interpolator may hold ahead ([`Machine::lookahead_blocks`]).
+/// With fewer it brakes for the end of its window under limits that a block it has not
+/// yet seen may lower, and can break an axis's jerk: the random search of
+/// `interpreter/tests/limits.rs` (`LIMITS_SEARCH_LOOKAHEAD`) finds an X jerk 3.6 times
+/// its limit at 3 blocks (seed 11, 300 cases a kind), none at 16 (seeds 5 and 11, 3 600
+/// cases). (2 until 2026-11-28.)
+pub const LOOKAHEAD_MIN: u32 = 16;
+/// The most blocks the interpolator may hold ahead.
+pub const LOOKAHEAD_MAX: u32 = 4096;
+
 /// The planner's look-ahead built in, in moves ([`Machine::plan_window_moves`]): every
 /// program of the repository has fewer between two rests, so they are planned whole.
 pub const PLAN_WINDOW_MOVES: u32 = 4096;
@@ -815,6 +826,26 @@ mod tests {
             assert!(text.contains(&format!("\n{name} = ")), "{key} missing");
         }
         assert_eq!(text.matches("\n# ").count(), KEY_DOCS.len(), "{text}");
+    }
+
+    /// Fewer than 16 blocks in hand let the interpolator break an axis's jerk
+    /// (`LOOKAHEAD_MIN`): such a machine file is refused, naming the key and why.
+    #[test]
+    fn a_look_ahead_too_short_to_keep_the_limits_is_refused() {
+        for (n, ok) in [
+            (2, false),
+            (3, false),
+            (15, false),
+            (16, true),
+            (4096, true),
+        ] {
+            let got = Machine::from_toml(&format!("lookahead_blocks = {n}\n"));
+            assert_eq!(got.is_ok(), ok, "{n}: {got:?}");
+            if let Err(e) = got {
+                assert!(e.contains("lookahead_blocks must be from 16"), "{e}");
+                assert!(e.contains("jerk"), "{e}");
+            }
+        }
     }
 
     #[test]
