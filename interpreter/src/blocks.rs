@@ -781,7 +781,7 @@ struct Envelope<'a> {
 /// block ([`figures`]), not at every speed tried: the bisections of
 /// [`relaxed_at`] and the braking search ask for them twenty times and more.
 #[derive(Debug, Clone, Copy)]
-pub(crate) struct Figure {
+struct Figure {
     kappa: f64,
     dkn: f64,
     t: [f64; 3],
@@ -794,16 +794,16 @@ pub(crate) struct Figure {
 /// A curve block's samples as the planner keeps them ([`PlanCache`]): each one's
 /// [`Figure`], the first and last (frame and curvature rate, for the junctions) and the
 /// curvature jumps at its knots.
-pub(crate) struct Sampled {
-    pub(crate) figures: Vec<Figure>,
-    pub(crate) jumps: Vec<f64>,
-    pub(crate) first: (Frame, [f64; 3]),
-    pub(crate) last: (Frame, [f64; 3]),
+struct Sampled {
+    figures: Vec<Figure>,
+    jumps: Vec<f64>,
+    first: (Frame, [f64; 3]),
+    last: (Frame, [f64; 3]),
 }
 
 impl Sampled {
     /// The samples of curve `b` with their places ([`samples`]).
-    pub(crate) fn of(b: &CommandBlock) -> Self {
+    fn of(b: &CommandBlock) -> Self {
         Self::new(samples(b, true))
     }
 
@@ -828,7 +828,7 @@ impl Sampled {
     }
 
     /// Bytes it holds.
-    pub(crate) fn bytes(&self) -> usize {
+    fn bytes(&self) -> usize {
         std::mem::size_of::<Self>()
             + std::mem::size_of_val(&self.figures[..])
             + std::mem::size_of_val(&self.jumps[..])

@@ -13,8 +13,9 @@
 //! cache changes the cost, never the plan.
 //!
 //! Each curve block's [`samples`](super::samples) (its frames, curvature rates and their
-//! places along it, with their [`Figure`](super::Figure)s: a few kilobytes a block) are kept too, within [`SAMPLES_BUDGET`]
-//! bytes: [`shape`](super::shape), [`relax`](super::relax) in every round and the
+//! places along it, as [`Figure`](super::Figure)s: a few kilobytes a block) are kept
+//! too, within [`SAMPLES_BUDGET`] bytes: [`shape`](super::shape), [`relax`](super::relax)
+//! in every round and the
 //! braking search of the backward pass in every round took them afresh, four to five
 //! times a curve block, and sampling was more than half of `cnc check` on curves. A plan
 //! is one window of the program ([`crate::window`]), so the budget is rarely reached;
@@ -36,7 +37,7 @@ pub(super) struct PlanCache {
     /// Each curve block's shapes asked for, with the feed (mm/s) and share each was
     /// worked out for (as bits).
     shapes: Vec<[Option<Box<Kept>>; 2]>,
-    /// Each curve block's samples, taken with their places (`samples(b, true)`).
+    /// Each curve block's samples, taken with their places ([`Sampled::of`]).
     samples: Vec<Option<Rc<Sampled>>>,
     /// Bytes of the samples kept.
     kept_bytes: usize,
