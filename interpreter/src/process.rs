@@ -147,8 +147,8 @@ pub fn compile_with(
     check_with(text, opts, machine, period_ns).map(|(prog, b)| (prog, blocks::commands(&b)))
 }
 
-/// What `cnc check` runs: reads, checks, builds and plans, and validates every block as
-/// it will be sent; the blocks as [`blocks::build`] holds them (straight moves compact),
+/// A program read, checked, built and planned as `cnc check` does it, every block
+/// validated as it will be sent; the blocks as [`blocks::build`] holds them (straight moves compact),
 /// [`blocks::commands`] turns them into those [`compile_with`] gives. Planned window by
 /// window ([`crate::window`]), the blocks gathered.
 pub fn check_with(
@@ -165,12 +165,22 @@ pub fn check_with(
         }
         all.append(&mut b)
     };
-    let planned = check_windows(text, opts, machine, period_ns, &mut gather, &mut |_, _| {})?;
+    // (On one thread: the interpreter compiles this way in a run, beside the
+    // interpolator's cycle.)
+    let stream = window::Stream {
+        every: window::BATCH_MOVES,
+        blocks: &mut gather,
+        release: &mut |_, _| {},
+        spare_cores: false,
+    };
+    let planned = check_streaming(text, opts, machine, period_ns, stream)?;
     Ok((planned, all))
 }
 
 /// [`check_streaming`] a window of [`window::BATCH_MOVES`] at a time: each window's blocks
-/// handed to `blocks` (see [`window::Stream`]), `release` told of the text read.
+/// handed to `blocks` (see [`window::Stream`]), `release` told of the text read, the
+/// machine's other cores used ([`window::Stream::spare_cores`]): for `cnc check` and
+/// the launcher, before any process of the stack runs.
 pub fn check_windows(
     text: &str,
     opts: &program::Options,
@@ -183,6 +193,7 @@ pub fn check_windows(
         every: window::BATCH_MOVES,
         blocks,
         release,
+        spare_cores: true,
     };
     check_streaming(text, opts, machine, period_ns, stream)
 }
@@ -809,13 +820,18 @@ pub fn run_streaming<S: Service>(
                         let (t, n, o) = (text.clone(), name.clone(), opts.clone());
                         watched(&link, hold, move || {
                             let mut release = |from, to| t.release(from, to);
-                            check_windows(
+                            check_streaming(
                                 t.as_str(),
                                 &o,
                                 &machine,
                                 period_ns,
-                                &mut |_, _| {},
-                                &mut release,
+                                window::Stream {
+                                    every: window::BATCH_MOVES,
+                                    blocks: &mut |_, _| {},
+                                    release: &mut release,
+                                    // (The interpolator is cycling already.)
+                                    spare_cores: false,
+                                },
                             )
                             .map_err(|d| format_diagnostics(&n, &d))
                         })
@@ -964,6 +980,8 @@ fn send_streamed<S: Service>(
                         let _ = tx.send((blocks, first));
                     },
                     release: &mut |from, to| text.release(from, to),
+                    // (The interpolator's cycle may need the other core.)
+                    spare_cores: false,
                 },
             )
         })

@@ -143,7 +143,22 @@ pub struct Stream<'a> {
     /// Told of the stretches of the text the reading is done with
     /// ([`program::Batches::release`]).
     pub release: &'a mut dyn FnMut(usize, usize),
+    /// Use the machine's other cores: read on a thread of its own, a few batches ahead
+    /// of the planning ([`READ_AHEAD_BATCHES`]), and plan the windows that follow a rest
+    /// side by side ([`Windows::plan_side_by_side`]). For `cnc check` and the
+    /// launcher's check, not for the interpreter's plan in a run, which shares the
+    /// machine with the interpolator's cycle. The same blocks, problems and figures
+    /// either way.
+    pub spare_cores: bool,
 }
+
+/// Batches the reading thread may hold ready for the planning ([`Stream::spare_cores`]):
+/// enough to keep both busy, few enough to keep the memory within a few batches.
+const READ_AHEAD_BATCHES: usize = 2;
+
+/// The reading thread's stack: as the main thread's (the nesting of values and of
+/// subroutine calls is bounded, within that).
+const READER_STACK: usize = 8 << 20;
 
 /// Reads, checks, builds and plans `text` window by window (see the module page),
 /// handing the blocks on as [`Stream`] says; every problem of the program, as
@@ -159,8 +174,10 @@ pub fn plan(
         every,
         blocks: hand,
         release,
+        spare_cores,
     } = stream;
-    let (planned, in_doubt) = plan_once(text, opts, machine, period_ns, every, hand, release)?;
+    let read = Reading { every, spare_cores };
+    let (planned, in_doubt) = plan_once(text, opts, machine, period_ns, read, hand, release)?;
     // A `G4 P` read as seconds before the program showed itself Fanuc's was
     // milliseconds: read again as Fanuc's (what is handed on starts again at block 0).
     if in_doubt && planned.dialect == program::Dialect::Fanuc && opts.dialect.is_none() {
@@ -168,9 +185,17 @@ pub fn plan(
             dialect: Some(program::Dialect::Fanuc),
             ..opts.clone()
         };
-        return plan_once(text, &fanuc, machine, period_ns, every, hand, release).map(|(p, _)| p);
+        return plan_once(text, &fanuc, machine, period_ns, read, hand, release).map(|(p, _)| p);
     }
     Ok(planned)
+}
+
+/// How [`plan_once`] reads and plans: batches of `every` moves, and whether it may use
+/// the machine's other cores ([`Stream::spare_cores`]).
+#[derive(Clone, Copy)]
+struct Reading {
+    every: usize,
+    spare_cores: bool,
 }
 
 /// [`plan`] read once as `opts` say; and whether a dwell in doubt was handed on.
@@ -179,11 +204,12 @@ fn plan_once(
     opts: &program::Options,
     machine: &Machine,
     period_ns: u64,
-    every: usize,
+    reading: Reading,
     hand: &mut dyn FnMut(Vec<Block>, usize),
     release: &mut dyn FnMut(usize, usize),
 ) -> Result<(Planned, bool), Vec<Diagnostic>> {
     let mut w = Windows::new(text, machine, period_ns, hand);
+    w.side_by_side = reading.spare_cores;
     let mut in_doubt = false;
     let read = {
         let mut sink = |moves: Vec<Move>, r: program::Read| {
@@ -191,15 +217,16 @@ fn plan_once(
             in_doubt |= r.in_doubt;
             w.take(moves);
         };
-        program::interpret_batched(
-            text,
-            opts,
-            program::Batches {
-                every: every.max(1),
-                sink: &mut sink,
-                release,
-            },
-        )
+        let batches = program::Batches {
+            every: reading.every.max(1),
+            sink: &mut sink,
+            release,
+        };
+        if reading.spare_cores {
+            read_ahead(text, opts, batches)
+        } else {
+            program::interpret_batched(text, opts, batches)
+        }
     };
     let mut prog = read?;
     w.take(std::mem::take(&mut prog.moves));
@@ -222,6 +249,68 @@ fn plan_once(
         subroutine_files: prog.subroutine_files,
     };
     Ok((planned, in_doubt))
+}
+
+/// What the reading thread of [`read_ahead`] hands over, in order.
+enum Got {
+    /// A batch and what was read by then ([`program::Batches::sink`]).
+    Moves(Vec<Move>, program::Read),
+    /// A stretch of the text the reading is done with ([`program::Batches::release`]).
+    Done(usize, usize),
+}
+
+/// [`program::interpret_batched`] on a thread of its own, its batches and releases
+/// handed to `batches` on this one in the order it made them, at most
+/// [`READ_AHEAD_BATCHES`] of them waiting. Where no thread can be started, read here.
+fn read_ahead(
+    text: &str,
+    opts: &program::Options,
+    batches: program::Batches<'_>,
+) -> Result<program::Program, Vec<Diagnostic>> {
+    let program::Batches {
+        every,
+        sink,
+        release,
+    } = batches;
+    let (tx, rx) = std::sync::mpsc::sync_channel::<Got>(READ_AHEAD_BATCHES);
+    std::thread::scope(|scope| {
+        let reader = std::thread::Builder::new()
+            .name("read".into())
+            .stack_size(READER_STACK)
+            .spawn_scoped(scope, move || {
+                // (The planning gone has stopped: what is left is not wanted.)
+                let send = |g: Got| drop(tx.send(g));
+                program::interpret_batched(
+                    text,
+                    opts,
+                    program::Batches {
+                        every,
+                        sink: &mut |moves, r| send(Got::Moves(moves, r)),
+                        release: &mut |from, to| send(Got::Done(from, to)),
+                    },
+                )
+            });
+        let reader = match reader {
+            Ok(r) => r,
+            Err(_) => {
+                let batches = program::Batches {
+                    every,
+                    sink,
+                    release,
+                };
+                return program::interpret_batched(text, opts, batches);
+            }
+        };
+        for got in rx {
+            match got {
+                Got::Moves(moves, r) => sink(moves, r),
+                Got::Done(from, to) => release(from, to),
+            }
+        }
+        reader
+            .join()
+            .unwrap_or_else(|panic| std::panic::resume_unwind(panic))
+    })
 }
 
 /// The moves read and not yet planned, and where the windows go.
@@ -249,6 +338,8 @@ struct Windows<'a, 'h> {
     rough_seams: usize,
     /// See [`Planned::short_windows`].
     short: usize,
+    /// Windows that follow a rest are planned side by side ([`Stream::spare_cores`]).
+    side_by_side: bool,
 }
 
 /// The junction between two feed blocks where a window handed on ended at speed: the
@@ -361,6 +452,7 @@ impl<'a, 'h> Windows<'a, 'h> {
             at_speed: 0,
             rough_seams: 0,
             short: 0,
+            side_by_side: false,
         }
     }
 }
@@ -406,13 +498,64 @@ impl Windows<'_, '_> {
         windows.pop();
         // `windows[0]` is what came before the first cut, `windows[k]` starts at cut
         // `k - 1`.
-        for (k, mut window) in windows.into_iter().enumerate() {
+        for (k, window) in windows.iter_mut().enumerate() {
             if let Some(Some(m)) = k.checked_sub(1).map(|c| cuts[c].1.clone()) {
                 window.insert(0, m);
             }
-            self.plan(window);
+        }
+        let mut windows = windows.into_iter();
+        // The first may continue a window cut at speed; those after it each follow a
+        // rest, and plan alike whatever came before.
+        if let Some(first) = windows.next() {
+            self.plan(first);
+        }
+        if self.side_by_side {
+            self.plan_side_by_side(windows.collect());
+        } else {
+            windows.for_each(|w| self.plan(w));
         }
         self.plan_at_speed_while_long();
+    }
+
+    /// Plans `windows`, each following a rest (no seam before any), on as many threads
+    /// as the machine has cores, and hands them on in order as [`Windows::plan`] does:
+    /// [`SIDE_BY_SIDE_WINDOWS`] a thread at a time, so that only those are held planned.
+    fn plan_side_by_side(&mut self, windows: Vec<Vec<Move>>) {
+        debug_assert!(self.seam.is_none());
+        let threads = std::thread::available_parallelism().map_or(1, |n| n.get());
+        if threads < 2 || windows.len() < 2 {
+            windows.into_iter().for_each(|w| self.plan(w));
+            return;
+        }
+        let (machine, period_ns) = (self.machine, self.period_ns);
+        for group in windows.chunks(threads * SIDE_BY_SIDE_WINDOWS) {
+            let next = std::sync::atomic::AtomicUsize::new(0);
+            let slots: Vec<std::sync::OnceLock<Vec<Block>>> =
+                group.iter().map(|_| std::sync::OnceLock::new()).collect();
+            let work = || loop {
+                let k = next.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+                let (Some(w), Some(slot)) = (group.get(k), slots.get(k)) else {
+                    break;
+                };
+                let _ = slot.set(planned_alone(w, machine, period_ns));
+            };
+            std::thread::scope(|scope| {
+                let helpers: Vec<_> = (1..threads.min(group.len()))
+                    .map(|_| scope.spawn(work))
+                    .collect();
+                work();
+                for h in helpers {
+                    if let Err(panic) = h.join() {
+                        std::panic::resume_unwind(panic);
+                    }
+                }
+            });
+            for (w, slot) in group.iter().zip(slots) {
+                if !w.is_empty() {
+                    self.planned_on(slot.into_inner().unwrap_or_default(), 0, false);
+                }
+            }
+        }
     }
 
     /// Keeps the moves held from `at` on, `mode` (the path mode in force there) put
@@ -490,8 +633,13 @@ impl Windows<'_, '_> {
         if window.is_empty() {
             return;
         }
-        let (mut blocks, from, rough) = self.planned(&window);
+        let (blocks, from, rough) = self.planned(&window);
         drop(window);
+        self.planned_on(blocks, from, rough);
+    }
+
+    /// A window's blocks as [`Windows::planned`] gives them, handed on from `from`.
+    fn planned_on(&mut self, mut blocks: Vec<Block>, from: usize, rough: bool) {
         self.seam = None;
         self.rough_seams += usize::from(rough);
         self.at_speed_from = self.machine.plan_window_moves as usize;
@@ -507,8 +655,7 @@ impl Windows<'_, '_> {
     /// planned again from the seam's move, whose first block starts where the last
     /// handed on ends (rough). The seam stays until what follows it is handed on.
     fn planned(&self, moves: &[Move]) -> (Vec<Block>, usize, bool) {
-        let mut blocks = blocks::build(moves, self.machine);
-        blocks::plan_and(&mut blocks, self.machine, self.period_ns, |_, _| {});
+        let mut blocks = planned_alone(moves, self.machine, self.period_ns);
         let Some(seam) = &self.seam else {
             return (blocks, 0, false);
         };
@@ -526,9 +673,7 @@ impl Windows<'_, '_> {
         {
             *from = start;
         }
-        let mut blocks = blocks::build(&again, self.machine);
-        blocks::plan_and(&mut blocks, self.machine, self.period_ns, |_, _| {});
-        (blocks, 0, true)
+        (planned_alone(&again, self.machine, self.period_ns), 0, true)
     }
 
     /// Plans the moves held, a stretch with no rest in it as long as the machine's
@@ -737,6 +882,18 @@ impl Windows<'_, '_> {
             (self.hand)(blocks, first);
         }
     }
+}
+
+/// Windows each thread of [`Windows::plan_side_by_side`] plans before they are handed
+/// on: enough that the threads seldom wait for the slowest of a group, few enough that a
+/// group's blocks take little memory.
+const SIDE_BY_SIDE_WINDOWS: usize = 16;
+
+/// `moves` built and planned on their own.
+fn planned_alone(moves: &[Move], machine: &Machine, period_ns: u64) -> Vec<Block> {
+    let mut blocks = blocks::build(moves, machine);
+    blocks::plan_and(&mut blocks, machine, period_ns, |_, _| {});
+    blocks
 }
 
 /// How many times the machine's `plan_window_moves` a window cut at speed may grow to

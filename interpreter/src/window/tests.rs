@@ -197,12 +197,42 @@ fn a_problem_far_down_is_found_the_same() {
     assert_eq!(whole, cut);
 }
 
-/// [`planned`] with the [`Planned`] it returned and the most blocks handed on at once.
+/// [`planned`] with the [`Planned`] it returned and the most blocks handed on at once:
+/// on one thread, and with the reading and the windows after a rest on threads of their
+/// own ([`Stream::spare_cores`]), which must give the same blocks bit for bit, the same
+/// problems and the same figures.
 fn planned_at(
     text: &str,
     opts: &Options,
     machine: &Machine,
     every: usize,
+) -> (Vec<CommandBlock>, Vec<String>, Option<(Planned, usize)>) {
+    let here = planned_way(text, opts, machine, every, false);
+    let ahead = planned_way(text, opts, machine, every, true);
+    assert_eq!(here.0.len(), ahead.0.len(), "blocks read ahead");
+    for (a, b) in here.0.iter().zip(&ahead.0) {
+        assert!(
+            shared::cmdlog::same_bits(a, b),
+            "block {} differs read ahead",
+            a.seq
+        );
+    }
+    assert_eq!(here.1, ahead.1, "problems read ahead");
+    assert_eq!(
+        format!("{:?}", here.2),
+        format!("{:?}", ahead.2),
+        "figures read ahead"
+    );
+    here
+}
+
+/// [`planned_at`] read one way.
+fn planned_way(
+    text: &str,
+    opts: &Options,
+    machine: &Machine,
+    every: usize,
+    spare_cores: bool,
 ) -> (Vec<CommandBlock>, Vec<String>, Option<(Planned, usize)>) {
     let mut all = Vec::new();
     let mut most = 0;
@@ -225,6 +255,7 @@ fn planned_at(
                 all.append(&mut b);
             },
             release: &mut |_, _| {},
+            spare_cores,
         },
     );
     match got {
