@@ -85,6 +85,18 @@
 //! 200 000 lines of it under `G64 P0.01` and the 100 000-line `mixed` bench program
 //! (BENCHMARKS.md). `tests::a_stretch_with_no_rest_is_cut_at_speed` holds the bit-for-bit
 //! identity with a window of 1000 moves and the path's joins with one of 64.
+//!
+//! # On the machine's other cores
+//!
+//! Where the stream may use them ([`Stream::spare_cores`]: `cnc check` and the launcher's
+//! check, before the stack runs; not the interpreter's plan in a run, beside the
+//! interpolator's cycle), the program is read on a thread of its own, a few batches
+//! ahead of the planning, and the windows of a batch that each follow a rest (planned
+//! alike whatever came before them) are planned side by side, a few a thread at a time,
+//! and handed on in order. Windows cut at speed stay one after the other: each
+//! continues from the seam the one before it found. The blocks, problems and figures
+//! are the same either way: every window test plans both ways and compares them bit
+//! for bit.
 
 use crate::blocks::{self, check::Checker, Block, Plannable};
 use crate::parse::Diagnostic;
@@ -93,6 +105,8 @@ use shared::path::sub;
 use shared::protocol::{FLAG_RAPID, FLAG_SURFACE};
 use shared::Machine;
 use std::collections::HashMap;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::{mpsc, Arc, Mutex};
 
 /// Moves read before the reader hands them over, and about the fewest a window holds
 /// (it ends at the last place it may in what has been read).
@@ -145,7 +159,7 @@ pub struct Stream<'a> {
     pub release: &'a mut dyn FnMut(usize, usize),
     /// Use the machine's other cores: read on a thread of its own, a few batches ahead
     /// of the planning ([`READ_AHEAD_BATCHES`]), and plan the windows that follow a rest
-    /// side by side ([`Windows::plan_side_by_side`]). For `cnc check` and the
+    /// on two threads ([`Windows::plan_side_by_side`]). For `cnc check` and the
     /// launcher's check, not for the interpreter's plan in a run, which shares the
     /// machine with the interpolator's cycle. The same blocks, problems and figures
     /// either way.
@@ -208,47 +222,51 @@ fn plan_once(
     hand: &mut dyn FnMut(Vec<Block>, usize),
     release: &mut dyn FnMut(usize, usize),
 ) -> Result<(Planned, bool), Vec<Diagnostic>> {
-    let mut w = Windows::new(text, machine, period_ns, hand);
-    w.side_by_side = reading.spare_cores;
-    let mut in_doubt = false;
-    let read = {
-        let mut sink = |moves: Vec<Move>, r: program::Read| {
-            w.clean &= r.clean;
-            in_doubt |= r.in_doubt;
-            w.take(moves);
-        };
-        let batches = program::Batches {
-            every: reading.every.max(1),
-            sink: &mut sink,
-            release,
-        };
+    std::thread::scope(|scope| {
+        let mut w = Windows::new(text, machine, period_ns, hand);
         if reading.spare_cores {
-            read_ahead(text, opts, batches)
-        } else {
-            program::interpret_batched(text, opts, batches)
+            w.helper = Helper::start(scope, machine, period_ns);
         }
-    };
-    let mut prog = read?;
-    w.take(std::mem::take(&mut prog.moves));
-    let rest = std::mem::take(&mut w.pending);
-    w.plan(rest);
-    let bad = w.checker.finish();
-    if !bad.is_empty() {
-        return Err(bad);
-    }
-    let planned = Planned {
-        dialect: prog.dialect,
-        messages: prog.messages,
-        compensated: prog.compensated,
-        blocks: w.seq,
-        notes: w.feeds.finish("move"),
-        windows: w.windows,
-        at_speed: w.at_speed,
-        rough_seams: w.rough_seams,
-        short_windows: w.short,
-        subroutine_files: prog.subroutine_files,
-    };
-    Ok((planned, in_doubt))
+        let mut in_doubt = false;
+        let read = {
+            let mut sink = |moves: Vec<Move>, r: program::Read| {
+                w.clean &= r.clean;
+                in_doubt |= r.in_doubt;
+                w.take(moves);
+            };
+            let batches = program::Batches {
+                every: reading.every.max(1),
+                sink: &mut sink,
+                release,
+            };
+            if reading.spare_cores {
+                read_ahead(text, opts, batches)
+            } else {
+                program::interpret_batched(text, opts, batches)
+            }
+        };
+        let mut prog = read?;
+        w.take(std::mem::take(&mut prog.moves));
+        let rest = std::mem::take(&mut w.pending);
+        w.plan(rest);
+        let bad = w.checker.finish();
+        if !bad.is_empty() {
+            return Err(bad);
+        }
+        let planned = Planned {
+            dialect: prog.dialect,
+            messages: prog.messages,
+            compensated: prog.compensated,
+            blocks: w.seq,
+            notes: w.feeds.finish("move"),
+            windows: w.windows,
+            at_speed: w.at_speed,
+            rough_seams: w.rough_seams,
+            short_windows: w.short,
+            subroutine_files: prog.subroutine_files,
+        };
+        Ok((planned, in_doubt))
+    })
 }
 
 /// What the reading thread of [`read_ahead`] hands over, in order.
@@ -338,8 +356,8 @@ struct Windows<'a, 'h> {
     rough_seams: usize,
     /// See [`Planned::short_windows`].
     short: usize,
-    /// Windows that follow a rest are planned side by side ([`Stream::spare_cores`]).
-    side_by_side: bool,
+    /// Plans windows that follow a rest beside this thread ([`Stream::spare_cores`]).
+    helper: Option<Helper>,
 }
 
 /// The junction between two feed blocks where a window handed on ended at speed: the
@@ -452,7 +470,7 @@ impl<'a, 'h> Windows<'a, 'h> {
             at_speed: 0,
             rough_seams: 0,
             short: 0,
-            side_by_side: false,
+            helper: None,
         }
     }
 }
@@ -509,7 +527,7 @@ impl Windows<'_, '_> {
         if let Some(first) = windows.next() {
             self.plan(first);
         }
-        if self.side_by_side {
+        if self.helper.is_some() {
             self.plan_side_by_side(windows.collect());
         } else {
             windows.for_each(|w| self.plan(w));
@@ -517,44 +535,33 @@ impl Windows<'_, '_> {
         self.plan_at_speed_while_long();
     }
 
-    /// Plans `windows`, each following a rest (no seam before any), on as many threads
-    /// as the machine has cores, and hands them on in order as [`Windows::plan`] does:
-    /// [`SIDE_BY_SIDE_WINDOWS`] a thread at a time, so that only those are held planned.
+    /// Plans `windows`, each following a rest (no seam before any), with the
+    /// [`Helper`], and hands them on in order as [`Windows::plan`] does. This thread
+    /// takes them from the first on, the helper from the last back; each takes those the
+    /// other has not. Where this thread comes to the one the helper is still planning,
+    /// it plans it too rather than wait: a helper put aside by a busy machine (another
+    /// process on the other core) never holds the planning up, at the cost of one
+    /// window planned twice.
     fn plan_side_by_side(&mut self, windows: Vec<Vec<Move>>) {
         debug_assert!(self.seam.is_none());
-        let threads = std::thread::available_parallelism().map_or(1, |n| n.get());
-        if threads < 2 || windows.len() < 2 {
-            windows.into_iter().for_each(|w| self.plan(w));
-            return;
+        let jobs: Arc<Vec<Job>> = Arc::new(windows.into_iter().map(Job::new).collect());
+        if let Some(h) = self.helper.as_ref().filter(|_| jobs.len() > 1) {
+            // (A helper gone leaves them all to this thread.)
+            let _ = h.jobs.send(jobs.clone());
         }
-        let (machine, period_ns) = (self.machine, self.period_ns);
-        for group in windows.chunks(threads * SIDE_BY_SIDE_WINDOWS) {
-            let next = std::sync::atomic::AtomicUsize::new(0);
-            let slots: Vec<std::sync::OnceLock<Vec<Block>>> =
-                group.iter().map(|_| std::sync::OnceLock::new()).collect();
-            let work = || loop {
-                let k = next.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
-                let (Some(w), Some(slot)) = (group.get(k), slots.get(k)) else {
-                    break;
-                };
-                let _ = slot.set(planned_alone(w, machine, period_ns));
-            };
-            std::thread::scope(|scope| {
-                let helpers: Vec<_> = (1..threads.min(group.len()))
-                    .map(|_| scope.spawn(work))
-                    .collect();
-                work();
-                for h in helpers {
-                    if let Err(panic) = h.join() {
-                        std::panic::resume_unwind(panic);
-                    }
-                }
-            });
-            for (w, slot) in group.iter().zip(slots) {
-                if !w.is_empty() {
-                    self.planned_on(slot.into_inner().unwrap_or_default(), 0, false);
-                }
+        for job in jobs.iter() {
+            if job.moves.is_empty() {
+                continue;
             }
+            let blocks = if job.claim() {
+                planned_alone(&job.moves, self.machine, self.period_ns)
+            } else {
+                match job.take_done() {
+                    Some(b) => b,
+                    None => planned_alone(&job.moves, self.machine, self.period_ns),
+                }
+            };
+            self.planned_on(blocks, 0, false);
         }
     }
 
@@ -884,10 +891,80 @@ impl Windows<'_, '_> {
     }
 }
 
-/// Windows each thread of [`Windows::plan_side_by_side`] plans before they are handed
-/// on: enough that the threads seldom wait for the slowest of a group, few enough that a
-/// group's blocks take little memory.
-const SIDE_BY_SIDE_WINDOWS: usize = 16;
+/// A window of moves that follows a rest, planned by whichever of the two threads of
+/// [`Windows::plan_side_by_side`] claims it first.
+struct Job {
+    moves: Vec<Move>,
+    claimed: AtomicBool,
+    /// Its blocks, where the helper has planned it.
+    done: Mutex<Option<Vec<Block>>>,
+}
+
+impl Job {
+    fn new(moves: Vec<Move>) -> Self {
+        Job {
+            moves,
+            claimed: AtomicBool::new(false),
+            done: Mutex::new(None),
+        }
+    }
+
+    /// The blocks the helper planned, if it has.
+    fn take_done(&self) -> Option<Vec<Block>> {
+        self.done
+            .lock()
+            .map_or_else(|e| e.into_inner().take(), |mut d| d.take())
+    }
+
+    /// The helper's blocks.
+    fn set_done(&self, blocks: Vec<Block>) {
+        let mut d = self.done.lock().unwrap_or_else(|e| e.into_inner());
+        *d = Some(blocks);
+    }
+
+    /// Whether the caller is the first to claim it.
+    fn claim(&self) -> bool {
+        !self.claimed.swap(true, Ordering::AcqRel)
+    }
+}
+
+/// A thread that plans windows beside the one that reads them in ([`Stream::spare_cores`]):
+/// each batch's windows that follow a rest are sent to it, and it plans them from the
+/// last back while they are unclaimed ([`Windows::plan_side_by_side`]). It lives as long
+/// as the [`plan_once`] that started it.
+struct Helper {
+    jobs: mpsc::Sender<Arc<Vec<Job>>>,
+}
+
+impl Helper {
+    /// Started in `scope`; `None` on a machine of one core, or where no thread starts.
+    fn start<'s>(
+        scope: &'s std::thread::Scope<'s, '_>,
+        machine: &'s Machine,
+        period_ns: u64,
+    ) -> Option<Helper> {
+        if std::thread::available_parallelism().map_or(1, |n| n.get()) < 2 {
+            return None;
+        }
+        let (tx, rx) = mpsc::channel::<Arc<Vec<Job>>>();
+        std::thread::Builder::new()
+            .name("plan".into())
+            .spawn_scoped(scope, move || {
+                for jobs in rx {
+                    for job in jobs.iter().rev() {
+                        if job.claim() {
+                            job.set_done(planned_alone(&job.moves, machine, period_ns));
+                        } else {
+                            // This thread has come to the windows the other has taken.
+                            break;
+                        }
+                    }
+                }
+            })
+            .ok()
+            .map(|_| Helper { jobs: tx })
+    }
+}
 
 /// `moves` built and planned on their own.
 fn planned_alone(moves: &[Move], machine: &Machine, period_ns: u64) -> Vec<Block> {
