@@ -92,11 +92,15 @@
 //! check, before the stack runs; not the interpreter's plan in a run, beside the
 //! interpolator's cycle), the program is read on a thread of its own, a few batches
 //! ahead of the planning, and the windows of a batch that each follow a rest (planned
-//! alike whatever came before them) are planned side by side, a few a thread at a time,
-//! and handed on in order. Windows cut at speed stay one after the other: each
+//! alike whatever came before them) are planned on two threads, the planning's own
+//! from the first on and a helper from the last back, and handed on in order. Neither
+//! waits for the other: where the planning comes to the window the helper is still on,
+//! it plans it too, so another process holding the other core costs no more than
+//! planning on one thread. Windows cut at speed stay one after the other: each
 //! continues from the seam the one before it found. The blocks, problems and figures
 //! are the same either way: every window test plans both ways and compares them bit
-//! for bit.
+//! for bit. The helper's windows wait, planned, until the planning comes to them,
+//! within a group of [`HELPER_GROUP`] windows.
 
 use crate::blocks::{self, check::Checker, Block, Plannable};
 use crate::parse::Diagnostic;
@@ -536,20 +540,27 @@ impl Windows<'_, '_> {
     }
 
     /// Plans `windows`, each following a rest (no seam before any), with the
-    /// [`Helper`], and hands them on in order as [`Windows::plan`] does. This thread
-    /// takes them from the first on, the helper from the last back; each takes those the
-    /// other has not. Where this thread comes to the one the helper is still planning,
+    /// [`Helper`], and hands them on in order as [`Windows::plan`] does. In each group
+    /// of [`HELPER_GROUP`], this thread takes them from the first on, the helper from
+    /// the last back; each takes those the other has not. Where this thread comes to the one the helper is still planning,
     /// it plans it too rather than wait: a helper put aside by a busy machine (another
     /// process on the other core) never holds the planning up, at the cost of one
     /// window planned twice.
     fn plan_side_by_side(&mut self, windows: Vec<Vec<Move>>) {
         debug_assert!(self.seam.is_none());
-        let jobs: Arc<Vec<Job>> = Arc::new(windows.into_iter().map(Job::new).collect());
-        if let Some(h) = self.helper.as_ref().filter(|_| jobs.len() > 1) {
-            // (A helper gone leaves them all to this thread.)
-            let _ = h.jobs.send(jobs.clone());
+        let mut groups: Vec<Arc<Vec<Job>>> = Vec::new();
+        let mut windows = windows.into_iter().peekable();
+        while windows.peek().is_some() {
+            let group = windows.by_ref().take(HELPER_GROUP).map(Job::new).collect();
+            groups.push(Arc::new(group));
         }
-        for job in jobs.iter() {
+        if let Some(h) = &self.helper {
+            for g in groups.iter().filter(|g| g.len() > 1) {
+                // (A helper gone leaves them all to this thread.)
+                let _ = h.jobs.send(g.clone());
+            }
+        }
+        for job in groups.iter().flat_map(|g| g.iter()) {
             if job.moves.is_empty() {
                 continue;
             }
@@ -890,6 +901,11 @@ impl Windows<'_, '_> {
         }
     }
 }
+
+/// Windows [`Windows::plan_side_by_side`] hands the helper at a time, each group taken
+/// from its first on by the planning and from its last back by the helper: the helper's
+/// blocks wait for the planning to come to them within one group, not a whole batch.
+const HELPER_GROUP: usize = 32;
 
 /// A window of moves that follows a rest, planned by whichever of the two threads of
 /// [`Windows::plan_side_by_side`] claims it first.
