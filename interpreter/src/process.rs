@@ -148,9 +148,9 @@ pub fn compile_with(
 }
 
 /// A program read, checked, built and planned as `cnc check` does it, every block
-/// validated as it will be sent; the blocks as [`blocks::build`] holds them (straight moves compact),
-/// [`blocks::commands`] turns them into those [`compile_with`] gives. Planned window by
-/// window ([`crate::window`]), the blocks gathered.
+/// validated as it will be sent; the blocks as [`blocks::build`] holds them (straight
+/// moves compact), [`blocks::commands`] turns them into those [`compile_with`] gives.
+/// Planned window by window ([`crate::window`]), the blocks gathered.
 pub fn check_with(
     text: &str,
     opts: &program::Options,

@@ -542,10 +542,10 @@ impl Windows<'_, '_> {
     /// Plans `windows`, each following a rest (no seam before any), with the
     /// [`Helper`], and hands them on in order as [`Windows::plan`] does. In each group
     /// of [`HELPER_GROUP`], this thread takes them from the first on, the helper from
-    /// the last back; each takes those the other has not. Where this thread comes to the one the helper is still planning,
-    /// it plans it too rather than wait: a helper put aside by a busy machine (another
-    /// process on the other core) never holds the planning up, at the cost of one
-    /// window planned twice.
+    /// the last back; each takes those the other has not. Where this thread comes to
+    /// the one the helper is still planning, it plans it too rather than wait: a helper
+    /// put aside by a busy machine (another process on the other core) never holds the
+    /// planning up, at the cost of at most one window a group planned twice.
     fn plan_side_by_side(&mut self, windows: Vec<Vec<Move>>) {
         debug_assert!(self.seam.is_none());
         let mut groups: Vec<Arc<Vec<Job>>> = Vec::new();

@@ -569,3 +569,72 @@ fn a_seam_on_a_line_not_found_again_is_planned_from_its_point() {
         .zip(&b)
         .all(|(x, y)| shared::cmdlog::same_bits(x, y)));
 }
+
+/// The planning never waits for its helper: with a helper that claims the last window
+/// of each group and never plans it (a thread put aside by a busy machine for as long as
+/// the check runs), every window is still planned, on the planning's own thread, in
+/// order, and the blocks are those planned without a helper. (A planning that waited
+/// for the windows the helper claimed would never end.)
+#[test]
+fn the_planning_never_waits_for_its_helper() {
+    let mut s = String::from("G21 G90 G17\nG1 F1200\n");
+    for row in 0..200 {
+        let y = row as f64;
+        let _ = writeln!(
+            s,
+            "G1 X{} Y{y}\nG1 X{} Y{y}",
+            row % 2 * 30,
+            (row + 1) % 2 * 30
+        );
+    }
+    s.push_str("M2\n");
+    let machine = Machine::default();
+    let moves = crate::program::interpret(&s).expect("a good program").moves;
+    let plan = |stuck_helper: bool| {
+        let mut all = Vec::new();
+        let (tx, rx) = mpsc::channel::<Arc<Vec<Job>>>();
+        let (claimed_tx, claimed_rx) = mpsc::channel::<()>();
+        // The second window handed on (the first of the groups) is handed once the
+        // helper has claimed the last window of the first group: the claim comes first,
+        // whatever the scheduling.
+        let mut handed = 0;
+        let mut hand = |mut b: Vec<Block>, _| {
+            handed += 1;
+            if handed == 2 && stuck_helper {
+                let wait = std::time::Duration::from_secs(60);
+                claimed_rx.recv_timeout(wait).expect("the helper's claim");
+            }
+            all.append(&mut b)
+        };
+        let mut claimed = 0;
+        std::thread::scope(|scope| {
+            let stuck = scope.spawn(move || {
+                let mut n = 0;
+                for group in rx {
+                    if group.last().is_some_and(Job::claim) {
+                        n += 1;
+                        let _ = claimed_tx.send(());
+                    }
+                }
+                n
+            });
+            {
+                let mut w = Windows::new(&s, &machine, PERIOD_NS, &mut hand);
+                // (Without the helper, its channel closed at once.)
+                w.helper = stuck_helper.then_some(Helper { jobs: tx });
+                w.take(moves.clone());
+                let rest = std::mem::take(&mut w.pending);
+                w.plan(rest);
+                assert!(w.windows > 100, "{} windows: too few for groups", w.windows);
+            }
+            claimed = stuck.join().expect("the stuck helper");
+        });
+        (commands(&all), claimed)
+    };
+    let ((alone, _), (stuck, claimed)) = (plan(false), plan(true));
+    assert!(claimed > 0, "the helper claimed no window");
+    assert_eq!(alone.len(), stuck.len());
+    for (a, b) in alone.iter().zip(&stuck) {
+        assert!(shared::cmdlog::same_bits(a, b), "block {} differs", a.seq);
+    }
+}
