@@ -393,3 +393,112 @@ pub fn row(
         jerk,
     })
 }
+
+/// The length of a block's set-point path, mm: its `length_mm`, but for a surface pass
+/// (whose `length_mm` is the contact point's) the tool point's, by 4 096 chords.
+fn set_point_length(b: &CommandBlock) -> f64 {
+    if !b.is_surface() {
+        return b.length_mm;
+    }
+    let (u0, u1) = path::domain(b);
+    const N: usize = 4096;
+    let at = |k: usize| path::eval(b, u0 + (u1 - u0) * k as f64 / N as f64).p;
+    (1..=N).map(|k| path::norm(sub(at(k), at(k - 1)))).sum()
+}
+
+/// Where a program's time goes against the jerk-limited optimum, block by block
+/// ([`losses`]): the block, its planned figures and the two times spent in it.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct BlockLoss {
+    pub seq: u64,
+    pub source_line: u32,
+    /// Where the block starts along the path, and its length, mm.
+    pub start_mm: f64,
+    pub length_mm: f64,
+    /// Its feed cap and planned start and end speeds, mm/s.
+    pub cap_mm_s: f64,
+    pub start_mm_s: f64,
+    pub end_mm_s: f64,
+    /// The tangential acceleration and jerk its profile may use.
+    pub acc: f64,
+    pub jerk: f64,
+    /// Our time in it (its cycles) and the optimum's (its nodes inside it), s.
+    pub ours_s: f64,
+    pub optimum_s: f64,
+    /// The highest and lowest speed of our cycles in it and of the optimum's nodes in
+    /// it, mm/s (infinite lowest where none fell in it). On a surface pass ours are
+    /// the engine's path speed, the contact point's, and the optimum's the tool
+    /// point's: only the times compare there.
+    pub ours_mm_s: (f64, f64),
+    pub optimum_mm_s: (f64, f64),
+}
+
+/// Each motion block's time in our run (the engine stepped as in [`measure`]: the cycles
+/// that report the block) against the time the optimum profile `(s, speed)` (arc length
+/// in mm from the path's start, mm/s; as [`topp3::JerkOptimum`] gives it) spends over its
+/// length (along the set-point path, as the optimum's arc length: a surface pass's tool
+/// point, whose length is not the block's `length_mm`). The optimum's time over a cell is its length over the mean of the speeds at
+/// its ends (exact where the speed changes at a constant rate). A diagnostic for finding
+/// where a plan is slow, not a figure of the table: dwells are left out, and our cycles
+/// are counted whole to the block they end in.
+pub fn losses(
+    blocks: &[CommandBlock],
+    machine: &Machine,
+    period_ns: u64,
+    (s, speed): (&[f64], &[f64]),
+) -> Result<Vec<BlockLoss>, String> {
+    let mut out = Vec::new();
+    let mut at = std::collections::HashMap::new();
+    let mut start = 0.0;
+    for b in blocks.iter().filter(|b| b.kind == BlockKind::Motion as u32) {
+        at.insert(b.seq, out.len());
+        out.push(BlockLoss {
+            seq: b.seq,
+            source_line: b.source_line,
+            start_mm: start,
+            length_mm: b.length_mm,
+            cap_mm_s: b.feed_mm_per_min / 60.0,
+            start_mm_s: b.start_feed_mm_per_min / 60.0,
+            end_mm_s: b.end_feed_mm_per_min / 60.0,
+            acc: b.acc_mm_per_s2,
+            jerk: b.jerk_mm_per_s3,
+            ours_s: 0.0,
+            optimum_s: 0.0,
+            ours_mm_s: (0.0, f64::INFINITY),
+            optimum_mm_s: (0.0, f64::INFINITY),
+        });
+        start += set_point_length(b);
+    }
+    let t_s = period_ns as f64 * 1e-9;
+    let mut engine = Engine::new(Limits::new(machine, period_ns), [0.0; 3]);
+    let mut src = Slice(blocks, 0);
+    loop {
+        let t = engine.tick(&mut src).map_err(|f| f.to_string())?;
+        if let Some(&i) = at.get(&t.block_seq) {
+            let l = &mut out[i];
+            l.ours_s += t_s;
+            let v = t.speed_mm_per_s;
+            l.ours_mm_s = (l.ours_mm_s.0.max(v), l.ours_mm_s.1.min(v));
+        }
+        match t.state {
+            TickState::Done => break,
+            TickState::Running => {}
+            TickState::Starved => return Err("the program has no end block".into()),
+        }
+    }
+    let starts: Vec<f64> = out.iter().map(|l| l.start_mm).collect();
+    for (w, v) in s.windows(2).zip(speed.windows(2)) {
+        let (ds, mean) = (w[1] - w[0], 0.5 * (v[0] + v[1]));
+        if ds <= 0.0 || mean <= 0.0 {
+            continue;
+        }
+        let mid = 0.5 * (w[0] + w[1]);
+        let i = starts.partition_point(|&x| x <= mid).saturating_sub(1);
+        if let Some(l) = out.get_mut(i) {
+            l.optimum_s += ds / mean;
+            let (hi, lo) = (v[0].max(v[1]), v[0].min(v[1]));
+            l.optimum_mm_s = (l.optimum_mm_s.0.max(hi), l.optimum_mm_s.1.min(lo));
+        }
+    }
+    Ok(out)
+}

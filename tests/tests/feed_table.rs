@@ -286,3 +286,81 @@ fn linuxcnc_s_programs_are_no_slower_on_its_limits() {
         slower.join("\n")
     );
 }
+
+/// Where one program's time goes against the jerk-limited optimum, block by block
+/// ([`tests::feed::losses`]): the blocks that lose the most, with their planned cap,
+/// speeds and tangential limits, and the highest and lowest speed of ours and of the
+/// optimum in each. How the rows above 1.05 of the table were read (`BENCHMARKS.md`).
+///
+/// ```text
+/// FEED_LOSSES='g5_butterfly-xy F6000' cargo test --release -p tests --test feed_table \
+///     -- --ignored --nocapture feed_losses
+/// ```
+///
+/// `FEED_LOSSES` names a program of the table (default the butterfly at F6000),
+/// `FEED_LOSSES_MACHINE` the machine (`built-in`, the default, or `LinuxCNC`),
+/// `FEED_LOSSES_ROWS` how many blocks to print (default 20).
+#[test]
+#[ignore = "a diagnostic for one program: seconds to a minute in release"]
+fn feed_losses() {
+    let want = std::env::var("FEED_LOSSES").unwrap_or_else(|_| "g5_butterfly-xy F6000".into());
+    let mname = std::env::var("FEED_LOSSES_MACHINE").unwrap_or_else(|_| "built-in".into());
+    let rows: usize = std::env::var("FEED_LOSSES_ROWS")
+        .ok()
+        .and_then(|r| r.parse().ok())
+        .unwrap_or(20);
+    let (name, text) = programs()
+        .into_iter()
+        .find(|(n, _)| *n == want)
+        .unwrap_or_else(|| panic!("no program {want:?} in the table"));
+    let (_, machine) = machines()
+        .into_iter()
+        .find(|(m, _)| *m == mname)
+        .unwrap_or_else(|| panic!("no machine {mname:?}: built-in or LinuxCNC"));
+    let opts = interpreter::program::Options::default();
+    let blocks = interpreter::process::compile_source(&name, &text, &opts, &machine, PERIOD_NS)
+        .unwrap()
+        .blocks;
+    let feeds = tests::topp::programmed_feeds(&name, &text, &machine, PERIOD_NS, &blocks).unwrap();
+    let length: f64 = blocks.iter().map(|b| b.length_mm).sum();
+    let step = tests::feed::JERK_STEP_MM.max(length / tests::feed::JERK_MAX_CELLS);
+    let jl = tests::topp3::JerkLimits::of(&machine, PERIOD_NS);
+    let o = tests::topp3::optimum(&blocks, &feeds, &jl, step).unwrap();
+    let mut l = tests::feed::losses(&blocks, &machine, PERIOD_NS, (&o.s, &o.speed)).unwrap();
+    let (ours, opt): (f64, f64) = l
+        .iter()
+        .fold((0.0, 0.0), |(a, b), x| (a + x.ours_s, b + x.optimum_s));
+    println!(
+        "{name} on {mname}: ours {ours:.3} s in motion, the jerk-limited optimum {opt:.3} s \
+         (grid {step:.2} mm; with dwells {:.3} s)\n",
+        o.time_s
+    );
+    println!(
+        "| seq | line | at mm | length mm | cap mm/s | start, end mm/s | acc | jerk | ours s | \
+         optimum s | lost s | ours highest, lowest mm/s | optimum's |"
+    );
+    println!("|---|---|---|---|---|---|---|---|---|---|---|---|---|");
+    l.sort_by(|a, b| (b.ours_s - b.optimum_s).total_cmp(&(a.ours_s - a.optimum_s)));
+    for x in l.iter().take(rows) {
+        println!(
+            "| {} | {} | {:.2} | {:.3} | {:.1} | {:.1}, {:.1} | {:.0} | {:.0} | {:.3} | {:.3} | \
+             {:.3} | {:.1}, {:.1} | {:.1}, {:.1} |",
+            x.seq,
+            x.source_line,
+            x.start_mm,
+            x.length_mm,
+            x.cap_mm_s,
+            x.start_mm_s,
+            x.end_mm_s,
+            x.acc,
+            x.jerk,
+            x.ours_s,
+            x.optimum_s,
+            x.ours_s - x.optimum_s,
+            x.ours_mm_s.0,
+            x.ours_mm_s.1,
+            x.optimum_mm_s.0,
+            x.optimum_mm_s.1
+        );
+    }
+}
