@@ -364,3 +364,36 @@ fn feed_losses() {
         );
     }
 }
+
+/// [`tests::feed::losses`] puts each block's time where it belongs: two lines, 10 mm
+/// along X and 20 mm along Y with an exact stop at the corner, at F6000 on the built-in
+/// machine (path acceleration 2000 mm/s² the lower limit). Rest to rest each takes
+/// `L/F + F/A` at the acceleration-only optimum: 0.15 and 0.25 s (to 1e-3 s, the grid's
+/// and the rest's rounding; a line placed at the other's length would take the other's
+/// time). Ours sum to the run's motion cycles and lie above the optimum's.
+#[test]
+fn the_losses_put_each_blocks_time_where_it_belongs() {
+    let m = Machine::default();
+    let text = "G21 G90 G1 X10 F6000\nY20\nM2\n";
+    let blocks = interpreter::process::compile(text, &m, PERIOD_NS)
+        .unwrap()
+        .1;
+    let feeds = tests::topp::programmed_feeds("lines.ngc", text, &m, PERIOD_NS, &blocks).unwrap();
+    let lim = tests::topp::RefLimits::of(&m, PERIOD_NS);
+    let o = tests::topp::optimum(&blocks, &feeds, &lim, DEFAULT_STEP_MM);
+    let s: Vec<f64> = o.grid.iter().map(|g| g.s).collect();
+    let l = tests::feed::losses(&blocks, &m, PERIOD_NS, (&s, &o.speed)).unwrap();
+    let est = interpreter::estimate::estimate(&blocks, &m, PERIOD_NS).unwrap();
+    println!("{l:?}");
+    assert_eq!(l.len(), 2);
+    for (x, want) in l.iter().zip([0.15, 0.25]) {
+        assert!((x.optimum_s - want).abs() < 1e-3, "{x:?}: want {want}");
+        assert!(x.ours_s >= x.optimum_s - 1e-3, "{x:?}");
+    }
+    let ours: f64 = l.iter().map(|x| x.ours_s).sum();
+    assert!(
+        (ours - est.time_s).abs() <= 2e-3 + 1e-9,
+        "{ours} against {}",
+        est.time_s
+    );
+}
