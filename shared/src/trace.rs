@@ -55,7 +55,8 @@ impl<T: Copy + Send + 'static> TraceWriter<T> {
                     // Hand what we have to the kernel every round: if this process is
                     // killed, at most the last few milliseconds of records are lost.
                     out.flush()?;
-                    std::thread::sleep(Duration::from_millis(5));
+                    // `finish` unparks it: the loop's end is not kept waiting a round.
+                    std::thread::park_timeout(Duration::from_millis(5));
                 }
                 out.flush()?;
                 out.get_ref().sync_all()?;
@@ -91,9 +92,11 @@ impl<T: Copy + Send + 'static> TraceWriter<T> {
     pub fn finish(mut self) -> std::io::Result<u64> {
         self.stop.store(true, Ordering::Release);
         match self.thread.take() {
-            Some(t) => t
-                .join()
-                .unwrap_or_else(|_| Err(std::io::Error::other("trace writer panicked"))),
+            Some(t) => {
+                t.thread().unpark();
+                t.join()
+                    .unwrap_or_else(|_| Err(std::io::Error::other("trace writer panicked")))
+            }
             None => Ok(0),
         }
     }
@@ -103,6 +106,7 @@ impl<T: Copy + Send + 'static> Drop for TraceWriter<T> {
     fn drop(&mut self) {
         self.stop.store(true, Ordering::Release);
         if let Some(t) = self.thread.take() {
+            t.thread().unpark();
             let _ = t.join();
         }
     }
