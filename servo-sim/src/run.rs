@@ -207,6 +207,17 @@ pub fn run<S: Service>(cfg: &Config) -> Result<Summary, IpcError> {
     }
     let io = |e: std::io::Error| IpcError(format!("writing the run directory: {e}"));
     let svc = Services::new(&cfg.prefix);
+    // The interpolator creates the services these open: opening them at the same moment
+    // would cost iceoryx2's 25 ms tick (`ipc::await_created`).
+    ipc::await_created::<S>(
+        &[
+            (&svc.feedback(), MessagingPattern::PublishSubscribe),
+            (&svc.feedback(), MessagingPattern::Event),
+            (&svc.setpoints(), MessagingPattern::PublishSubscribe),
+            (&svc.setpoints(), MessagingPattern::Event),
+        ],
+        ipc::CREATOR_WAIT,
+    );
     let node = ipc::node::<S>("servo-sim")?;
     let feedback = ipc::feedback(&node, &svc)?;
     let fb_pub = feedback
