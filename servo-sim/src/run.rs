@@ -253,6 +253,7 @@ pub fn run<S: Service>(cfg: &Config) -> Result<Summary, IpcError> {
         format_feedback,
     )
     .map_err(io)?;
+    trace.sync_at_end(cfg.clock == ClockMode::Real);
     let mut drives = Drives::new(cfg.machine.clone(), cfg.period_ns);
     // The drive loop gets the interpolator's real-time set-up (unpinned, a priority
     // below its): starved of the CPU, the drives would go silent and fault a healthy run.

@@ -454,6 +454,7 @@ pub fn run_with<S: Service>(cfg: &Config, hooks: Hooks) -> Result<Summary, RunEr
         1 << 16,
         format_setpoint,
     )?;
+    trace.sync_at_end(!sim);
     // Misses go through a pre-allocated ring to a thread that keeps them all.
     let (mut timing, mut miss_log) = Timing::new(cfg.period_ns, MISS_RING);
     if !sim {
