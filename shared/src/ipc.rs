@@ -221,3 +221,53 @@ pub fn wakeup<S: Service>(
         .open_or_create()
         .map_err(|e| err("event service", e))
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::protocol::Services;
+    use std::time::Duration;
+
+    fn status_of(svc: &Services) -> [(String, MessagingPattern); 1] {
+        [(svc.status(), MessagingPattern::PublishSubscribe)]
+    }
+
+    fn awaited(services: &[(String, MessagingPattern)], max: Duration) -> bool {
+        let refs: Vec<(&str, MessagingPattern)> =
+            services.iter().map(|(n, p)| (n.as_str(), *p)).collect();
+        await_created::<local::Service>(&refs, max)
+    }
+
+    /// A peer waits for the service until its creator has made it, and no longer; with no
+    /// creator it gives up after `max` (and then opens or creates it itself).
+    #[test]
+    fn a_peer_waits_for_the_creator_and_no_longer() {
+        let svc = Services::new(&format!("await{}", std::process::id()));
+        let wanted = status_of(&svc);
+        assert!(!awaited(&wanted, Duration::from_millis(5)));
+        let creator = std::thread::spawn({
+            let svc = Services::new(&format!("await{}", std::process::id()));
+            move || {
+                std::thread::sleep(Duration::from_millis(30));
+                let node = node::<local::Service>("creator").unwrap();
+                let made = status(&node, &svc).unwrap();
+                // Held until the waiter has seen it.
+                std::thread::sleep(Duration::from_millis(200));
+                drop(made);
+            }
+        });
+        assert!(awaited(&wanted, Duration::from_secs(10)));
+        creator.join().unwrap();
+    }
+
+    /// The root of this user's iceoryx2 files lies on tmpfs where that is writable.
+    #[test]
+    fn the_root_is_on_dev_shm_where_writable() {
+        let root = config().global.root_path().to_string();
+        if state_parent() == "/dev/shm" {
+            assert!(root.starts_with("/dev/shm/iceoryx2-cnc-"), "{root}");
+        } else {
+            assert!(root.starts_with("/tmp/iceoryx2-cnc-"), "{root}");
+        }
+    }
+}
