@@ -217,7 +217,7 @@ mod tests {
     #[test]
     fn ties_read_as_display_writes_them() {
         same(f64::from_bits(0x4317_9085_685d_83c9));
-        same(1658206780088562.25);
+        same(1_658_206_780_088_562.0 + 0.25);
         let mut rng = XorShift(777);
         for _ in 0..100_000 {
             let n = (rng.next() >> 11) as f64;

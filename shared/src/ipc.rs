@@ -242,11 +242,11 @@ mod tests {
     /// creator it gives up after `max` (and then opens or creates it itself).
     #[test]
     fn a_peer_waits_for_the_creator_and_no_longer() {
-        let svc = Services::new(&format!("await{}", std::process::id()));
+        let svc = Services::new(format!("await{}", std::process::id()));
         let wanted = status_of(&svc);
         assert!(!awaited(&wanted, Duration::from_millis(5)));
         let creator = std::thread::spawn({
-            let svc = Services::new(&format!("await{}", std::process::id()));
+            let svc = Services::new(format!("await{}", std::process::id()));
             move || {
                 std::thread::sleep(Duration::from_millis(30));
                 let node = node::<local::Service>("creator").unwrap();
