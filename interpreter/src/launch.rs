@@ -954,6 +954,7 @@ fn supervise(roles: &mut [Role], mut progress: Option<&mut Progress>) -> Option<
     let mut last_exit: Option<Instant> = None;
     let mut last_sample: Option<Instant> = None;
     let mut operator_stop: Option<Instant> = None;
+    let exits = Exits::open(roles);
     loop {
         if let Some(p) = progress.as_deref_mut() {
             p.update();
@@ -1046,7 +1047,70 @@ fn supervise(roles: &mut [Role], mut progress: Option<&mut Progress>) -> Option<
             stop_all(roles);
             return fault;
         }
-        std::thread::sleep(Duration::from_millis(10));
+        exits.wait(roles, Duration::from_millis(10));
+    }
+}
+
+/// The running processes' pidfds, to sleep between the supervisor's looks until one of
+/// them ends or the look is due: a run's end is seen when it happens, not up to a look
+/// later (10 ms of every `--clock sim` run's wall time, against a loop of 0.3 s).
+struct Exits {
+    fds: Vec<(u32, libc::c_int)>,
+}
+
+impl Exits {
+    fn open(roles: &[Role]) -> Exits {
+        let fds = roles
+            .iter()
+            .filter_map(|r| {
+                let pid = r.child.id();
+                // SAFETY: pidfd_open(2) with a pid of our own unreaped child and no flags;
+                // returns a new fd or -1.
+                let fd = unsafe { libc::syscall(libc::SYS_pidfd_open, pid as libc::pid_t, 0) };
+                (fd >= 0).then_some((pid, fd as libc::c_int))
+            })
+            .collect();
+        Exits { fds }
+    }
+
+    /// Sleeps for `most` or until a process still running ends. Without pidfds (an old
+    /// kernel) a plain sleep.
+    fn wait(&self, roles: &[Role], most: Duration) {
+        let mut polled: Vec<libc::pollfd> = self
+            .fds
+            .iter()
+            .filter(|(pid, _)| {
+                roles
+                    .iter()
+                    .any(|r| r.child.id() == *pid && r.exit.is_none())
+            })
+            .map(|(_, fd)| libc::pollfd {
+                fd: *fd,
+                events: libc::POLLIN,
+                revents: 0,
+            })
+            .collect();
+        if polled.is_empty() {
+            std::thread::sleep(most);
+            return;
+        }
+        // SAFETY: `polled` is a valid array of that many pollfds for the call's length.
+        unsafe {
+            libc::poll(
+                polled.as_mut_ptr(),
+                polled.len() as libc::nfds_t,
+                most.as_millis() as libc::c_int,
+            )
+        };
+    }
+}
+
+impl Drop for Exits {
+    fn drop(&mut self) {
+        for (_, fd) in &self.fds {
+            // SAFETY: an fd this struct opened and closes once.
+            unsafe { libc::close(*fd) };
+        }
     }
 }
 

@@ -7,7 +7,7 @@ use crate::program;
 use crate::publish::{send, Finish, Link, Pace};
 use crate::report::InterpreterSummary;
 use crate::window::{self, Planned};
-use iceoryx2::prelude::Service;
+use iceoryx2::prelude::{MessagingPattern, Service};
 use shared::cmdlog::CommandLog;
 use shared::ipc::IpcError;
 use shared::protocol::{BlockKind, CommandBlock, FLAG_RAPID};
@@ -718,7 +718,17 @@ pub fn run_streaming<S: Service>(
     streaming: Streaming,
 ) -> Result<InterpreterSummary, String> {
     // The ports first: the interpolator waits for the first block as long as they are
-    // there, however long the program takes to read and plan.
+    // there, however long the program takes to read and plan. The interpolator creates
+    // them: opening them at the same moment would cost iceoryx2's 25 ms tick
+    // (`ipc::await_created`).
+    let svc = shared::protocol::Services::new(&cfg.prefix);
+    shared::ipc::await_created::<S>(
+        &[
+            (&svc.blocks(), MessagingPattern::PublishSubscribe),
+            (&svc.status(), MessagingPattern::PublishSubscribe),
+        ],
+        shared::ipc::CREATOR_WAIT,
+    );
     let link = Link::<S>::open(&cfg.prefix).map_err(|e| e.to_string())?;
     let mut salvaged = None;
     let mut dialect = None;

@@ -32,7 +32,15 @@ pub fn err(what: &str, e: impl core::fmt::Debug) -> IpcError {
 /// The iceoryx2 configuration of every node of the stack: iceoryx2's own (its defaults,
 /// or a config file an operator put in one of the places iceoryx2 looks), except that
 /// where it keeps iceoryx2's default root directory (`/tmp/iceoryx2/`) and file prefix
-/// (`iox2_`), each user gets their own: `/tmp/iceoryx2-cnc-<uid>/` and `iox2u<uid>_`.
+/// (`iox2_`), each user gets their own: `/dev/shm/iceoryx2-cnc-<uid>/` (or
+/// `/tmp/iceoryx2-cnc-<uid>/` where `/dev/shm` is not a directory this user can write)
+/// and `iox2u<uid>_`.
+///
+/// The root holds the nodes' and services' small files, and iceoryx2 syncs each one it
+/// writes: about 20 `fsync` calls for the interpolator's services alone, 1–2 ms each on
+/// this VM's disk and more while others build, all before the first cycle. On `/dev/shm`
+/// (tmpfs, like the shared memory itself) a sync costs nothing, and nothing in the root
+/// outlives a reboot in any case.
 ///
 /// iceoryx2 creates its root directory mode 0750 for the first user who runs it, and
 /// every other user's node creation then fails (`InternalError`): one root run, and no
@@ -47,7 +55,7 @@ pub fn config() -> &'static Config {
         // SAFETY: getuid(2) cannot fail and touches no memory of ours.
         let uid = unsafe { libc::getuid() };
         if cfg.global.root_path() == default.global.root_path() {
-            let root = format!("/tmp/iceoryx2-cnc-{uid}/");
+            let root = format!("{}/iceoryx2-cnc-{uid}/", state_parent());
             match Path::new(root.as_bytes()) {
                 Ok(p) => cfg.global.set_root_path(&p),
                 Err(e) => tracing::warn!("iceoryx2 root {root}: {e:?}; the default is used"),
@@ -62,6 +70,19 @@ pub fn config() -> &'static Config {
         }
         cfg
     })
+}
+
+/// Where the per-user iceoryx2 root goes: `/dev/shm` when it is a directory this user can
+/// write, else `/tmp`.
+fn state_parent() -> &'static str {
+    let shm = c"/dev/shm";
+    // SAFETY: access(2) on a NUL-terminated path; it only reads it.
+    let writable = unsafe { libc::access(shm.as_ptr(), libc::W_OK | libc::X_OK) } == 0;
+    if writable && std::path::Path::new("/dev/shm").is_dir() {
+        "/dev/shm"
+    } else {
+        "/tmp"
+    }
 }
 
 /// A node of the stack; `role` names it in iceoryx2's introspection.
@@ -88,6 +109,44 @@ pub fn node<S: Service>(role: &str) -> Result<Node<S>, IpcError> {
         );
     }
     Ok(node)
+}
+
+/// Before the first service of a stack: how long a peer waits for the interpolator to
+/// have created the services, before it opens (or creates) them itself all the same.
+pub const CREATOR_WAIT: std::time::Duration = std::time::Duration::from_millis(200);
+
+/// Waits until every service of `services` (name, messaging pattern) exists, fully
+/// created, looking every 100 µs for at most `max`; returns whether they all do.
+///
+/// Why: every process opens the stack's services with `open_or_create`, and two that reach
+/// one service at once collide: the one that finds it half created sleeps iceoryx2's whole
+/// I/O tick (25 ms, a constant of the crate) before it looks again. Measured on the
+/// butterfly under `--clock sim`: the servo-sim's services open 35 ms after its start
+/// against the interpolator's 15 ms, the run's start-up a third longer. So the
+/// interpolator creates them and its peers wait for that here, in short looks; a peer that
+/// waited `max` in vain (no interpolator yet, a starved one) goes on as before, so this
+/// changes how soon, never whether, a stack starts.
+pub fn await_created<S: Service>(
+    services: &[(&str, MessagingPattern)],
+    max: std::time::Duration,
+) -> bool {
+    let names: Vec<(ServiceName, MessagingPattern)> = services
+        .iter()
+        .filter_map(|(n, p)| Some((name(n).ok()?, *p)))
+        .collect();
+    let start = std::time::Instant::now();
+    loop {
+        let all = names
+            .iter()
+            .all(|(n, p)| S::does_exist(n, config(), *p).unwrap_or(false));
+        if all {
+            return true;
+        }
+        if start.elapsed() >= max {
+            return false;
+        }
+        std::thread::sleep(std::time::Duration::from_micros(100));
+    }
 }
 
 fn name(s: &str) -> Result<ServiceName, IpcError> {
@@ -161,4 +220,54 @@ pub fn wakeup<S: Service>(
         .max_listeners(2)
         .open_or_create()
         .map_err(|e| err("event service", e))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::protocol::Services;
+    use std::time::Duration;
+
+    fn status_of(svc: &Services) -> [(String, MessagingPattern); 1] {
+        [(svc.status(), MessagingPattern::PublishSubscribe)]
+    }
+
+    fn awaited(services: &[(String, MessagingPattern)], max: Duration) -> bool {
+        let refs: Vec<(&str, MessagingPattern)> =
+            services.iter().map(|(n, p)| (n.as_str(), *p)).collect();
+        await_created::<local::Service>(&refs, max)
+    }
+
+    /// A peer waits for the service until its creator has made it, and no longer; with no
+    /// creator it gives up after `max` (and then opens or creates it itself).
+    #[test]
+    fn a_peer_waits_for_the_creator_and_no_longer() {
+        let svc = Services::new(format!("await{}", std::process::id()));
+        let wanted = status_of(&svc);
+        assert!(!awaited(&wanted, Duration::from_millis(5)));
+        let creator = std::thread::spawn({
+            let svc = Services::new(format!("await{}", std::process::id()));
+            move || {
+                std::thread::sleep(Duration::from_millis(30));
+                let node = node::<local::Service>("creator").unwrap();
+                let made = status(&node, &svc).unwrap();
+                // Held until the waiter has seen it.
+                std::thread::sleep(Duration::from_millis(200));
+                drop(made);
+            }
+        });
+        assert!(awaited(&wanted, Duration::from_secs(10)));
+        creator.join().unwrap();
+    }
+
+    /// The root of this user's iceoryx2 files lies on tmpfs where that is writable.
+    #[test]
+    fn the_root_is_on_dev_shm_where_writable() {
+        let root = config().global.root_path().to_string();
+        if state_parent() == "/dev/shm" {
+            assert!(root.starts_with("/dev/shm/iceoryx2-cnc-"), "{root}");
+        } else {
+            assert!(root.starts_with("/tmp/iceoryx2-cnc-"), "{root}");
+        }
+    }
 }

@@ -7,7 +7,8 @@
 //! * [`path`]: the geometry of a motion block (NURBS plus the axial part of a helix).
 //! * [`machine`]: the machine file (limits and the servo model).
 //! * [`cmdlog`]: the command log (`commands.log`), every block exactly as sent.
-//! * [`ipc`]: the services of a run and their QoS; [`trace`]: off-cycle CSV recording;
+//! * [`ipc`]: the services of a run and their QoS; [`trace`]: off-cycle CSV recording,
+//!   its numbers written by [`decimal`];
 //!   [`clock`]: monotonic integer time.
 //!
 //! Vocabulary: a *block* is one command (a motion along one curve, a dwell, the program
@@ -17,6 +18,7 @@
 pub mod alloc_count;
 pub mod clock;
 pub mod cmdlog;
+pub mod decimal;
 pub mod ipc;
 pub mod logging;
 pub mod machine;
