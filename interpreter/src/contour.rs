@@ -832,9 +832,12 @@ fn circle_cycles(c: &CircleRun, seg_of: &[Option<usize>], t: &Traces) -> CircleC
     }
 }
 
+/// The closed runs, the index of the circle among them and the circle ([`main_circle`]).
+type MainCircle = (Vec<(usize, usize)>, usize, CircleRun);
+
 /// The closed runs of `segs` ([`closed_runs`]), the longest of them that is a circle and
 /// its index among them; when none is, why the longest is not.
-fn main_circle(segs: &[Seg]) -> Result<(Vec<(usize, usize)>, usize, CircleRun), String> {
+fn main_circle(segs: &[Seg]) -> Result<MainCircle, String> {
     let runs = closed_runs(segs);
     let longest = *runs.first().ok_or_else(|| {
         "no run of feed moves ends where it starts (a closed curve between rapids)".to_string()

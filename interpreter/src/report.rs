@@ -240,7 +240,7 @@ fn csv_rows(path: &Path, mut row: impl FnMut(&[f64])) {
     let mut input = std::io::BufReader::new(f);
     let mut line: Vec<u8> = Vec::new();
     // The header.
-    if !matches!(input.read_until(b'\n', &mut line), Ok(_) if line.ends_with(b"\n")) {
+    if !(input.read_until(b'\n', &mut line).is_ok() && line.ends_with(b"\n")) {
         return;
     }
     let mut vals: Vec<f64> = Vec::new();

@@ -225,7 +225,7 @@ fn roundness(
     }
     let mut failed: Option<std::io::Error> = None;
     let mut pass = |f: &mut dyn FnMut([f64; 2])| {
-        if let Err(e) = spill.for_each(|p| f(p)) {
+        if let Err(e) = spill.for_each(&mut *f) {
             failed.get_or_insert(e);
         }
     };
