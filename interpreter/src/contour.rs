@@ -34,6 +34,9 @@ use shared::path::{domain, norm};
 use shared::protocol::{BlockKind, CommandBlock, FLAG_RAPID};
 use std::f64::consts::PI;
 
+mod stream;
+pub use stream::{figures, figures_dir, FbRow, SpRow};
+
 /// The run's traces, as columns (both in cycle order).
 #[derive(Debug, Clone, Copy)]
 pub struct Traces<'a> {
@@ -143,6 +146,71 @@ pub struct Contour {
     /// Where the last set-point with a feedback row lies on the path: what follows it
     /// never ran when the run stopped early.
     pub reached: Option<Reached>,
+}
+
+/// The figures of a [`Contour`] without its lists per feedback row and per point: what
+/// `report.json` holds. [`figures`] measures them reading the traces row by row.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Figures {
+    pub max: Option<Worst>,
+    pub rms_um: Option<f64>,
+    pub chord: Option<Worst>,
+    pub roundness: Result<RoundnessSummary, String>,
+    pub reached: Option<Reached>,
+}
+
+/// The figures of a [`Roundness`] without its points.
+#[derive(Debug, Clone, PartialEq)]
+pub struct RoundnessSummary {
+    pub axes: (usize, usize),
+    pub centre_mm: [f64; 2],
+    pub radius_mm: f64,
+    pub commanded_centre_mm: [f64; 2],
+    pub commanded_radius_mm: f64,
+    pub roundness_um: f64,
+    pub lines: (u32, u32),
+    /// Measured positions the figures come from.
+    pub samples: usize,
+    pub ccw: bool,
+}
+
+impl RoundnessSummary {
+    /// As [`Roundness::radius_error_um`].
+    pub fn radius_error_um(&self) -> f64 {
+        (self.radius_mm - self.commanded_radius_mm) * 1e3
+    }
+}
+
+impl Roundness {
+    pub fn summary(&self) -> RoundnessSummary {
+        RoundnessSummary {
+            axes: self.axes,
+            centre_mm: self.centre_mm,
+            radius_mm: self.radius_mm,
+            commanded_centre_mm: self.commanded_centre_mm,
+            commanded_radius_mm: self.commanded_radius_mm,
+            roundness_um: self.roundness_um,
+            lines: self.lines,
+            samples: self.measured.len(),
+            ccw: self.ccw,
+        }
+    }
+}
+
+impl Contour {
+    pub fn figures(&self) -> Figures {
+        Figures {
+            max: self.max,
+            rms_um: self.rms_um,
+            chord: self.chord,
+            roundness: self
+                .roundness
+                .as_ref()
+                .map(Roundness::summary)
+                .map_err(Clone::clone),
+            reached: self.reached,
+        }
+    }
 }
 
 /// A point of the commanded path: a block (by its `seq`) and a parameter on it.
@@ -419,16 +487,7 @@ const SETTLED_MM: f64 = 1e-10;
 
 /// Measures the run. `blocks` are the validated command blocks in sending order.
 pub fn analyse(blocks: &[CommandBlock], t: &Traces) -> Contour {
-    let mut segs: Vec<Seg> = blocks
-        .iter()
-        .filter(|b| b.kind() == Some(BlockKind::Motion) && b.n_ctrl > 0)
-        .map(Seg::new)
-        .collect();
-    for i in 0..segs.len() {
-        let line = segs[i].b.source_line;
-        let end = segs.len().min(i + LOCATE_AHEAD);
-        segs[i].line_goes_on = segs[i + 1..end].iter().any(|g| g.b.source_line == line);
-    }
+    let segs = segs_of(blocks);
     let n_fb = t.fb_cycle.len();
     // Pass 1, in order (the search for each set-point's block goes forward from the last
     // one): the block of each feedback row's set-point (None: no set-point that cycle),
@@ -542,6 +601,21 @@ pub fn analyse(blocks: &[CommandBlock], t: &Traces) -> Contour {
         roundness,
         reached,
     }
+}
+
+/// The motion blocks of `blocks` with what the search needs.
+fn segs_of(blocks: &[CommandBlock]) -> Vec<Seg<'_>> {
+    let mut segs: Vec<Seg> = blocks
+        .iter()
+        .filter(|b| b.kind() == Some(BlockKind::Motion) && b.n_ctrl > 0)
+        .map(Seg::new)
+        .collect();
+    for i in 0..segs.len() {
+        let line = segs[i].b.source_line;
+        let end = segs.len().min(i + LOCATE_AHEAD);
+        segs[i].line_goes_on = segs[i + 1..end].iter().any(|g| g.b.source_line == line);
+    }
+    segs
 }
 
 /// A chord between two set-points: its middle, the block of the second, its length (mm;
@@ -758,12 +832,16 @@ fn circle_cycles(c: &CircleRun, seg_of: &[Option<usize>], t: &Traces) -> CircleC
     }
 }
 
-fn roundness(segs: &[Seg], seg_of: &[Option<usize>], t: &Traces) -> Result<Roundness, String> {
+/// The closed runs, the index of the circle among them and the circle ([`main_circle`]).
+type MainCircle = (Vec<(usize, usize)>, usize, CircleRun);
+
+/// The closed runs of `segs` ([`closed_runs`]), the longest of them that is a circle and
+/// its index among them; when none is, why the longest is not.
+fn main_circle(segs: &[Seg]) -> Result<MainCircle, String> {
     let runs = closed_runs(segs);
     let longest = *runs.first().ok_or_else(|| {
         "no run of feed moves ends where it starts (a closed curve between rapids)".to_string()
     })?;
-    // The longest closed run that is a circle; when none is, why the longest is not.
     let Some((k, c)) = runs
         .iter()
         .enumerate()
@@ -771,6 +849,11 @@ fn roundness(segs: &[Seg], seg_of: &[Option<usize>], t: &Traces) -> Result<Round
     else {
         return Err(circle_run(segs, longest).err().unwrap_or_default());
     };
+    Ok((runs, k, c))
+}
+
+fn roundness(segs: &[Seg], seg_of: &[Option<usize>], t: &Traces) -> Result<Roundness, String> {
+    let (runs, k, c) = main_circle(segs)?;
     let (first, last) = (c.first, c.last);
     let (axes, cc, cr) = (c.axes, c.centre, c.radius);
     let (meas, cmd, ramps_left_out) = circle_cycles(&c, seg_of, t);
@@ -886,77 +969,115 @@ pub fn analyse_dir(dir: &std::path::Path) -> Result<Contour, String> {
 /// the first damaged row of a CSV file (a run cut short still gives the figures of what
 /// it did).
 pub fn read_dir(dir: &std::path::Path) -> Result<(Vec<CommandBlock>, OwnedTraces), String> {
-    let log = shared::cmdlog::read(&dir.join("commands.log"))?;
-    let blocks: Vec<CommandBlock> = log
-        .blocks
-        .into_iter()
-        .filter(|b| b.validate().is_ok())
-        .collect();
+    let blocks = read_blocks(dir)?;
     let mut t = OwnedTraces::default();
-    read_csv(
-        &dir.join("setpoints.csv"),
-        &["cycle", "x_mm", "y_mm", "z_mm", "line"],
-        |r| {
-            t.sp_cycle.push(r[0] as u64);
-            t.sp_pos_mm.push([r[1], r[2], r[3]]);
-            t.sp_line.push(r[4] as u32);
-        },
-    )?;
-    read_csv(
-        &dir.join("feedback.csv"),
-        &["cycle", "x_mm", "y_mm", "z_mm"],
-        |r| {
-            t.fb_cycle.push(r[0] as u64);
-            t.fb_pos_mm.push([r[1], r[2], r[3]]);
-        },
-    )?;
+    let mut sp = CsvRows::setpoints(dir)?;
+    while let Some(r) = sp.next_row() {
+        t.sp_cycle.push(r[0] as u64);
+        t.sp_pos_mm.push([r[1], r[2], r[3]]);
+        t.sp_line.push(r[4] as u32);
+    }
+    let mut fb = CsvRows::feedback(dir)?;
+    while let Some(r) = fb.next_row() {
+        t.fb_cycle.push(r[0] as u64);
+        t.fb_pos_mm.push([r[1], r[2], r[3]]);
+    }
     Ok((blocks, t))
 }
 
-/// Calls `row` with the named columns of each row of a CSV file, up to the first row that
+/// The valid blocks of `commands.log` in `dir`, in sending order.
+pub fn read_blocks(dir: &std::path::Path) -> Result<Vec<CommandBlock>, String> {
+    let log = shared::cmdlog::read(&dir.join("commands.log"))?;
+    Ok(log
+        .blocks
+        .into_iter()
+        .filter(|b| b.validate().is_ok())
+        .collect())
+}
+
+/// The named columns of a CSV file's rows, one row at a time, up to the first row that
 /// does not parse.
-fn read_csv(
-    path: &std::path::Path,
-    want: &[&str],
-    mut row: impl FnMut(&[f64]),
-) -> Result<(), String> {
-    use std::io::BufRead;
-    let name = path.display();
-    let f = std::fs::File::open(path).map_err(|e| format!("{name}: {e}"))?;
-    let mut lines = std::io::BufReader::new(f).lines();
-    let header = lines
-        .next()
-        .ok_or_else(|| format!("{name}: empty"))?
-        .map_err(|e| format!("{name}: {e}"))?;
-    let cols: Vec<&str> = header.trim().split(',').collect();
-    let idx: Vec<usize> = want
-        .iter()
-        .map(|w| {
-            cols.iter()
-                .position(|c| c == w)
-                .ok_or_else(|| format!("{name}: no column `{w}`"))
+pub struct CsvRows {
+    lines: std::io::Lines<std::io::BufReader<std::fs::File>>,
+    idx: Vec<usize>,
+    cols: usize,
+    vals: Vec<f64>,
+    done: bool,
+}
+
+impl CsvRows {
+    /// `cycle, x_mm, y_mm, z_mm, line` of `setpoints.csv` in `dir`.
+    pub fn setpoints(dir: &std::path::Path) -> Result<CsvRows, String> {
+        CsvRows::open(
+            &dir.join("setpoints.csv"),
+            &["cycle", "x_mm", "y_mm", "z_mm", "line"],
+        )
+    }
+
+    /// `cycle, x_mm, y_mm, z_mm` of `feedback.csv` in `dir`.
+    pub fn feedback(dir: &std::path::Path) -> Result<CsvRows, String> {
+        CsvRows::open(
+            &dir.join("feedback.csv"),
+            &["cycle", "x_mm", "y_mm", "z_mm"],
+        )
+    }
+
+    /// The columns `want` of the CSV file at `path`; the error names the file that is
+    /// missing or unreadable, or the column it lacks.
+    pub fn open(path: &std::path::Path, want: &[&str]) -> Result<CsvRows, String> {
+        use std::io::BufRead;
+        let name = path.display();
+        let f = std::fs::File::open(path).map_err(|e| format!("{name}: {e}"))?;
+        let mut lines = std::io::BufReader::new(f).lines();
+        let header = lines
+            .next()
+            .ok_or_else(|| format!("{name}: empty"))?
+            .map_err(|e| format!("{name}: {e}"))?;
+        let cols: Vec<&str> = header.trim().split(',').collect();
+        let idx: Vec<usize> = want
+            .iter()
+            .map(|w| {
+                cols.iter()
+                    .position(|c| c == w)
+                    .ok_or_else(|| format!("{name}: no column `{w}`"))
+            })
+            .collect::<Result<_, _>>()?;
+        Ok(CsvRows {
+            lines,
+            idx,
+            cols: cols.len(),
+            vals: vec![0.0; want.len()],
+            done: false,
         })
-        .collect::<Result<_, _>>()?;
-    let mut vals = vec![0.0; want.len()];
-    for l in lines {
-        let Ok(l) = l else { break };
+    }
+
+    /// The next row's columns, in the order asked for; `None` at the end or at the first
+    /// row that does not parse (and from then on).
+    pub fn next_row(&mut self) -> Option<&[f64]> {
+        if self.done {
+            return None;
+        }
+        let Some(Ok(l)) = self.lines.next() else {
+            self.done = true;
+            return None;
+        };
         let mut n = 0;
         let mut ok = true;
         for (c, cell) in l.trim().split(',').enumerate() {
             n += 1;
-            if let Some(k) = idx.iter().position(|&i| i == c) {
+            if let Some(k) = self.idx.iter().position(|&i| i == c) {
                 match cell.parse::<f64>() {
-                    Ok(x) if x.is_finite() => vals[k] = x,
+                    Ok(x) if x.is_finite() => self.vals[k] = x,
                     _ => ok = false,
                 }
             }
         }
-        if !ok || n != cols.len() {
-            break;
+        if !ok || n != self.cols {
+            self.done = true;
+            return None;
         }
-        row(&vals);
+        Some(&self.vals)
     }
-    Ok(())
 }
 
 /// Max − min of the deviations, µm (0 for none).
@@ -1069,10 +1190,21 @@ fn turned(pts: &[[f64; 2]], c: [f64; 2]) -> f64 {
 /// The angle `pts` turn about `c` (counter-clockwise positive), and the sum of its
 /// steps' sizes (equal to the turn's size when the points never turn back).
 fn turning(pts: &[[f64; 2]], c: [f64; 2]) -> (f64, f64) {
+    turning_by(|f| pts.iter().for_each(|p| f(*p)), c)
+}
+
+/// [`turning`] of the points that `each` gives, in order, to the function it is called
+/// with.
+fn turning_by(each: impl FnOnce(&mut dyn FnMut([f64; 2])), c: [f64; 2]) -> (f64, f64) {
     let ang = |p: &[f64; 2]| (p[1] - c[1]).atan2(p[0] - c[0]);
     let (mut sum, mut abs) = (0.0, 0.0);
-    for w in pts.windows(2) {
-        let mut d = ang(&w[1]) - ang(&w[0]);
+    let mut prev: Option<f64> = None;
+    each(&mut |p| {
+        let a = ang(&p);
+        let Some(before) = prev.replace(a) else {
+            return;
+        };
+        let mut d = a - before;
         if d > PI {
             d -= 2.0 * PI;
         } else if d < -PI {
@@ -1080,7 +1212,7 @@ fn turning(pts: &[[f64; 2]], c: [f64; 2]) -> (f64, f64) {
         }
         sum += d;
         abs += d.abs();
-    }
+    });
     (sum, abs)
 }
 
@@ -1089,18 +1221,26 @@ fn turning(pts: &[[f64; 2]], c: [f64; 2]) -> (f64, f64) {
 /// normal equations stay well conditioned). `None` for fewer than three points or points
 /// on a line.
 pub fn fit_circle(pts: &[[f64; 2]]) -> Option<([f64; 2], f64)> {
-    if pts.len() < 3 {
+    fit_circle_by(pts.len(), |f| pts.iter().for_each(|p| f(*p)))
+}
+
+/// [`fit_circle`] of `len` points that `each` gives, in the same order, to the function
+/// it is called with (once per pass: the points need not be held).
+fn fit_circle_by(
+    len: usize,
+    mut each: impl FnMut(&mut dyn FnMut([f64; 2])),
+) -> Option<([f64; 2], f64)> {
+    if len < 3 {
         return None;
     }
-    let n = pts.len() as f64;
-    let m = pts
-        .iter()
-        .fold([0.0, 0.0], |s, p| [s[0] + p[0] / n, s[1] + p[1] / n]);
-    let rel: Vec<[f64; 2]> = pts.iter().map(|p| [p[0] - m[0], p[1] - m[1]]).collect();
+    let n = len as f64;
+    let mut m = [0.0, 0.0];
+    each(&mut |p| m = [m[0] + p[0] / n, m[1] + p[1] / n]);
+    let mut rel = |f: &mut dyn FnMut([f64; 2])| each(&mut |p| f([p[0] - m[0], p[1] - m[1]]));
     // Kåsa: minimise Σ (x² + y² + D x + E y + F)².
     let mut a = [[0.0f64; 3]; 3];
     let mut rhs = [0.0f64; 3];
-    for p in &rel {
+    rel(&mut |p| {
         let row = [p[0], p[1], 1.0];
         let z = -(p[0] * p[0] + p[1] * p[1]);
         for i in 0..3 {
@@ -1109,7 +1249,7 @@ pub fn fit_circle(pts: &[[f64; 2]]) -> Option<([f64; 2], f64)> {
             }
             rhs[i] += row[i] * z;
         }
-    }
+    });
     let [d, e, f] = solve3(a, rhs)?;
     let mut c = [-d / 2.0, -e / 2.0];
     let r2 = c[0] * c[0] + c[1] * c[1] - f;
@@ -1121,11 +1261,11 @@ pub fn fit_circle(pts: &[[f64; 2]]) -> Option<([f64; 2], f64)> {
     for _ in 0..20 {
         let mut jtj = [[0.0f64; 3]; 3];
         let mut jtr = [0.0f64; 3];
-        for p in &rel {
+        rel(&mut |p| {
             let (dx, dy) = (p[0] - c[0], p[1] - c[1]);
             let di = dx.hypot(dy);
             if di == 0.0 {
-                continue;
+                return;
             }
             let jrow = [-dx / di, -dy / di, -1.0];
             let res = di - r;
@@ -1135,7 +1275,7 @@ pub fn fit_circle(pts: &[[f64; 2]]) -> Option<([f64; 2], f64)> {
                 }
                 jtr[i] -= jrow[i] * res;
             }
-        }
+        });
         let Some(step) = solve3(jtj, jtr) else {
             break;
         };

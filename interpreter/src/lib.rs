@@ -45,6 +45,7 @@ pub mod replay;
 pub mod report;
 pub mod rundir;
 pub mod scallop;
+mod spill;
 pub mod step;
 pub mod surface_blocks;
 pub mod surface_path;

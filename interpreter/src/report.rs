@@ -183,7 +183,7 @@ pub struct RoundnessFigures {
 }
 
 impl RoundnessFigures {
-    pub fn of(r: &crate::contour::Roundness) -> Self {
+    pub fn of(r: &crate::contour::RoundnessSummary) -> Self {
         let name = ["X", "Y", "Z"];
         RoundnessFigures {
             roundness_um: r.roundness_um,
@@ -193,7 +193,7 @@ impl RoundnessFigures {
             commanded_radius_mm: r.commanded_radius_mm,
             radius_error_um: r.radius_error_um(),
             lines: [r.lines.0, r.lines.1],
-            samples: r.measured.len(),
+            samples: r.samples,
         }
     }
 }
@@ -228,25 +228,63 @@ pub struct TraceFigures {
     pub feedback_rows: u64,
 }
 
-/// The complete lines of a CSV file's data rows as numbers (a killed writer may leave a
-/// half line at the end; it is left out, as is any row that does not parse).
-fn csv_rows(path: &Path) -> Vec<Vec<f64>> {
-    let Ok(text) = std::fs::read_to_string(path) else {
-        return Vec::new();
+/// Calls `row` with the numbers of each complete line of a CSV file's data rows, a line
+/// at a time, up to the first that does not parse (a killed writer may leave a half line
+/// at the end; it is left out). As `str::lines` of the text up to its last newline: the
+/// last complete line keeps a carriage return before its newline (and so does not parse).
+fn csv_rows(path: &Path, mut row: impl FnMut(&[f64])) {
+    use std::io::BufRead;
+    let Ok(f) = std::fs::File::open(path) else {
+        return;
     };
-    let complete = text.rfind('\n').map_or("", |n| &text[..n]);
-    complete
-        .lines()
-        .skip(1)
-        .map_while(|l| l.split(',').map(|v| v.parse::<f64>().ok()).collect())
-        .collect()
+    let mut input = std::io::BufReader::new(f);
+    let mut line: Vec<u8> = Vec::new();
+    // The header.
+    if !(input.read_until(b'\n', &mut line).is_ok() && line.ends_with(b"\n")) {
+        return;
+    }
+    let mut vals: Vec<f64> = Vec::new();
+    // A complete line waits for the next one: only then is its carriage return cut.
+    let mut pending: Option<Vec<u8>> = None;
+    let mut parse = |l: &[u8], vals: &mut Vec<f64>| -> bool {
+        let Ok(l) = std::str::from_utf8(l) else {
+            return false;
+        };
+        vals.clear();
+        for v in l.split(',') {
+            match v.parse::<f64>() {
+                Ok(x) => vals.push(x),
+                Err(_) => return false,
+            }
+        }
+        row(vals);
+        true
+    };
+    loop {
+        line.clear();
+        let complete =
+            matches!(input.read_until(b'\n', &mut line), Ok(n) if n > 0 && line.ends_with(b"\n"));
+        if !complete {
+            if let Some(p) = pending.take() {
+                parse(&p, &mut vals);
+            }
+            return;
+        }
+        line.pop();
+        if let Some(mut p) = pending.replace(line.clone()) {
+            if p.ends_with(b"\r") {
+                p.pop();
+            }
+            if !parse(&p, &mut vals) {
+                return;
+            }
+        }
+    }
 }
 
 impl TraceFigures {
     pub fn read(dir: &Path, period_ns: u64) -> TraceFigures {
         let mut t = TraceFigures::default();
-        let sp = csv_rows(&dir.join("setpoints.csv"));
-        t.cycles = sp.len() as u64;
         let dt = period_ns.max(1) as f64 * 1e-9;
         // The peak feed is over feed moves, as the interpolator counts it: the source
         // lines of rapids come from the command log.
@@ -261,7 +299,11 @@ impl TraceFigures {
                 })
                 .unwrap_or_default();
         let mut last = [0.0; 3];
-        for r in sp.iter().filter(|r| r.len() >= 6) {
+        csv_rows(&dir.join("setpoints.csv"), |r| {
+            t.cycles += 1;
+            if r.len() < 6 {
+                return;
+            }
             let p = [r[2], r[3], r[4]];
             let d = shared::path::norm([p[0] - last[0], p[1] - last[1], p[2] - last[2]]);
             t.path_length_mm += d;
@@ -269,29 +311,49 @@ impl TraceFigures {
                 t.peak_speed_mm_per_s = t.peak_speed_mm_per_s.max(d / dt);
             }
             last = p;
-        }
-        let fb = csv_rows(&dir.join("feedback.csv"));
-        t.feedback_rows = fb.len() as u64;
-        for r in fb.iter().filter(|r| r.len() >= 8) {
+        });
+        csv_rows(&dir.join("feedback.csv"), |r| {
+            t.feedback_rows += 1;
+            if r.len() < 8 {
+                return;
+            }
             for a in 0..3 {
                 let e = r[5 + a].abs();
                 if e.is_finite() {
                     t.max_following_error_axis_um[a] = t.max_following_error_axis_um[a].max(e);
                 }
             }
-        }
+        });
         t
     }
 }
 
-/// The most bytes of command log and traces the contour and chord analysis reads: it
-/// holds them whole, at about 1.25 times their size (a run of 100 000 lines of `G1`,
-/// 583 MB of files, took the launcher to 720 MB; a million lines would be 7 GB, ten
-/// million would not fit). A longer run's report leaves those figures out ("contour
-/// error not computed") rather than fail at its end; its traces are all on disk.
+/// The most bytes of command log and traces that `report.html` and the measured scallop
+/// read: they hold them whole, at about 1.25 times their size (a run of 100 000 lines of
+/// `G1`, 583 MB of files, took the launcher to 720 MB; a million lines would be 7 GB, ten
+/// million would not fit). A longer run has no page and no measured scallop rather than
+/// fail at its end; its traces are all on disk. `report.json`'s contour, chord and
+/// roundness figures read the traces a batch of rows at a time
+/// ([`crate::contour::figures_dir`]), whatever their size.
 pub const CONTOUR_MAX_BYTES: u64 = 2 << 30;
 
-/// Whether the run in `dir` is short enough for the contour analysis
+/// The measured scallop of a run of surface blocks ([`crate::scallop::measure`]), from
+/// every measured position, held whole (as its index of ball centres holds them): only
+/// for a run within [`CONTOUR_MAX_BYTES`]; `None` without surface blocks.
+fn measured_scallop(dir: &Path) -> Option<crate::scallop::Scallop> {
+    let blocks = crate::contour::read_blocks(dir).ok()?;
+    if !blocks.iter().any(|b| b.is_surface()) || !contour_in_memory(dir) {
+        return None;
+    }
+    let mut fb = crate::contour::CsvRows::feedback(dir).ok()?;
+    let mut positions = Vec::new();
+    while let Some(r) = fb.next_row() {
+        positions.push([r[1], r[2], r[3]]);
+    }
+    crate::scallop::measure(&blocks, &positions)
+}
+
+/// Whether the run in `dir` is short enough for the page and the measured scallop
 /// ([`CONTOUR_MAX_BYTES`]).
 pub(crate) fn contour_in_memory(dir: &Path) -> bool {
     let bytes: u64 = ["commands.log", "setpoints.csv", "feedback.csv"]
@@ -300,7 +362,7 @@ pub(crate) fn contour_in_memory(dir: &Path) -> bool {
         .sum();
     if bytes > CONTOUR_MAX_BYTES {
         tracing::warn!(
-            "the run's command log and traces are {} MB, more than the contour analysis holds ({} MB): the report leaves out the contour and chord errors",
+            "the run's command log and traces are {} MB, more than the report page and the measured scallop hold ({} MB): they are left out",
             bytes >> 20,
             CONTOUR_MAX_BYTES >> 20
         );
@@ -387,15 +449,9 @@ pub fn assemble(
     let traced = (ipol.is_none() || servo.is_none()).then(|| TraceFigures::read(dir, period_ns));
     let i = ipol.as_ref();
     // After every process has ended: the traces are complete and nothing runs in real time.
-    let traces = contour_in_memory(dir)
-        .then(|| crate::contour::read_dir(dir).ok())
-        .flatten();
-    let contour = traces
-        .as_ref()
-        .map(|(blocks, t)| crate::contour::analyse(blocks, &t.traces()));
-    let scallop = traces
-        .as_ref()
-        .and_then(|(blocks, t)| crate::scallop::measure(blocks, &t.fb_pos_mm));
+    // They are read a row at a time, whatever the run's length.
+    let contour = crate::contour::figures_dir(dir).ok();
+    let scallop = contour.as_ref().and_then(|_| measured_scallop(dir));
     let worst = contour.as_ref().and_then(|c| c.max);
     let chord = contour.as_ref().and_then(|c| c.chord);
     let salvaged = interp.as_ref().and_then(|s| s.salvaged.clone());
