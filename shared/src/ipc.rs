@@ -50,6 +50,11 @@ pub fn err(what: &str, e: impl core::fmt::Debug) -> IpcError {
 pub fn config() -> &'static Config {
     static CONFIG: std::sync::OnceLock<Config> = std::sync::OnceLock::new();
     CONFIG.get_or_init(|| {
+        // iceoryx2 warns, on reading its global configuration, that no config file exists
+        // (we need none): only its errors are worth the operator's attention unless
+        // IOX2_LOG_LEVEL asks for more. Set here, before that first read, whatever asks
+        // for the configuration first (a node, or a peer looking for the services).
+        set_log_level_from_env_or(LogLevel::Error);
         let mut cfg = Config::global_config().clone();
         let default = Config::default();
         // SAFETY: getuid(2) cannot fail and touches no memory of ours.

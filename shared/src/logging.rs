@@ -19,5 +19,10 @@ pub fn init() {
         )
         .with_ansi(std::io::stderr().is_terminal())
         .with_writer(std::io::stderr)
+        // A log nobody reads any more (`cnc run … 2>&1 | head -1`, a closed terminal)
+        // loses its lines, and the process goes on: by default tracing reports a failed
+        // write on stderr itself, and that second write, failing too, panics and aborts
+        // a process of the stack over its log.
+        .log_internal_errors(false)
         .init();
 }

@@ -347,10 +347,29 @@ fn a_killed_interpolator_leaves_its_cycles_and_path_in_the_report() {
 /// on to its end, quietly, and writes its reports.
 #[test]
 fn a_closed_stdout_and_stderr_do_not_stop_the_run_or_its_reports() {
-    let dir = temp_dir("closed-pipe");
+    closed_pipes_run("closed-pipe", None);
+}
+
+/// The same with every process logging (`RUST_LOG=info`: each one's start-up, the
+/// machine in force, its end) into the closed stderr: the lines are lost, the run is not.
+/// (tracing reported each failed write on stderr itself, and that write's failure
+/// panicked: the servo-sim and the interpreter aborted at their first line, and the run
+/// stopped with exit code 101 or a signal.)
+#[test]
+fn a_log_nobody_reads_does_not_stop_the_run() {
+    closed_pipes_run("closed-log", Some("info"));
+}
+
+fn closed_pipes_run(tag: &str, rust_log: Option<&str>) {
+    let dir = temp_dir(tag);
     let prog = write_program(&dir, "G21 G90\nG1 X5 Y3 F3000\nM2\n");
     let run = dir.join("run");
-    let mut child = Command::new(cnc_exe())
+    let mut cmd = Command::new(cnc_exe());
+    match rust_log {
+        Some(level) => cmd.env("RUST_LOG", level),
+        None => cmd.env_remove("RUST_LOG"),
+    };
+    let mut child = cmd
         .args(["run", "--clock", "sim", "--out"])
         .arg(&run)
         .arg(&prog)
