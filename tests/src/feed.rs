@@ -17,7 +17,7 @@
 
 use crate::topp::{self, RefLimits};
 use crate::topp3::{self, JerkLimits};
-use interpolator::engine::{BlockSource, Engine, Limits, TickState};
+use interpolator::engine::{BlockSource, Engine, Limits, Tick, TickState};
 use shared::path;
 use shared::protocol::{BlockKind, CommandBlock};
 use shared::Machine;
@@ -167,6 +167,27 @@ fn kinks(blocks: &[CommandBlock]) -> HashSet<u64> {
         .collect()
 }
 
+/// Steps `blocks` (planned, numbered from 0) through the engine from the origin to the
+/// program's end, handing `each` every cycle's output.
+fn run(
+    blocks: &[CommandBlock],
+    machine: &Machine,
+    period_ns: u64,
+    mut each: impl FnMut(&Tick),
+) -> Result<(), String> {
+    let mut engine = Engine::new(Limits::new(machine, period_ns), [0.0; 3]);
+    let mut src = Slice(blocks, 0);
+    loop {
+        let t = engine.tick(&mut src).map_err(|f| f.to_string())?;
+        each(&t);
+        match t.state {
+            TickState::Done => return Ok(()),
+            TickState::Running => {}
+            TickState::Starved => return Err("the program has no end block".into()),
+        }
+    }
+}
+
 /// Steps `blocks` (planned, numbered from 0) through the engine from the origin and
 /// measures every cycle (see the module page).
 pub fn measure(
@@ -175,8 +196,6 @@ pub fn measure(
     period_ns: u64,
 ) -> Result<Measured, String> {
     let t_s = period_ns as f64 * 1e-9;
-    let mut engine = Engine::new(Limits::new(machine, period_ns), [0.0; 3]);
-    let mut src = Slice(blocks, 0);
     let by_seq: std::collections::HashMap<u64, usize> =
         blocks.iter().enumerate().map(|(i, b)| (b.seq, i)).collect();
     let index = |seq: u64| by_seq.get(&seq).copied();
@@ -188,8 +207,7 @@ pub fn measure(
     let mut seqs = [0u64; 4];
     let mut foot: Option<(usize, f64)> = None;
     let mut cycles = 0u64;
-    loop {
-        let t = engine.tick(&mut src).map_err(|f| f.to_string())?;
+    run(blocks, machine, period_ns, |t| {
         cycles += 1;
         p.rotate_left(1);
         p[3] = t.pos_mm;
@@ -244,12 +262,7 @@ pub fn measure(
                 foot = Some((bi, u));
             }
         }
-        match t.state {
-            TickState::Done => break,
-            TickState::Running => {}
-            TickState::Starved => return Err("the program has no end block".into()),
-        }
-    }
+    })?;
     Ok(Measured {
         cycles,
         time_s: (cycles * period_ns) as f64 * 1e-9,
@@ -394,18 +407,6 @@ pub fn row(
     })
 }
 
-/// The length of a block's set-point path, mm: its `length_mm`, but for a surface pass
-/// (whose `length_mm` is the contact point's) the tool point's, by 4 096 chords.
-fn set_point_length(b: &CommandBlock) -> f64 {
-    if !b.is_surface() {
-        return b.length_mm;
-    }
-    let (u0, u1) = path::domain(b);
-    const N: usize = 4096;
-    let at = |k: usize| path::eval(b, u0 + (u1 - u0) * k as f64 / N as f64).p;
-    (1..=N).map(|k| path::norm(sub(at(k), at(k - 1)))).sum()
-}
-
 /// Where a program's time goes against the jerk-limited optimum, block by block
 /// ([`losses`]): the block, its planned figures and the two times spent in it.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -467,25 +468,17 @@ pub fn losses(
             ours_mm_s: (0.0, f64::INFINITY),
             optimum_mm_s: (0.0, f64::INFINITY),
         });
-        start += set_point_length(b);
+        start += topp::set_point_length(b);
     }
     let t_s = period_ns as f64 * 1e-9;
-    let mut engine = Engine::new(Limits::new(machine, period_ns), [0.0; 3]);
-    let mut src = Slice(blocks, 0);
-    loop {
-        let t = engine.tick(&mut src).map_err(|f| f.to_string())?;
+    run(blocks, machine, period_ns, |t| {
         if let Some(&i) = at.get(&t.block_seq) {
             let l = &mut out[i];
             l.ours_s += t_s;
             let v = t.speed_mm_per_s;
             l.ours_mm_s = (l.ours_mm_s.0.max(v), l.ours_mm_s.1.min(v));
         }
-        match t.state {
-            TickState::Done => break,
-            TickState::Running => {}
-            TickState::Starved => return Err("the program has no end block".into()),
-        }
-    }
+    })?;
     let starts: Vec<f64> = out.iter().map(|l| l.start_mm).collect();
     for (w, v) in s.windows(2).zip(speed.windows(2)) {
         let (ds, mean) = (w[1] - w[0], 0.5 * (v[0] + v[1]));

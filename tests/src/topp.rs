@@ -313,6 +313,16 @@ fn angle(a: [f64; 3], b: [f64; 3]) -> f64 {
     s.atan2(c)
 }
 
+/// The length of a block's set-point path, mm, as the grid measures it: its
+/// `length_mm`, but for a surface pass (whose `length_mm` is the contact point's) the
+/// tool point's, by the adaptive rule of [`shared::path::length`] on [`speed`].
+pub fn set_point_length(b: &CommandBlock) -> f64 {
+    if !b.is_surface() {
+        return b.length_mm;
+    }
+    shared::nurbs::arc_length_adaptive(&[0.0, 1.0], 4, |u| speed(b, u))
+}
+
 /// Length of the set-point path over `[a, b]`: 3-point Gauss–Legendre.
 fn cell_length(b: &CommandBlock, u0: f64, u1: f64) -> f64 {
     const X: [f64; 3] = [-0.774_596_669_241_483_4, 0.0, 0.774_596_669_241_483_4];
