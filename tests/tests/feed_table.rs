@@ -6,7 +6,8 @@
 //! [`tests::topp`] on the exact path, their ratio, LinuxCNC 2.9's time where it has one,
 //! and the worst acceleration, jerk and chord in units of their limits ([`tests::feed`]).
 //! On the built-in machine also the jerk-limited optimum of [`tests::topp3`] (on a grid
-//! of [`tests::feed::JERK_STEP_MM`], coarser on long paths), our ratio to it, its grid
+//! of [`tests::feed::jerk_step_mm`]: 0.25 mm, finer where a curved block is shorter than
+//! eight cells, coarser on long paths), our ratio to it, its grid
 //! and its profile's own jerk in units of the limit (each kept profile's is within
 //! [`tests::topp3::KEEP_JERK`]; a figure above it would mean no solve kept the jerk);
 //! it is printed again as a table of its own at the end. This adds a few minutes;
@@ -322,8 +323,7 @@ fn feed_losses() {
         .unwrap()
         .blocks;
     let feeds = tests::topp::programmed_feeds(&name, &text, &machine, PERIOD_NS, &blocks).unwrap();
-    let length: f64 = blocks.iter().map(|b| b.length_mm).sum();
-    let step = tests::feed::JERK_STEP_MM.max(length / tests::feed::JERK_MAX_CELLS);
+    let step = tests::feed::jerk_step_mm(&blocks);
     let jl = tests::topp3::JerkLimits::of(&machine, PERIOD_NS);
     let o = tests::topp3::optimum(&blocks, &feeds, &jl, step).unwrap();
     let mut l = tests::feed::losses(&blocks, &machine, PERIOD_NS, (&o.s, &o.speed)).unwrap();
