@@ -100,11 +100,21 @@ impl Limit<'_> {
             }
         };
         bound(m.path_acc_mm_per_s2, norm(k), f64::sqrt);
-        bound(m.path_jerk_mm_per_s3, norm(dk), f64::cbrt);
         for (i, ax) in m.axes.as_array().iter().enumerate() {
             bound(ax.max_vel_mm_per_min / 60.0, t[i].abs(), |x| x);
             bound(ax.max_acc_mm_per_s2, k[i].abs(), f64::sqrt);
-            bound(ax.max_jerk_mm_per_s3, dk[i].abs(), f64::cbrt);
+        }
+        // The jerk's bounds after the others, each cube root taken only where it may be
+        // the lower (`min_cbrt`: the same bits as `v.min(x.cbrt())`). The minimum of the
+        // same numbers in another order is the same number.
+        let mut jerk_bound = |limit: f64, x: f64| {
+            if x > 1e-12 {
+                v = super::min_cbrt(v, limit / x);
+            }
+        };
+        jerk_bound(m.path_jerk_mm_per_s3, norm(dk));
+        for (i, ax) in m.axes.as_array().iter().enumerate() {
+            jerk_bound(ax.max_jerk_mm_per_s3, dk[i].abs());
         }
         v.is_finite().then_some(Sample {
             u,
