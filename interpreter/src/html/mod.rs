@@ -26,6 +26,7 @@
 //!   says so instead of drawing a histogram it cannot know.
 
 pub mod data;
+pub mod measure;
 pub mod page;
 pub mod path;
 pub mod polar;
