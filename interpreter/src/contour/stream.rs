@@ -4,6 +4,8 @@
 //! of the circle the roundness is measured on (every cycle of it: millions on a long
 //! circle) go to a temporary file ([`crate::spill`]) and are read back once per pass of
 //! the fit. The command blocks are held whole (they are what the path is measured to).
+//! The page's measure ([`super::polar`]) is the same pass, handing on each row's contour
+//! error and keeping the cycles on more than one circle.
 
 use super::{
     contour_distance, dist3, distance, fit_circle_by, locate, main_circle, radius, segs_of,

@@ -5,7 +5,8 @@
 //! off mid-row by a crash still plots up to its last whole row). `report.json` is read
 //! field by field from a JSON value rather than into the launcher's `Report` type, so a
 //! report from an older or newer format still gives every figure it has, and an absent
-//! figure is named instead of failing the whole page.
+//! figure is named instead of failing the whole page. The traces' rows go to temporary
+//! files as they are read ([`Setpoints`], [`Feedback`]): the plots read them back.
 
 use crate::spill::{Spill, Spilled};
 use serde_json::Value;
