@@ -59,7 +59,7 @@ fn the_report_s_heap_is_flat_in_the_run_s_length_and_its_figures_are_the_whole_t
         "the report's peak heap grows with the run: {short_peak} B for 50 000 cycles, {long_peak} B for 500 000"
     );
     for (dir, rep, n) in [(&short, &short_rep, 50_000u64), (&long, &long_rep, 500_000)] {
-        // The whole-trace analysis, as the page still measures it.
+        // The whole-trace analysis (`contour::analyse`), held in memory.
         let whole = interpreter::contour::analyse_dir(dir).unwrap();
         let streamed = interpreter::contour::figures_dir(dir).unwrap();
         assert_eq!(format!("{:?}", whole.figures()), format!("{streamed:?}"));
