@@ -34,7 +34,9 @@ use shared::path::{domain, norm};
 use shared::protocol::{BlockKind, CommandBlock, FLAG_RAPID};
 use std::f64::consts::PI;
 
+mod polar;
 mod stream;
+pub use polar::{measure_for_page, Deviations, PageMeasure, ReversePlot, RoundnessPlot};
 pub use stream::{figures, figures_dir, FbRow, SpRow};
 
 /// The run's traces, as columns (both in cycle order).
@@ -1316,7 +1318,7 @@ mod tests {
     use super::*;
     use shared::Machine;
 
-    fn blocks_of(program: &str) -> Vec<CommandBlock> {
+    pub(super) fn blocks_of(program: &str) -> Vec<CommandBlock> {
         let prog = crate::program::interpret(program).expect("a good program");
         let mut b = crate::blocks::build(&prog.moves, &Machine::default());
         crate::blocks::plan(&mut b, &Machine::default(), 1_000_000);

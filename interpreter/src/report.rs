@@ -329,12 +329,14 @@ impl TraceFigures {
 }
 
 /// The most bytes of command log and traces that `report.html` and the measured scallop
-/// read: they hold them whole, at about 1.25 times their size (a run of 100 000 lines of
-/// `G1`, 583 MB of files, took the launcher to 720 MB; a million lines would be 7 GB, ten
-/// million would not fit). A longer run has no page and no measured scallop rather than
-/// fail at its end; its traces are all on disk. `report.json`'s contour, chord and
-/// roundness figures read the traces a batch of rows at a time
-/// ([`crate::contour::figures_dir`]), whatever their size.
+/// read. The measured scallop holds a surface run's measured positions whole, and both
+/// hold the command blocks whole, at about 1.25 times the log's size (before the page
+/// read the traces into temporary files, a run of 100 000 lines of `G1`, 583 MB of
+/// files, took the launcher to 720 MB; a million lines would be 7 GB). A longer run has
+/// no page and no measured scallop rather than fail at its end; its traces are all on
+/// disk. `report.json`'s contour, chord and roundness figures read the traces a batch of
+/// rows at a time ([`crate::contour::figures_dir`]), whatever their size, and so does the
+/// page but for its scallop map ([`crate::html`]).
 pub const CONTOUR_MAX_BYTES: u64 = 2 << 30;
 
 /// The measured scallop of a run of surface blocks ([`crate::scallop::measure`]), from

@@ -1,10 +1,12 @@
 //! A list of fixed-size records of `f64`s kept in a temporary file rather than in memory
-//! (the points of a circle run of a long run are millions), read back in order as often
-//! as needed. The file is removed as soon as it is made: it lives as long as the
-//! [`Spill`] and never outlives the process.
+//! (the points of a circle run of a long run are millions, a trace's rows for the page
+//! too), read back in order as often as needed. The file is removed as soon as it is
+//! made: it lives as long as the [`Spill`] (or the [`Spilled`] it becomes) and never
+//! outlives the process.
 
 use std::fs::File;
-use std::io::{BufReader, BufWriter, Read, Seek, SeekFrom, Write};
+use std::io::{BufWriter, Write};
+use std::os::unix::fs::FileExt;
 
 /// Records of `N` numbers each, appended then read back in order.
 pub struct Spill<const N: usize> {
@@ -52,21 +54,109 @@ impl<const N: usize> Spill<N> {
     /// Calls `f` with every record, in the order they were pushed.
     pub fn for_each(&mut self, mut f: impl FnMut([f64; N])) -> std::io::Result<()> {
         self.out.flush()?;
-        let mut file = self.out.get_ref().try_clone()?;
-        file.seek(SeekFrom::Start(0))?;
-        let mut input = BufReader::with_capacity(1 << 16, file);
-        let mut buf = vec![0u8; 8 * N];
-        for _ in 0..self.len {
-            input.read_exact(&mut buf)?;
-            let mut rec = [0.0; N];
-            for (x, b) in rec.iter_mut().zip(buf.chunks_exact(8)) {
-                *x = f64::from_le_bytes(b.try_into().expect("8 bytes"));
-            }
-            f(rec);
+        let mut recs = Records::<N>::new(self.out.get_ref(), self.len);
+        for r in &mut recs {
+            f(r);
         }
-        // The next push goes at the end (the clone shares the file offset).
-        self.out.get_mut().seek(SeekFrom::End(0))?;
-        Ok(())
+        recs.err.map_or(Ok(()), Err)
+    }
+
+    /// The list, complete: read-only from now on, and readable through a shared
+    /// reference (by several readers at once).
+    pub fn finish(mut self) -> std::io::Result<Spilled<N>> {
+        self.out.flush()?;
+        let len = self.len;
+        let file = self.out.into_inner().map_err(|e| e.into_error())?;
+        Ok(Spilled { file, len })
+    }
+}
+
+/// A complete [`Spill`].
+#[derive(Debug)]
+pub struct Spilled<const N: usize> {
+    file: File,
+    len: usize,
+}
+
+impl<const N: usize> Spilled<N> {
+    /// How many records there are.
+    pub fn len(&self) -> usize {
+        self.len
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.len == 0
+    }
+
+    /// The records in order. A read that fails ends them early: [`Records::failed`]
+    /// says so.
+    pub fn records(&self) -> Records<'_, N> {
+        Records::new(&self.file, self.len)
+    }
+}
+
+/// The records of a spill file, read a block at a time at their own offset (readers of
+/// the same file do not disturb each other).
+pub struct Records<'a, const N: usize> {
+    file: &'a File,
+    /// Records not yet read from the file.
+    left: usize,
+    at: u64,
+    buf: Vec<u8>,
+    pos: usize,
+    err: Option<std::io::Error>,
+}
+
+impl<'a, const N: usize> Records<'a, N> {
+    /// Records per read.
+    const BLOCK: usize = 4096;
+
+    fn new(file: &'a File, len: usize) -> Self {
+        Records {
+            file,
+            left: len,
+            at: 0,
+            buf: Vec::new(),
+            pos: 0,
+            err: None,
+        }
+    }
+
+    /// Why the records ended early, if they did.
+    pub fn failed(&self) -> Option<&std::io::Error> {
+        self.err.as_ref()
+    }
+}
+
+impl<const N: usize> Iterator for Records<'_, N> {
+    type Item = [f64; N];
+
+    fn next(&mut self) -> Option<[f64; N]> {
+        if self.pos == self.buf.len() {
+            if self.left == 0 || self.err.is_some() {
+                return None;
+            }
+            let n = self.left.min(Self::BLOCK);
+            self.buf.resize(8 * N * n, 0);
+            if let Err(e) = self.file.read_exact_at(&mut self.buf, self.at) {
+                self.err = Some(e);
+                self.buf.clear();
+                self.pos = 0;
+                return None;
+            }
+            self.at += self.buf.len() as u64;
+            self.left -= n;
+            self.pos = 0;
+        }
+        let mut rec = [0.0; N];
+        for (x, b) in rec
+            .iter_mut()
+            .zip(self.buf[self.pos..self.pos + 8 * N].chunks_exact(8))
+        {
+            *x = f64::from_le_bytes(b.try_into().expect("8 bytes"));
+        }
+        self.pos += 8 * N;
+        Some(rec)
     }
 }
 
@@ -93,5 +183,11 @@ mod tests {
         let mut last = [0.0; 2];
         s.for_each(|r| last = r).unwrap();
         assert_eq!((s.len(), last), (100_001, [7.0, 8.0]));
+        // Finished, two readers side by side.
+        let done = s.finish().unwrap();
+        let pairs = done.records().zip(done.records().skip(1)).count();
+        assert_eq!(pairs, 100_000);
+        assert!(done.records().zip(done.records()).all(|(a, b)| a == b));
+        assert_eq!(done.records().last(), Some([7.0, 8.0]));
     }
 }

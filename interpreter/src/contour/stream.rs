@@ -4,12 +4,15 @@
 //! of the circle the roundness is measured on (every cycle of it: millions on a long
 //! circle) go to a temporary file ([`crate::spill`]) and are read back once per pass of
 //! the fit. The command blocks are held whole (they are what the path is measured to).
+//! The page's measure ([`super::polar`]) is the same pass, handing on each row's contour
+//! error and keeping the cycles on more than one circle.
 
 use super::{
     contour_distance, dist3, distance, fit_circle_by, locate, main_circle, radius, segs_of,
     threads, turning_by, CircleRun, CsvRows, Figures, Reached, RoundnessSummary, Seg, Worst,
     ON_PATH_MM,
 };
+use crate::spill::Spill;
 use shared::protocol::CommandBlock;
 use std::f64::consts::PI;
 
@@ -38,6 +41,8 @@ pub fn figures_dir(dir: &std::path::Path) -> Result<Figures, String> {
 
 /// A feedback row with the set-point of its cycle.
 struct Row {
+    /// Its index among the feedback rows.
+    fb_i: usize,
     /// Its block.
     at: usize,
     p: [f64; 3],
@@ -53,15 +58,17 @@ struct Row {
 type Chord = ([f64; 3], usize, f64, u64);
 
 /// What [`figures`] adds up as the batches go by.
-struct Tally<'a> {
+struct Tally<'a, 'e> {
     segs: &'a [Seg<'a>],
+    /// Each row's contour error (µm; `None` on a rapid) by its feedback row's index.
+    on_error: &'e mut dyn FnMut(usize, Option<f64>),
     worst: Option<Worst>,
     sum_sq: f64,
     count: u64,
     chord: Option<Worst>,
 }
 
-impl Tally<'_> {
+impl Tally<'_, '_> {
     /// Measures a batch (spread over the cores) and adds it, in order.
     fn add(&mut self, rows: &mut [Row], chords: &mut [Chord]) {
         let segs = self.segs;
@@ -96,6 +103,7 @@ impl Tally<'_> {
             self.chord = Some(self.chord.filter(|w| w.um >= c.um).unwrap_or(c));
         }
         for r in rows.iter() {
+            (self.on_error)(r.fb_i, r.err);
             if let Some(um) = r.err {
                 self.sum_sq += um * um;
                 self.count += 1;
@@ -123,12 +131,53 @@ pub fn figures(
     // The circle is found from the blocks alone; its measured positions are gathered as
     // the rows go by.
     let circle = main_circle(&segs).map(|(_, _, c)| c);
-    let mut points = match &circle {
-        Ok(_) => Some(crate::spill::Spill::<2>::new().map_err(|e| format!("temporary file: {e}"))),
-        Err(_) => None,
+    let circles = circle.as_ref().map_or(&[][..], std::slice::from_ref);
+    let m = measure(&segs, circles, sp, fb, &mut |_, _| {});
+    let roundness = match (circle, m.points.into_iter().next()) {
+        (Err(e), _) => Err(e),
+        (Ok(c), Some(Ok(mut spill))) => roundness(&segs, &c, &mut spill),
+        (Ok(_), Some(Err(e))) => Err(e),
+        (Ok(_), None) => Err("no measured positions".into()),
     };
+    Figures {
+        max: m.max,
+        rms_um: m.rms_um,
+        chord: m.chord,
+        roundness,
+        reached: m.reached,
+    }
+}
+
+/// What [`measure`] measures: the figures but the roundness, and the cycles on each
+/// circle it was given.
+pub(super) struct Measured {
+    pub max: Option<Worst>,
+    pub rms_um: Option<f64>,
+    pub chord: Option<Worst>,
+    pub reached: Option<Reached>,
+    /// Per circle, the measured then the commanded position (in its plane) of each cycle
+    /// whose set-point lies on it, in order; or why they could not be kept.
+    pub points: Vec<Result<Spill<4>, String>>,
+}
+
+/// Measures the traces `sp` and `fb` against the path `segs` a batch of rows at a time,
+/// handing each feedback row's contour error to `on_error` in order (its index among the
+/// feedback rows, `None` on a rapid; rows without a set-point are not handed over), and
+/// gathering the cycles on each of `circles` to a temporary file.
+pub(super) fn measure(
+    segs: &[Seg],
+    circles: &[CircleRun],
+    sp: impl IntoIterator<Item = SpRow>,
+    fb: impl IntoIterator<Item = FbRow>,
+    on_error: &mut dyn FnMut(usize, Option<f64>),
+) -> Measured {
+    let mut points: Vec<Result<Spill<4>, String>> = circles
+        .iter()
+        .map(|_| Spill::new().map_err(|e| format!("temporary file: {e}")))
+        .collect();
     let mut tally = Tally {
-        segs: &segs,
+        segs,
+        on_error,
         worst: None,
         sum_sq: 0.0,
         count: 0,
@@ -142,7 +191,7 @@ pub fn figures(
     if !segs.is_empty() {
         let mut sp = sp.into_iter().enumerate();
         let mut cur = sp.next();
-        for (fb_cycle, p) in fb {
+        for (fb_i, (fb_cycle, p)) in fb.into_iter().enumerate() {
             while cur.as_ref().is_some_and(|(_, r)| r.0 < fb_cycle) {
                 cur = sp.next();
             }
@@ -150,7 +199,7 @@ pub fn figures(
             else {
                 continue;
             };
-            cursor = locate(&segs, &mut last_u, cursor, s, line);
+            cursor = locate(segs, &mut last_u, cursor, s, line);
             let rapid = segs[cursor].rapid;
             if let Some((p_i, p_cycle, a, p_seg)) = prev {
                 let next = p_i + 1 == sp_i && p_cycle + 1 == sp_cycle;
@@ -164,14 +213,16 @@ pub fn figures(
                 }
             }
             prev = Some((sp_i, sp_cycle, s, cursor));
-            if let (Ok(c), Some(Ok(spill))) = (&circle, &mut points) {
-                if (c.first..=c.last).contains(&cursor) {
-                    if let Err(e) = spill.push([p[c.axes.0], p[c.axes.1]]) {
-                        points = Some(Err(format!("temporary file: {e}")));
+            for (c, spill) in circles.iter().zip(points.iter_mut()) {
+                if let (true, Ok(into)) = ((c.first..=c.last).contains(&cursor), &mut *spill) {
+                    let (a, b) = c.axes;
+                    if let Err(e) = into.push([p[a], p[b], s[a], s[b]]) {
+                        *spill = Err(format!("temporary file: {e}"));
                     }
                 }
             }
             rows.push(Row {
+                fb_i,
                 at: cursor,
                 p,
                 s,
@@ -197,18 +248,12 @@ pub fn figures(
             u,
         }
     });
-    let roundness = match (circle, points) {
-        (Err(e), _) => Err(e),
-        (Ok(c), Some(Ok(mut spill))) => roundness(&segs, &c, &mut spill),
-        (Ok(_), Some(Err(e))) => Err(e),
-        (Ok(_), None) => Err("no measured positions".into()),
-    };
-    Figures {
+    Measured {
         max: tally.worst,
         rms_um: (tally.count > 0).then(|| (tally.sum_sq / tally.count as f64).sqrt()),
         chord: tally.chord,
-        roundness,
         reached,
+        points,
     }
 }
 
@@ -217,7 +262,7 @@ pub fn figures(
 fn roundness(
     segs: &[Seg],
     c: &CircleRun,
-    spill: &mut crate::spill::Spill<2>,
+    spill: &mut Spill<4>,
 ) -> Result<RoundnessSummary, String> {
     let n = spill.len();
     if n < 16 {
@@ -225,7 +270,7 @@ fn roundness(
     }
     let mut failed: Option<std::io::Error> = None;
     let mut pass = |f: &mut dyn FnMut([f64; 2])| {
-        if let Err(e) = spill.for_each(&mut *f) {
+        if let Err(e) = spill.for_each(|r| f([r[0], r[1]])) {
             failed.get_or_insert(e);
         }
     };

@@ -5,8 +5,10 @@
 //! off mid-row by a crash still plots up to its last whole row). `report.json` is read
 //! field by field from a JSON value rather than into the launcher's `Report` type, so a
 //! report from an older or newer format still gives every figure it has, and an absent
-//! figure is named instead of failing the whole page.
+//! figure is named instead of failing the whole page. The traces' rows go to temporary
+//! files as they are read ([`Setpoints`], [`Feedback`]): the plots read them back.
 
+use crate::spill::{Spill, Spilled};
 use serde_json::Value;
 use shared::protocol::{BlockKind, CommandBlock};
 use shared::Machine;
@@ -93,25 +95,73 @@ pub struct Report {
     pub miss_list: Vec<Miss>,
 }
 
-/// `setpoints.csv` as columns.
-#[derive(Debug, Clone, Default)]
+/// `setpoints.csv`'s rows (cycle, position, source line), in a temporary file
+/// ([`crate::spill`]): a one-hour run has 3.6 million of them, which the page reads a
+/// few times over but never holds.
+#[derive(Debug)]
 pub struct Setpoints {
-    pub cycle: Vec<u64>,
-    pub pos_mm: Vec<[f64; 3]>,
-    pub line: Vec<u32>,
+    rows: Spilled<5>,
+    /// The last row's cycle.
+    pub last_cycle: u64,
+    /// The first and the last set-point.
+    pub first_mm: [f64; 3],
+    pub last_mm: [f64; 3],
+    /// The smallest and largest coordinate of the set-points, per axis.
+    pub extent_mm: [(f64, f64); 3],
 }
 
-/// `feedback.csv` as columns (following error kept as `f32` µm: plenty for a plot, and a
-/// third less memory on a one-hour run).
-#[derive(Debug, Clone, Default)]
+impl Setpoints {
+    /// How many rows there are.
+    pub fn len(&self) -> usize {
+        self.rows.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.rows.is_empty()
+    }
+
+    /// The rows in order: cycle, position (mm), source line.
+    pub fn rows(&self) -> impl Iterator<Item = (u64, [f64; 3], u32)> + '_ {
+        self.rows
+            .records()
+            .map(|r| (r[0] as u64, [r[1], r[2], r[3]], r[4] as u32))
+    }
+}
+
+/// `feedback.csv`'s rows (cycle, measured position, following error), in a temporary
+/// file as [`Setpoints`]'.
+#[derive(Debug)]
 pub struct Feedback {
-    pub cycle: Vec<u64>,
-    pub pos_mm: Vec<[f64; 3]>,
-    pub ferr_um: Vec<[f32; 3]>,
+    rows: Spilled<7>,
+    /// The last row's cycle.
+    pub last_cycle: u64,
+}
+
+impl Feedback {
+    /// How many rows there are.
+    pub fn len(&self) -> usize {
+        self.rows.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.rows.is_empty()
+    }
+
+    /// The rows in order: cycle, measured position (mm), following error (µm, to `f32`
+    /// precision: plenty for a plot).
+    pub fn rows(&self) -> impl Iterator<Item = (u64, [f64; 3], [f64; 3])> + '_ {
+        self.rows.records().map(|r| {
+            (
+                r[0] as u64,
+                [r[1], r[2], r[3]],
+                [r[4], r[5], r[6]].map(|e| f64::from(e as f32)),
+            )
+        })
+    }
 }
 
 /// Everything the page draws from.
-#[derive(Debug, Clone)]
+#[derive(Debug)]
 pub struct Run {
     pub dir: PathBuf,
     pub report: Option<Report>,
@@ -141,26 +191,39 @@ impl Run {
     pub fn load(dir: &Path) -> Run {
         let mut problems = Vec::new();
         let report = load_report(&dir.join("report.json"), &mut problems);
-        // The two traces are read side by side (each is hundreds of MB on a long run).
+        // The two traces are read side by side (each is hundreds of MB on a long run) into
+        // temporary files.
         let ((setpoints, sp_problems), (feedback, fb_problems)) = std::thread::scope(|scope| {
             let sp = scope.spawn(|| {
                 let mut problems = Vec::new();
-                let mut s = Setpoints::default();
-                let ok = load_csv(
+                let (mut first, mut last, mut last_cycle) = (None, [0.0; 3], 0);
+                let mut extent = [(f64::INFINITY, f64::NEG_INFINITY); 3];
+                let rows = load_csv(
                     &dir.join("setpoints.csv"),
                     &["cycle", "x_mm", "y_mm", "z_mm", "line"],
                     &mut problems,
-                    |r| {
-                        s.cycle.push(r[0] as u64);
-                        s.pos_mm.push([r[1], r[2], r[3]]);
-                        s.line.push(r[4] as u32);
+                    |r: &[f64; 5]| {
+                        let p = [r[1], r[2], r[3]];
+                        first.get_or_insert(p);
+                        last = p;
+                        last_cycle = r[0] as u64;
+                        for (e, x) in extent.iter_mut().zip(p) {
+                            *e = (e.0.min(x), e.1.max(x));
+                        }
                     },
                 );
-                (ok.map(|()| s), problems)
+                let s = rows.map(|rows| Setpoints {
+                    rows,
+                    last_cycle,
+                    first_mm: first.unwrap_or_default(),
+                    last_mm: last,
+                    extent_mm: extent,
+                });
+                (s, problems)
             });
             let mut problems = Vec::new();
-            let mut f = Feedback::default();
-            let ok = load_csv(
+            let mut last_cycle = 0;
+            let rows = load_csv(
                 &dir.join("feedback.csv"),
                 &[
                     "cycle",
@@ -172,13 +235,9 @@ impl Run {
                     "ferr_z_um",
                 ],
                 &mut problems,
-                |r| {
-                    f.cycle.push(r[0] as u64);
-                    f.pos_mm.push([r[1], r[2], r[3]]);
-                    f.ferr_um.push([r[4] as f32, r[5] as f32, r[6] as f32]);
-                },
+                |r: &[f64; 7]| last_cycle = r[0] as u64,
             );
-            let fb = (ok.map(|()| f), problems);
+            let fb = (rows.map(|rows| Feedback { rows, last_cycle }), problems);
             (
                 sp.join()
                     .unwrap_or_else(|_| (None, vec!["setpoints.csv: reader failed".into()])),
@@ -207,20 +266,19 @@ impl Run {
         if let Some(r) = &report {
             let cycles = r.cycles.unwrap_or(0);
             let lost = r.lost_setpoints.unwrap_or(0);
-            let rows = |c: &Vec<u64>| c.len() as u64;
             if let Some(s) = &setpoints {
-                if rows(&s.cycle) < cycles {
+                if (s.len() as u64) < cycles {
                     problems.push(format!(
                         "setpoints.csv: {} rows for the {cycles} cycles of report.json (file cut short?)",
-                        rows(&s.cycle)
+                        s.len()
                     ));
                 }
             }
             if let Some(f) = &feedback {
-                if rows(&f.cycle) + lost < cycles {
+                if f.len() as u64 + lost < cycles {
                     problems.push(format!(
                         "feedback.csv: {} rows for the {cycles} cycles of report.json ({lost} set-points lost; file cut short?)",
-                        rows(&f.cycle)
+                        f.len()
                     ));
                 }
             }
@@ -353,17 +411,18 @@ fn period_from_csv(path: &Path) -> Option<u64> {
     None
 }
 
-/// Reads the named columns of a CSV file, handing each row's values (in `want` order) to
-/// `row_out` as it is read: a one-hour file has 3.6 million rows, so nothing is kept here
-/// and nothing is allocated per row. Stops at the first bad row (recording a problem naming
-/// file and line), the rows before it having been handed over; `None` when the file or
-/// its header is unusable or it has no data rows.
-fn load_csv(
+/// Reads the named columns of a CSV file into a temporary file, each row's values in
+/// `want` order, handing each row to `row_out` too as it is read: a one-hour file has 3.6
+/// million rows, so nothing is kept in memory and nothing is allocated per row. Stops at
+/// the first bad row (recording a problem naming file and line), the rows before it
+/// kept; `None` when the file or its header is unusable, it has no data rows or the
+/// temporary file cannot be written.
+fn load_csv<const N: usize>(
     path: &Path,
-    want: &[&str],
+    want: &[&str; N],
     problems: &mut Vec<String>,
-    mut row_out: impl FnMut(&[f64]),
-) -> Option<()> {
+    mut row_out: impl FnMut(&[f64; N]),
+) -> Option<Spilled<N>> {
     let name = file_name(path);
     let f = match File::open(path) {
         Ok(f) => f,
@@ -403,9 +462,15 @@ fn load_csv(
     for (k, &c) in idx.iter().enumerate() {
         slot[c] = k;
     }
-    let mut rows = 0usize;
+    let mut spill = match Spill::<N>::new() {
+        Ok(s) => s,
+        Err(e) => {
+            problems.push(format!("{name}: temporary file: {e}"));
+            return None;
+        }
+    };
     let mut buf: Vec<u8> = Vec::new();
-    let mut row = vec![0.0f64; want.len()];
+    let mut row = [0.0f64; N];
     for lineno in 2.. {
         buf.clear();
         match reader.read_until(b'\n', &mut buf) {
@@ -459,14 +524,23 @@ fn load_csv(
             ));
             break;
         }
+        if let Err(e) = spill.push(row) {
+            problems.push(format!("{name}: temporary file: {e}"));
+            return None;
+        }
         row_out(&row);
-        rows += 1;
     }
-    if rows == 0 {
+    if spill.len() == 0 {
         problems.push(format!("{name}: no data rows"));
         return None;
     }
-    Some(())
+    match spill.finish() {
+        Ok(rows) => Some(rows),
+        Err(e) => {
+            problems.push(format!("{name}: temporary file: {e}"));
+            None
+        }
+    }
 }
 
 /// `s` as an `f64`, exactly as `str::parse` reads it. Plain decimals of at most 15

@@ -4,7 +4,8 @@
 //! where the tool went and how fast ([`path`]), where it slowed down and how hard it
 //! accelerated ([`series`]), how far the axes lagged ([`series`]), how round a circle came
 //! out ([`polar`]) and which periods came late ([`timing`]). [`data`] loads and checks the
-//! run directory, [`svg`] holds the chart primitives and [`page`] assembles the HTML.
+//! run directory, [`measure`] measures the contour error and roundness, [`svg`] holds the
+//! chart primitives and [`page`] assembles the HTML.
 //!
 //! Choices, and why:
 //! * **SVG written by hand, no plotting crate.** Every chart here is a handful of
@@ -21,11 +22,19 @@
 //!   message`) listed at the top of the page, and the plots that need it say so in place;
 //!   what is usable is still drawn. Only a run directory with nothing usable at all (no
 //!   `report.json`, no `setpoints.csv`, no `commands.log`) is an [`HtmlError`].
+//! * **Memory bounded in the run's length** (issue #25): the traces (a one-hour run's are
+//!   hundreds of MB) are read once, each into an unlinked temporary file
+//!   ([`crate::spill`]), and each plot reads back what it needs a row at a time; the
+//!   contour analysis ([`measure`]) is `report.json`'s, a batch of rows at a time, its
+//!   contour error per row to a temporary file too. What stays in memory is the command
+//!   blocks, each plot's reduction, and for a surface part the measured positions its
+//!   scallop map indexes.
 //! * **Only measured data is drawn.** The run directory holds timing percentiles and the
 //!   list of misses, not per-cycle timing, so the timing section shows exactly those and
 //!   says so instead of drawing a histogram it cannot know.
 
 pub mod data;
+pub mod measure;
 pub mod page;
 pub mod path;
 pub mod polar;

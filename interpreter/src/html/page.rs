@@ -41,7 +41,7 @@ svg text{font-family:system-ui,sans-serif;fill:#111}
 /// The whole page for `run`.
 pub fn page(run: &Run) -> String {
     let mut body = String::new();
-    let contour = contour_of(run);
+    let contour = super::measure::Measure::of(run);
     path::section(run, contour.as_ref(), &mut body);
     view3d::section(run, contour.as_ref(), &mut body);
     scallop::section(run, &mut body);
@@ -73,26 +73,6 @@ pub fn page(run: &Run) -> String {
     out.push_str(&body);
     out.push_str("<p class=\"note\">Made by <code>cnc report</code>. Plots reduce the data to the minimum and maximum per pixel column, so no single-cycle spike is lost; the figures in the summary are those of report.json.</p></main></body></html>\n");
     out
-}
-
-/// Contour error and roundness of the run, measured here from the same files as
-/// `report.json`'s (so the plots and the summary agree); `None` without the traces or the
-/// command log.
-fn contour_of(run: &Run) -> Option<crate::contour::Contour> {
-    let (sp, fb) = (run.setpoints.as_ref()?, run.feedback.as_ref()?);
-    if run.blocks.is_empty() {
-        return None;
-    }
-    Some(crate::contour::analyse(
-        &run.blocks,
-        &crate::contour::Traces {
-            sp_cycle: &sp.cycle,
-            sp_pos_mm: &sp.pos_mm,
-            sp_line: &sp.line,
-            fb_cycle: &fb.cycle,
-            fb_pos_mm: &fb.pos_mm,
-        },
-    ))
 }
 
 fn row(out: &mut String, key: &str, name: &str, value: &str) {

@@ -31,7 +31,11 @@ pub type Proj<'a> = &'a dyn Fn([f64; 3]) -> (f64, f64);
 /// The plane to draw: the two axes with the largest extent of `pts` (X, Y for a flat XY
 /// job), and whether `pts` leave that plane (then the plot is a projection).
 pub fn plane(pts: &[[f64; 3]]) -> (usize, usize, bool) {
-    let ext = extent(pts);
+    plane_of(extent(pts))
+}
+
+/// [`plane`] of points whose extent is `ext`.
+fn plane_of(ext: [(f64, f64); 3]) -> (usize, usize, bool) {
     let e = |i: usize| ext[i].1 - ext[i].0;
     let mut order = [0usize, 1, 2];
     // stable: X before Y before Z among equal extents, so flat XY jobs stay XY.
@@ -114,7 +118,7 @@ pub fn stopped_early(run: &Run) -> bool {
 /// to its end, or when the traces cannot tell.
 pub fn stop_point(
     run: &Run,
-    contour: Option<&crate::contour::Contour>,
+    contour: Option<&super::measure::Measure>,
     blocks: &[&CommandBlock],
 ) -> Option<(usize, f64)> {
     if !stopped_early(run) {
@@ -155,22 +159,22 @@ pub const ERROR_COLOURS: [&str; 10] = [
 
 /// The path section: the path coloured by planned feed and, where the traces allow, by
 /// contour error (a switch without script), the colour scales and caption.
-pub fn section(run: &Run, contour: Option<&crate::contour::Contour>, out: &mut String) {
+pub fn section(run: &Run, contour: Option<&super::measure::Measure>, out: &mut String) {
     out.push_str("<section id=\"path\"><h2>Path</h2>");
     let blocks: Vec<&CommandBlock> = run.motion().collect();
     let coarse: Vec<[f64; 3]> = blocks.iter().flat_map(|b| sample(b, 16)).collect();
     let from_setpoints = coarse.is_empty();
-    let pts = if from_setpoints {
-        match &run.setpoints {
-            Some(s) => s.pos_mm.clone(),
-            None => {
-                out.push_str("<p class=\"missing\">No path: commands.log and setpoints.csv are both unusable.</p></section>");
-                return;
-            }
+    // Without blocks the path is the set-points', read from their file as it is drawn.
+    let setpoints = match (from_setpoints, &run.setpoints) {
+        (false, _) => None,
+        (true, Some(s)) => Some(s),
+        (true, None) => {
+            out.push_str("<p class=\"missing\">No path: commands.log and setpoints.csv are both unusable.</p></section>");
+            return;
         }
-    } else {
-        coarse
     };
+    let pts = coarse;
+    let ext = setpoints.map_or_else(|| extent(&pts), |s| s.extent_mm);
     // The plane is the feed moves' (a rapid up to a safe height does not make a flat
     // part's plot a side view); their extent and the rapids' set the scale.
     let feed_pts: Vec<[f64; 3]> = blocks
@@ -178,10 +182,14 @@ pub fn section(run: &Run, contour: Option<&crate::contour::Contour>, out: &mut S
         .filter(|b| !is_rapid(b))
         .flat_map(|b| sample(b, 16))
         .collect();
-    let (a, b, _) = plane(if feed_pts.is_empty() { &pts } else { &feed_pts });
-    let third = extent(&pts)[3 - a - b];
+    let (a, b, _) = if feed_pts.is_empty() {
+        plane_of(ext)
+    } else {
+        plane(&feed_pts)
+    };
+    let third = ext[3 - a - b];
     let projected = third.1 - third.0 > 1e-6;
-    let (c, scale) = plane_chart(
+    let (c, scale) = extent_chart(
         "path-plot",
         &format!(
             "Path in the {}{} plane{}, colour = planned feed",
@@ -190,7 +198,7 @@ pub fn section(run: &Run, contour: Option<&crate::contour::Contour>, out: &mut S
             if projected { " (projection)" } else { "" }
         ),
         (a, b),
-        &pts,
+        ext,
         (760.0, 700.0),
     );
     let proj = move |p: [f64; 3]| (p[a], p[b]);
@@ -204,8 +212,8 @@ pub fn section(run: &Run, contour: Option<&crate::contour::Contour>, out: &mut S
     }
     out.push_str("<div class=\"row by-feed\">");
     c.open(out);
-    if from_setpoints {
-        draw_setpoints(&c, &pts, &proj, out);
+    if let Some(s) = setpoints {
+        draw_setpoints(&c, s, &proj, out);
     } else {
         draw_blocks(run, &c, &blocks, &proj, scale, top, stop, out);
     }
@@ -278,7 +286,17 @@ pub fn plane_chart(
     pts: &[[f64; 3]],
     max: (f64, f64),
 ) -> (Chart, f64) {
-    let ext = extent(pts);
+    extent_chart(id, title, (a, b), extent(pts), max)
+}
+
+/// [`plane_chart`] framing points whose extent is `ext`.
+fn extent_chart(
+    id: &str,
+    title: &str,
+    (a, b): (usize, usize),
+    ext: [(f64, f64); 3],
+    max: (f64, f64),
+) -> (Chart, f64) {
     fit_chart(
         id,
         title,
@@ -315,12 +333,14 @@ pub fn fit_chart(
 /// with its own colour scale; `None` without a contour analysis or any counted cycle.
 fn error_plot(
     run: &Run,
-    contour: Option<&crate::contour::Contour>,
+    contour: Option<&super::measure::Measure>,
     (a, b): (usize, usize),
     pts: &[[f64; 3]],
 ) -> Option<String> {
     let contour = contour?;
     let fb = run.feedback.as_ref()?;
+    // Read three times over: once to size the cells, once for each cell's worst error,
+    // once to draw.
     let top = contour.max.map(|w| w.um)?;
     let top = super::svg::nice_ceil(top.max(1e-3));
     let (c, _) = plane_chart(
@@ -344,10 +364,9 @@ fn error_plot(
     // once.
     let bin = |um: f64| ((um / top * 10.0).floor().max(0.0) as usize).min(9);
     let counted = || {
-        fb.pos_mm
-            .iter()
-            .zip(&contour.error_um)
-            .map(|(p, e)| e.map(|_| (c.px(p[a]), c.py(p[b]))))
+        fb.rows()
+            .zip(contour.errors())
+            .map(|((_, p, _), e)| e.map(|_| (c.px(p[a]), c.py(p[b]))))
     };
     // Cells of 1.5 px, coarser where the path covers more than CELL_BUDGET of them (a
     // raster over the whole part), so the plot stays within its share of the page.
@@ -362,10 +381,10 @@ fn error_plot(
     let cell_px = CELL_PX * (fine as f64 / CELL_BUDGET).sqrt().max(1.0);
     let cell_of = |(x, y): (f64, f64)| ((x / cell_px).floor() as i64, (y / cell_px).floor() as i64);
     let mut worst: std::collections::HashMap<(i64, i64), usize> = Default::default();
-    for (px, e) in counted().zip(&contour.error_um) {
+    for (px, e) in counted().zip(contour.errors()) {
         if let (Some(px), Some(um)) = (px, e) {
             let w = worst.entry(cell_of(px)).or_insert(0);
-            *w = (*w).max(bin(*um));
+            *w = (*w).max(bin(um));
         }
     }
     let mut drawn: std::collections::HashSet<(i64, i64)> = Default::default();
@@ -603,7 +622,8 @@ impl Pen {
             return;
         }
         out.push_str(&self.head);
-        write_px(self.pts.drain(..), out);
+        let n = self.pts.len();
+        write_px(self.pts.drain(..), n, out);
         out.push_str("\"/>");
     }
 }
@@ -694,13 +714,12 @@ impl Draw<'_> {
 /// Writes pixel coordinates, dropping points within half a pixel of the last one kept
 /// (the last point is always kept so blocks join).
 pub fn push_points(c: &Chart, xy: &[(f64, f64)], out: &mut String) {
-    write_px(xy.iter().map(|&(x, y)| (c.px(x), c.py(y))), out);
+    write_px(xy.iter().map(|&(x, y)| (c.px(x), c.py(y))), xy.len(), out);
 }
 
-/// Writes pixel coordinates `pts`, dropping points within half a pixel of the last one
-/// kept (the last point is always kept).
-fn write_px(pts: impl ExactSizeIterator<Item = (f64, f64)>, out: &mut String) {
-    let n = pts.len();
+/// Writes the `n` pixel coordinates `pts`, dropping points within half a pixel of the
+/// last one kept (the last point is always kept).
+fn write_px(pts: impl Iterator<Item = (f64, f64)>, n: usize, out: &mut String) {
     let mut last = (f64::NAN, f64::NAN);
     for (i, p) in pts.enumerate() {
         let near = (p.0 - last.0).abs() < 0.5 && (p.1 - last.1).abs() < 0.5;
@@ -738,10 +757,10 @@ fn draw_programmed(run: &Run, c: &Chart, proj: Proj, scale: f64, out: &mut Strin
     out.push_str("</g>");
 }
 
-fn draw_setpoints(c: &Chart, pts: &[[f64; 3]], proj: Proj, out: &mut String) {
-    let xy: Vec<(f64, f64)> = pts.iter().map(|p| proj(*p)).collect();
+fn draw_setpoints(c: &Chart, sp: &super::data::Setpoints, proj: Proj, out: &mut String) {
+    let xy = sp.rows().map(|(_, p, _)| proj(p));
     out.push_str("<polyline class=\"feed\" stroke=\"#1f3b73\" points=\"");
-    push_points(c, &xy, out);
+    write_px(xy.map(|(x, y)| (c.px(x), c.py(y))), sp.len(), out);
     out.push_str("\"/>");
 }
 
@@ -770,12 +789,11 @@ fn label(c: &Chart, (x, y): (f64, f64), dy: f64, text: &str, out: &mut String) {
 /// Start (open circle), end (filled square), or where a run that stopped early stopped
 /// (a cross).
 pub fn markers(run: &Run, c: &Chart, proj: Proj, pts: &[[f64; 3]], out: &mut String) {
-    let sp = run
-        .setpoints
-        .as_ref()
-        .map(|s| s.pos_mm.as_slice())
-        .unwrap_or(&[]);
-    let (Some(start), Some(end)) = (sp.first().or(pts.first()), sp.last().or(pts.last())) else {
+    let sp = run.setpoints.as_ref();
+    let (Some(start), Some(end)) = (
+        sp.map(|s| &s.first_mm).or(pts.first()),
+        sp.map(|s| &s.last_mm).or(pts.last()),
+    ) else {
         return;
     };
     let fault = stopped_early(run);

@@ -9,31 +9,53 @@
 //! about the same circle, so a circle that came out small (no feed-forward: `v²/(2·R·Kv²)`)
 //! shows as the commanded line lying outside by that much.
 
+use super::measure::Measure;
 use super::svg::{esc, fixed, nice_ceil, num, style_attrs, AXES};
-use crate::contour::{steady, Contour};
+use crate::contour::Deviations;
 use std::fmt::Write;
 
-/// Keeps at most the smallest and largest deviation per quarter degree, in order.
-fn reduce(v: &[(f64, f64)]) -> Vec<(f64, f64)> {
-    if v.len() <= 3000 {
-        return v.to_vec();
+/// The `len` points `each` gives (angle, deviation), as drawn.
+type Points<'a> = (usize, &'a dyn Fn(&mut dyn FnMut((f64, f64))));
+
+/// Keeps at most the smallest and largest deviation per quarter degree, in order, of the
+/// `len` points `each` gives (read twice: the deviations, then the angles of those kept).
+fn reduce((len, each): Points) -> Vec<(f64, f64)> {
+    if len <= 3000 {
+        let mut v = Vec::with_capacity(len);
+        each(&mut |p| v.push(p));
+        return v;
     }
     let mut r = super::svg::Reducer::new(0.0, 1.0, 1440.0);
     // Unwrapped angle keeps the order of travel for the reducer's columns.
-    for (i, p) in v.iter().enumerate() {
-        r.push(i as f64 / v.len() as f64, p.1);
-    }
+    let mut i = 0usize;
+    each(&mut |p| {
+        r.push(i as f64 / len as f64, p.1);
+        i += 1;
+    });
     let flat: Vec<(f64, f64)> = r.finish().into_iter().flatten().collect();
-    flat.iter()
-        .map(|&(x, d)| {
-            let i = ((x * v.len() as f64).round() as usize).min(v.len() - 1);
-            (v[i].0, d)
-        })
+    // The point each kept one stands for (in order, as the reducer keeps them).
+    let at: Vec<usize> = flat
+        .iter()
+        .map(|&(x, _)| ((x * len as f64).round() as usize).min(len - 1))
+        .collect();
+    let mut angle = vec![0.0; at.len()];
+    let (mut i, mut k) = (0usize, 0usize);
+    each(&mut |p| {
+        while at.get(k) == Some(&i) {
+            angle[k] = p.0;
+            k += 1;
+        }
+        i += 1;
+    });
+    angle
+        .into_iter()
+        .zip(flat)
+        .map(|(t, (_, d))| (t, d))
         .collect()
 }
 
 /// The roundness section, or a one-line note why the path gets none.
-pub fn section(contour: Option<&Contour>, out: &mut String) {
+pub fn section(contour: Option<&Measure>, out: &mut String) {
     let why_none = "feedback.csv, setpoints.csv or commands.log is unusable".to_string();
     let r = match contour.map_or(Err(&why_none), |c| c.roundness.as_ref()) {
         Ok(r) => r,
@@ -47,19 +69,26 @@ pub fn section(contour: Option<&Contour>, out: &mut String) {
         }
     };
     let name = ["X", "Y", "Z"];
-    let (a, b) = r.axes;
-    let src = &r.measured;
-    let maxabs = steady(src, r.ramps_left_out)
-        .iter()
-        .chain(steady(&r.commanded, r.ramps_left_out))
-        .chain(
-            r.reverse
-                .iter()
-                .flat_map(|v| steady(&v.measured, v.ramps_left_out)),
-        )
-        .map(|p| p.1.abs())
-        .fold(0.0, f64::max)
-        .max(1e-3);
+    let (a, b) = r.figures.axes;
+    // The points drawn: the measured and commanded positions of the first run, the
+    // measured of the reverse run, each read from its temporary file as it is drawn.
+    let measured = |f: &mut dyn FnMut((f64, f64))| r.points.each_steady(false, f);
+    let commanded = |f: &mut dyn FnMut((f64, f64))| r.points.each_steady(true, f);
+    let reverse = |f: &mut dyn FnMut((f64, f64))| {
+        if let Some(v) = &r.reverse {
+            v.points.each_steady(false, f);
+        }
+    };
+    let len = |d: &Deviations| d.steady_len();
+    let mut maxabs = 0.0f64;
+    for each in [
+        &measured as &dyn Fn(&mut dyn FnMut((f64, f64))),
+        &commanded,
+        &reverse,
+    ] {
+        each(&mut |p| maxabs = maxabs.max(p.1.abs()));
+    }
+    let maxabs = maxabs.max(1e-3);
     let per_div = nice_ceil(maxabs / 3.0);
     let (cx, cy, base, div) = (310.0, 326.0, 150.0, 36.0);
     let _ = write!(
@@ -101,8 +130,8 @@ pub fn section(contour: Option<&Contour>, out: &mut String) {
             cy - (r1 + 10.0) * t.sin() + 4.0
         );
     }
-    let plot = |v: &[(f64, f64)], st: &super::svg::Style, out: &mut String| {
-        if v.is_empty() {
+    let plot = |v: Points, st: &super::svg::Style, out: &mut String| {
+        if v.0 == 0 {
             return;
         }
         out.push_str("<polyline points=\"");
@@ -121,16 +150,11 @@ pub fn section(contour: Option<&Contour>, out: &mut String) {
         width: 1.3,
         dash: "",
     };
-    let ramps = r.ramps_left_out;
-    plot(steady(&r.commanded, ramps), &commanded_style, out);
+    plot((len(&r.points), &commanded), &commanded_style, out);
     if let Some(rev) = &r.reverse {
-        plot(
-            steady(&rev.measured, rev.ramps_left_out),
-            &reverse_style,
-            out,
-        );
+        plot((len(&rev.points), &reverse), &reverse_style, out);
     }
-    plot(steady(&r.measured, ramps), &AXES[0], out);
+    plot((len(&r.points), &measured), &AXES[0], out);
     let way = |ccw: bool| {
         if ccw {
             "counter-clockwise"
@@ -139,13 +163,13 @@ pub fn section(contour: Option<&Contour>, out: &mut String) {
         }
     };
     let first = if r.reverse.is_some() {
-        format!("measured, {}", way(r.ccw))
+        format!("measured, {}", way(r.figures.ccw))
     } else {
         "measured (feedback.csv)".into()
     };
     let mut legend = vec![(first, AXES[0])];
     if r.reverse.is_some() {
-        legend.push((format!("measured, {}", way(!r.ccw)), reverse_style));
+        legend.push((format!("measured, {}", way(!r.figures.ccw)), reverse_style));
     }
     legend.push(("commanded (setpoints.csv)".into(), commanded_style));
     let mut x = 10.0;
@@ -166,43 +190,39 @@ pub fn section(contour: Option<&Contour>, out: &mut String) {
         632.0,
         num(per_div)
     );
-    let (lo, hi) = src
-        .iter()
-        .fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), p| {
-            (l.min(p.1), h.max(p.1))
-        });
+    let (lo, hi) = r.deviation_um;
     let _ = write!(
         out,
         r#"<table class="figs"><tr><th>roundness (max − min radius of the measured positions about their best-fit centre)</th><td id="circularity">{:.2} µm</td></tr><tr><th>roundness at steady speed (the ramps from and to rest left out, as drawn)</th><td id="steady-roundness">{:.2} µm</td></tr><tr><th>largest deviation outward / inward</th><td>{:+.2} µm / {:+.2} µm</td></tr><tr><th>best-fit centre (measured)</th><td>{} {} mm, {} {} mm</td></tr><tr><th>best-fit radius (measured)</th><td>{:.4} mm</td></tr><tr><th>commanded circle</th><td>centre {} {} mm, {} {} mm, radius {:.4} mm</td></tr><tr><th>radius error (measured − commanded)</th><td id="radius-error">{:+.2} µm</td></tr><tr><th>commanded set-points' roundness about the commanded centre (chord error)</th><td>{:.3} µm</td></tr><tr><th>lines</th><td>{}–{}</td></tr><tr><th>magnification</th><td>{} µm per division (rings); best-fit circle bold</td></tr></table>"#,
-        r.roundness_um,
-        r.steady_roundness_um(),
+        r.figures.roundness_um,
+        r.steady_roundness_um,
         hi,
         lo,
         name[a],
-        fixed(r.centre_mm[0], 4),
+        fixed(r.figures.centre_mm[0], 4),
         name[b],
-        fixed(r.centre_mm[1], 4),
-        r.radius_mm,
+        fixed(r.figures.centre_mm[1], 4),
+        r.figures.radius_mm,
         name[a],
-        fixed(r.commanded_centre_mm[0], 4),
+        fixed(r.figures.commanded_centre_mm[0], 4),
         name[b],
-        fixed(r.commanded_centre_mm[1], 4),
-        r.commanded_radius_mm,
-        r.radius_error_um(),
+        fixed(r.figures.commanded_centre_mm[1], 4),
+        r.figures.commanded_radius_mm,
+        r.figures.radius_error_um(),
         r.commanded_roundness_um,
-        r.lines.0,
-        r.lines.1,
+        r.figures.lines.0,
+        r.figures.lines.1,
         num(per_div)
     );
     if let Some(rev) = &r.reverse {
         let _ = write!(
             out,
             r#"<table class="figs" id="reverse-run"><tr><th>the same circle {}, lines {}–{}: roundness about its own best-fit centre</th><td>{:.2} µm</td></tr><tr><th>its best-fit radius less the {} run's</th><td>{:+.2} µm</td></tr></table>"#,
-            way(!r.ccw),
+            way(!r.figures.ccw),
             rev.lines.0,
             rev.lines.1,
             rev.roundness_um,
-            way(r.ccw),
+            way(r.figures.ccw),
             rev.radius_offset_um
         );
     }

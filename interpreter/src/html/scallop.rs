@@ -33,7 +33,10 @@ pub fn section(run: &Run, out: &mut String) {
         out.push_str("<p class=\"missing\">No scallop map: feedback.csv is missing or unusable.</p></section>");
         return;
     };
-    let Some(map) = crate::scallop::map(&run.blocks, &fb.pos_mm, MAP_POINTS)
+    // The map's index of ball centres holds every measured position (as the measured
+    // scallop of report.json does): read here, for a run of surface blocks only.
+    let positions: Vec<[f64; 3]> = fb.rows().map(|(_, p, _)| p).collect();
+    let Some(map) = crate::scallop::map(&run.blocks, &positions, MAP_POINTS)
         .filter(|m| m.patches.iter().flatten().any(Option::is_some))
     else {
         out.push_str("<p class=\"note\">No scallop map: the part's passes use more than one tool, or no ball reached the surface.</p></section>");

@@ -8,16 +8,16 @@
 //! [`Reducer`], so a one-hour run draws as quickly and as small as a one-second one.
 
 use super::data::Run;
+use super::measure::Measure;
 use super::svg::{num, pad_range, y_extent, Chart, Reducer, Style, AXES, LIMIT, SOLID};
-use crate::contour::Contour;
 use shared::path::norm;
 use std::collections::HashMap;
 use std::fmt::Write;
 
 /// The time axis shared by every plot over time: `(0, last cycle × period)` in s.
 pub fn time_range(run: &Run) -> (f64, f64) {
-    let last_sp = run.setpoints.as_ref().and_then(|s| s.cycle.last().copied());
-    let last_fb = run.feedback.as_ref().and_then(|f| f.cycle.last().copied());
+    let last_sp = run.setpoints.as_ref().map(|s| s.last_cycle);
+    let last_fb = run.feedback.as_ref().map(|f| f.last_cycle);
     let last = last_sp.max(last_fb).unwrap_or(0).max(1);
     (0.0, last as f64 * run.period_s())
 }
@@ -62,8 +62,7 @@ pub fn motion(run: &Run, out: &mut String) {
     // Positions of the last four consecutive cycles, newest first.
     let mut hist: Vec<[f64; 3]> = Vec::with_capacity(4);
     let mut prev_cycle: Option<u64> = None;
-    for i in 0..sp.cycle.len() {
-        let (cyc, p) = (sp.cycle[i], sp.pos_mm[i]);
+    for (cyc, p, line) in sp.rows() {
         let t = cyc as f64 * period;
         if prev_cycle.is_some_and(|c| c + 1 != cyc) {
             hist.clear();
@@ -75,7 +74,7 @@ pub fn motion(run: &Run, out: &mut String) {
         hist.insert(0, p);
         hist.truncate(4);
         // The feed limit of a line with feed moves, if it has any.
-        let line_limit = limit_of_line.get(&sp.line[i]).copied();
+        let line_limit = limit_of_line.get(&line).copied();
         let feeding = line_limit.and_then(|(f, rapid_only)| (!rapid_only).then_some(f));
         if let Some((f, _)) = line_limit {
             limit.push(t, f);
@@ -217,7 +216,7 @@ pub fn motion(run: &Run, out: &mut String) {
 /// Following error per axis and the contour error (distance from the measured position to
 /// the exact commanded path, from [`crate::contour`]). Returns the largest contour error in
 /// µm, when it could be computed.
-pub fn errors(run: &Run, contour: Option<&Contour>, out: &mut String) -> Option<f64> {
+pub fn errors(run: &Run, contour: Option<&Measure>, out: &mut String) -> Option<f64> {
     out.push_str("<section id=\"errors\"><h2>Following and contour error</h2>");
     let Some(fb) = &run.feedback else {
         out.push_str("<p class=\"missing\">Not drawn: feedback.csv is missing or unusable (see the problems above).</p></section>");
@@ -230,8 +229,9 @@ pub fn errors(run: &Run, contour: Option<&Contour>, out: &mut String) -> Option<
     let mut creduce = Reducer::new(tr.0, tr.1, cols);
     let mut prev: Option<u64> = None;
     let mut contour_prev = false;
-    for i in 0..fb.cycle.len() {
-        let cyc = fb.cycle[i];
+    // Without a contour measure, no row has a contour error.
+    let mut errors = contour.map(|c| c.errors());
+    for (cyc, _, e) in fb.rows() {
         let t = cyc as f64 * period;
         if prev.is_some_and(|c| c + 1 != cyc) {
             for r in axes.iter_mut() {
@@ -239,12 +239,11 @@ pub fn errors(run: &Run, contour: Option<&Contour>, out: &mut String) -> Option<
             }
         }
         prev = Some(cyc);
-        let e = fb.ferr_um[i].map(f64::from);
         for (r, v) in axes.iter_mut().zip(e) {
             r.push(t, v);
         }
         // Cycles on rapids have no contour error: a gap in its line.
-        match contour.and_then(|c| c.error_um.get(i).copied().flatten()) {
+        match errors.as_mut().and_then(|e| e.next().flatten()) {
             Some(n) => {
                 creduce.push(t, n);
                 contour_prev = true;

@@ -78,7 +78,7 @@ fn wireframe(patches: &[&CommandBlock]) -> Vec<Vec<[f64; 3]>> {
 }
 
 /// The 3D section, or nothing for a path in one plane.
-pub fn section(run: &Run, contour: Option<&crate::contour::Contour>, out: &mut String) {
+pub fn section(run: &Run, contour: Option<&super::measure::Measure>, out: &mut String) {
     let blocks: Vec<&CommandBlock> = run.motion().collect();
     let feed_pts: Vec<[f64; 3]> = blocks
         .iter()
