@@ -822,8 +822,13 @@ fn the_window_keeps_each_blocks_figures_beside_it_as_the_ring_wraps() {
             w.push(b);
             next += 1;
         }
+        // A planned end lowered after the block was taken, seen in its figures too
+        // (which are kept twice: see `Window::figs`).
+        w.lower_end(w.len - 1, 0.5 * round as f64);
+        assert_eq!(w.held().len(), w.len);
         for i in 0..w.len {
             let (b, f) = (w.get(i).unwrap(), w.fig(i).unwrap());
+            assert_eq!(w.held()[i].end_mm_per_s, f.end_mm_per_s);
             assert_eq!(f.motion, is_motion(b), "round {round}, {i}");
             assert_eq!(f.length_mm, b.length_mm);
             assert_eq!(f.end_mm_per_s, b.end_feed_mm_per_min / 60.0);
@@ -1199,4 +1204,56 @@ fn a_chain_of_tiny_blocks_with_stops_runs_to_its_end_at_100_us() {
     let last = ticks.last().unwrap();
     assert_eq!(last.state, TickState::Done);
     assert_eq!(last.pos_mm, [3.0 * span, 0.0, 0.0]);
+}
+
+#[test]
+fn reach_within_takes_the_steps_of_a_plain_bisection() {
+    // `reach_within` tests two steps' midpoints at once; its answer must be that of the
+    // plain bisection, one step at a time, to the bit (the set-points depend on it),
+    // early exit included.
+    fn plain(lim: Jerk, v: f64, d: f64, enough: f64) -> f64 {
+        if d <= 0.0 || v >= enough {
+            return v;
+        }
+        let (sat, cub) = ((2.0 * lim.acc * d).sqrt(), lim.jerk * d * d);
+        let (mut lo, mut hi) = (
+            v,
+            v + if sat * sat * sat >= cub {
+                sat
+            } else {
+                cub.cbrt()
+            },
+        );
+        for _ in 0..10 {
+            let mid = 0.5 * (lo + hi);
+            if change_within(lim, mid, v, d) {
+                lo = mid;
+            } else {
+                hi = mid;
+            }
+            if lo >= enough {
+                break;
+            }
+        }
+        lo
+    }
+    let mut n = 0;
+    for (acc, jerk) in [
+        (2000.0, 50_000.0),
+        (300.0, 8000.0),
+        (5000.0, 1e6),
+        (50.0, 100.0),
+    ] {
+        let lim = Jerk { acc, jerk };
+        for v in [0.0, 0.3, 4.0, 27.0, 150.0] {
+            for d in [-1.0, 0.0, 1e-6, 1e-3, 0.01, 0.37, 2.0, 40.0] {
+                for enough in [f64::INFINITY, v, v + 0.01, v + 1.0, v + 30.0, 2.0 * v + 5.0] {
+                    let (a, b) = (reach_within(lim, v, d, enough), plain(lim, v, d, enough));
+                    assert_eq!(a.to_bits(), b.to_bits(), "{lim:?} {v} {d} {enough}");
+                    n += 1;
+                }
+            }
+        }
+    }
+    assert_eq!(n, 960);
 }
