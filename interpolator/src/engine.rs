@@ -644,9 +644,19 @@ impl Low {
         if peak <= r {
             return self.v;
         }
+        self.passed_from(r, j)
+    }
+
+    /// [`Low::passed_below`] where the peak is above `r`: the speed to pass the low with
+    /// so that the easing under `j` stays within `r`, no higher than `low.v`.
+    #[inline]
+    fn passed_from(&self, r: f64, j: f64) -> f64 {
         let a2 = self.acc * self.acc;
         // Passed at its full acceleration: `v - a²/2jerk + a²/2j = r`; where that is
         // slower than the acceleration allows (`a² = 2·jerk·v`): `v·jerk/j = r`.
+        // (Two of its divisions are the same in every fold under one set of limits; kept
+        // from fold to fold they made `cycle/profile_worst`'s p99 slower, 2654 against
+        // 2444–2533 ns: the divisions run beside the rest, the look-up did not.)
         let full = r + a2 / (2.0 * self.jerk) - a2 / (2.0 * j);
         let root = r * j / self.jerk;
         let v = if 2.0 * self.jerk * root <= a2 {
@@ -1288,8 +1298,8 @@ impl Engine {
         };
         // The lowest jerk of the blocks beyond the limits kept so far.
         let mut kept_next_jerk = f64::INFINITY;
-        // The last fold's spare and what it was found from (see below).
-        let mut fold_spare: Option<([u64; 4], (f64, f64))> = None;
+        // The last fold's spare and what it was found from (see `fold_full`).
+        let mut fold_memo = None;
         let mut held = self.window.held().iter();
         // The figures of the block beyond the point reached, if a motion (the walk ends
         // at the first that is not).
@@ -1344,24 +1354,9 @@ impl Engine {
                         acc: acc_hi,
                         jerk: last.next.jerk,
                     };
-                    // (Folds in a row into an unchanged last limit, under unchanged
-                    // limits, find the same spare: kept, not found again.)
-                    let key = [low.v, low.acc, low.jerk, easing.jerk].map(f64::to_bits);
-                    let (peak, spare) = match fold_spare {
-                        Some((k, found)) if k == key => found,
-                        _ => {
-                            let found = self.spare(low, easing);
-                            fold_spare = Some((key, found));
-                            found
-                        }
-                    };
-                    let room = d - last.d - spare;
-                    // (The search ends once it shows the low's easing, `peak`, within
-                    // reach: the low is then kept as it is, whatever the rest finds.)
-                    let r = reach_within(easing, v, room, peak);
                     last.v = last
                         .v
-                        .min(low.passed_below(peak, r, easing.jerk.min(low.jerk)));
+                        .min(self.folded(low, easing, v, d - last.d, &mut fold_memo));
                     last.lim = min_lim(last.lim, lim);
                     last.next = min_lim(last.next, next);
                     kept_next_jerk = kept_next_jerk.min(next.jerk);
@@ -1388,6 +1383,62 @@ impl Engine {
             };
         }
         n
+    }
+
+    /// The speed a kept limit `low` (as a [`Low`]: its place and speed, the acceleration
+    /// the machine may carry there and the jerk of the block beyond it) is lowered to when
+    /// a lower limit `v`, `gap` mm beyond it, braked for under `easing`, is folded into it
+    /// (see [`Engine::limits_ahead`]; `memo` keeps the last spare found).
+    ///
+    /// The usual case first, without the spare's square root and divisions: on a chain of
+    /// tiny blocks braking at speed (some forty folds in a cycle of `cycle/profile_worst`
+    /// at its p99, each waiting on the last) the spare past the low alone exceeds the gap
+    /// ([`Engine::spare_exceeds`]), so the room is negative and the search gives `v`
+    /// itself; and `v` is below `low.v` by more than rounding, so below the easing's peak
+    /// (never under `low.v` by more than an ulp: the easing under a jerk no higher than
+    /// the low's rises at least as far as it falls). The low is then passed below from
+    /// `v`: the arithmetic [`Engine::fold_full`] does in that case, so the same bits.
+    #[inline]
+    fn folded(
+        &self,
+        low: Low,
+        easing: Jerk,
+        v: f64,
+        gap: f64,
+        memo: &mut Option<([u64; 4], (f64, f64))>,
+    ) -> f64 {
+        if v < low.v * (1.0 - 1e-12) && self.spare_exceeds(low, easing.jerk, gap) {
+            return low.passed_from(v, easing.jerk.min(low.jerk));
+        }
+        self.fold_full(low, easing, v, gap, memo)
+    }
+
+    /// [`Engine::folded`] the long way: the spare past the low, the highest speed from
+    /// which `v` is reached in the room left, and the low passed below that.
+    fn fold_full(
+        &self,
+        low: Low,
+        easing: Jerk,
+        v: f64,
+        gap: f64,
+        memo: &mut Option<([u64; 4], (f64, f64))>,
+    ) -> f64 {
+        // (Folds in a row into an unchanged limit, under unchanged limits, find the same
+        // spare: kept, not found again.)
+        let key = [low.v, low.acc, low.jerk, easing.jerk].map(f64::to_bits);
+        let (peak, spare) = match *memo {
+            Some((k, found)) if k == key => found,
+            _ => {
+                let found = self.spare(low, easing);
+                *memo = Some((key, found));
+                found
+            }
+        };
+        let room = gap - spare;
+        // (The search ends once it shows the low's easing, `peak`, within reach: the low
+        // is then kept as it is, whatever the rest finds.)
+        let r = reach_within(easing, v, room, peak);
+        low.passed_below(peak, r, easing.jerk.min(low.jerk))
     }
 
     /// Whether the limit `v`, `d` mm ahead with the block `next` beyond it, is kept by

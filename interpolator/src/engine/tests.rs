@@ -1257,3 +1257,48 @@ fn reach_within_takes_the_steps_of_a_plain_bisection() {
     }
     assert_eq!(n, 960);
 }
+
+#[test]
+fn a_fold_taken_the_short_way_finds_the_bits_of_the_long_way() {
+    // `Engine::folded` skips the spare's square root and the search where the spare
+    // alone exceeds the gap and the limit is below the low by more than rounding; it must
+    // give what `Engine::fold_full` gives, to the bit, whatever it keeps between folds.
+    let lim = Limits {
+        max_following_error_mm: 1.0,
+        ..Limits::new(&Machine::default(), 100_000)
+    };
+    let e = Engine::new(lim, [0.0; 3]);
+    let mut seed = 0x9e37_79b9_7f4a_7c15u64;
+    let mut rnd = move || {
+        seed = seed
+            .wrapping_mul(6_364_136_223_846_793_005)
+            .wrapping_add(1_442_695_040_888_963_407);
+        (seed >> 11) as f64 / (1u64 << 53) as f64
+    };
+    let (mut memo, mut short) = (None, 0);
+    for _ in 0..200_000 {
+        let pick = |x: f64, of: &[f64]| of[((x * of.len() as f64) as usize).min(of.len() - 1)];
+        let low = Low {
+            d: 0.0,
+            v: 40.0 * rnd(),
+            acc: pick(rnd(), &[2000.0, 333.3, 5000.0, 120.0]),
+            jerk: pick(rnd(), &[50_000.0, 8333.3, 1e6, 700.0]),
+        };
+        let easing = Jerk {
+            acc: pick(rnd(), &[2000.0, 333.3]),
+            jerk: pick(rnd(), &[50_000.0, 8333.3, 1e6]),
+        };
+        let v = low.v * pick(rnd(), &[rnd(), 1.0, 1.0 - 1e-13, 0.999, 0.0]);
+        let gap = pick(rnd(), &[0.01 * rnd(), rnd(), 0.0, 1e-5]);
+        let got = e.folded(low, easing, v, gap, &mut memo);
+        let want = e.fold_full(low, easing, v, gap, &mut None);
+        assert_eq!(
+            got.to_bits(),
+            want.to_bits(),
+            "{low:?} {easing:?} {v} {gap}"
+        );
+        short += usize::from(v < low.v * (1.0 - 1e-12) && e.spare_exceeds(low, easing.jerk, gap));
+    }
+    // Both ways taken often.
+    assert!((20_000..180_000).contains(&short), "{short}");
+}
