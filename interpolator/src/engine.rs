@@ -368,6 +368,9 @@ impl Limits {
 /// hundred blocks' figures then touches a few cache lines, not a few hundred.
 struct Window {
     buf: Vec<CommandBlock>,
+    /// The figures of the block in slot `k` of `buf`, twice: at `k` and at `k + cap`.
+    /// The figures held are then one plain slice from `head` on, whichever way the ring
+    /// wraps ([`Window::held`]), walked without a ring index per block.
     figs: Vec<BlockFigs>,
     head: usize,
     len: usize,
@@ -406,7 +409,7 @@ impl Window {
         let empty = CommandBlock::empty(BlockKind::ProgramEnd, 0, 0);
         Window {
             buf: vec![empty; capacity.max(1)],
-            figs: vec![BlockFigs::of(&empty); capacity.max(1)],
+            figs: vec![BlockFigs::of(&empty); 2 * capacity.max(1)],
             head: 0,
             len: 0,
             lowest: NO_LIMIT,
@@ -441,7 +444,7 @@ impl Window {
     #[inline]
     fn fig(&self, i: usize) -> Option<&BlockFigs> {
         if i < self.len {
-            self.figs.get(self.slot(i))
+            self.figs.get(self.head + i)
         } else {
             None
         }
@@ -458,8 +461,13 @@ impl Window {
             return;
         }
         let k = self.slot(self.len);
+        let twin = k + self.buf.len();
         if let (Some(slot), Some(fig)) = (self.buf.get_mut(k), self.figs.get_mut(k)) {
             *fig = BlockFigs::of(&b);
+            let fig = *fig;
+            if let Some(t) = self.figs.get_mut(twin) {
+                *t = fig;
+            }
             if fig.motion {
                 let lim = fig.lim;
                 for (lo, (n, v)) in [&mut self.lowest.acc, &mut self.lowest.jerk]
@@ -489,6 +497,9 @@ impl Window {
         if let (Some(b), Some(fig)) = (self.buf.get_mut(k), self.figs.get_mut(k)) {
             fig.end_mm_per_s = v;
             b.end_feed_mm_per_min = v * 60.0;
+        }
+        if let Some(twin) = self.figs.get_mut(k + self.buf.len()) {
+            twin.end_mm_per_s = v;
         }
     }
 
@@ -522,17 +533,20 @@ impl Window {
         true
     }
 
-    /// [`Window::lowest`] and its counts found afresh: a walk over the figures held, the
-    /// two runs of the ring as plain slices.
+    /// The figures of the blocks held, oldest first, as one slice: the `i`-th is
+    /// `fig(i)`. (The walk of [`Engine::limits_ahead`] visits up to a few hundred every
+    /// cycle.)
+    #[inline]
+    fn held(&self) -> &[BlockFigs] {
+        self.figs
+            .get(self.head..self.head + self.len)
+            .unwrap_or(&[])
+    }
+
+    /// [`Window::lowest`] and its counts found afresh: a walk over the figures held.
     fn find_lowest(&mut self) {
-        let (head, len) = (self.head, self.len);
-        let cap = self.figs.len();
-        let first = self.figs.get(head..cap.min(head + len)).unwrap_or(&[]);
-        let rest = self
-            .figs
-            .get(..(head + len).saturating_sub(cap))
-            .unwrap_or(&[]);
-        let held = || first.iter().chain(rest).filter(|f| f.motion);
+        let all = self.held();
+        let held = || all.iter().filter(|f| f.motion);
         let lowest = held().fold(NO_LIMIT, |lo, f| min_lim(lo, f.lim));
         let mut at_lowest = [0; 2];
         for f in held() {
@@ -630,9 +644,19 @@ impl Low {
         if peak <= r {
             return self.v;
         }
+        self.passed_from(r, j)
+    }
+
+    /// [`Low::passed_below`] where the peak is above `r`: the speed to pass the low with
+    /// so that the easing under `j` stays within `r`, no higher than `low.v`.
+    #[inline]
+    fn passed_from(&self, r: f64, j: f64) -> f64 {
         let a2 = self.acc * self.acc;
         // Passed at its full acceleration: `v - a²/2jerk + a²/2j = r`; where that is
         // slower than the acceleration allows (`a² = 2·jerk·v`): `v·jerk/j = r`.
+        // (Two of its divisions are the same in every fold under one set of limits; kept
+        // from fold to fold they made `cycle/profile_worst`'s p99 slower, 2654 against
+        // 2444–2533 ns: the divisions run beside the rest, the look-up did not.)
         let full = r + a2 / (2.0 * self.jerk) - a2 / (2.0 * j);
         let root = r * j / self.jerk;
         let v = if 2.0 * self.jerk * root <= a2 {
@@ -677,10 +701,24 @@ fn reach_within(lim: Jerk, v: f64, d: f64, enough: f64) -> f64 {
             cub.cbrt()
         },
     );
-    for _ in 0..10 {
+    // Ten steps, two at a time: the second step's midpoint is one of two known ahead
+    // (`up` where the first succeeds, `down` where it fails), so both are tested beside
+    // the first instead of after it. The same midpoints and tests as one step at a time,
+    // so the same answer to the bit, in a shorter chain of dependent operations: the folds
+    // of `limits_ahead`, some fifteen in a cycle that crosses a block end of
+    // `cycle/profile_worst`, each wait on theirs.
+    for _ in 0..5 {
         let mid = 0.5 * (lo + hi);
+        let (up, down) = (0.5 * (mid + hi), 0.5 * (lo + mid));
         // (Selected, not branched on: the outcome of each step is a coin toss.)
         let ok = change_within(lim, mid, v, d);
+        let (ok_up, ok_down) = (change_within(lim, up, v, d), change_within(lim, down, v, d));
+        lo = if ok { mid } else { lo };
+        hi = if ok { hi } else { mid };
+        if lo >= enough {
+            break;
+        }
+        let (mid, ok) = if ok { (up, ok_up) } else { (down, ok_down) };
         lo = if ok { mid } else { lo };
         hi = if ok { hi } else { mid };
         if lo >= enough {
@@ -1260,9 +1298,12 @@ impl Engine {
         };
         // The lowest jerk of the blocks beyond the limits kept so far.
         let mut kept_next_jerk = f64::INFINITY;
-        let mut i = 0usize;
-        // The figures of the block beyond the point reached (the `i`-th held), if a motion.
-        let mut beyond = self.window.motion(i);
+        // The last fold's spare and what it was found from (see `fold_full`).
+        let mut fold_memo = None;
+        let mut held = self.window.held().iter();
+        // The figures of the block beyond the point reached, if a motion (the walk ends
+        // at the first that is not).
+        let mut beyond = held.next().filter(|f| f.motion);
         loop {
             let next = beyond.map_or(lim, |f| f.lim);
             if v >= lowest
@@ -1313,14 +1354,9 @@ impl Engine {
                         acc: acc_hi,
                         jerk: last.next.jerk,
                     };
-                    let (peak, spare) = self.spare(low, easing);
-                    let room = d - last.d - spare;
-                    // (The search ends once it shows the low's easing, `peak`, within
-                    // reach: the low is then kept as it is, whatever the rest finds.)
-                    let r = reach_within(easing, v, room, peak);
                     last.v = last
                         .v
-                        .min(low.passed_below(peak, r, easing.jerk.min(low.jerk)));
+                        .min(self.folded(low, easing, v, d - last.d, &mut fold_memo));
                     last.lim = min_lim(last.lim, lim);
                     last.next = min_lim(last.next, next);
                     kept_next_jerk = kept_next_jerk.min(next.jerk);
@@ -1340,14 +1376,69 @@ impl Engine {
             acc_hi = acc_hi.max(b.lim.acc);
             since_low = Some(since_low.map_or(b.lim, |l| min_lim(l, b.lim)));
             d += b.length_mm;
-            i += 1;
-            beyond = self.window.motion(i);
+            beyond = held.next().filter(|f| f.motion);
             v = match beyond {
                 Some(_) => b.end_mm_per_s,
                 None => 0.0,
             };
         }
         n
+    }
+
+    /// The speed a kept limit `low` (as a [`Low`]: its place and speed, the acceleration
+    /// the machine may carry there and the jerk of the block beyond it) is lowered to when
+    /// a lower limit `v`, `gap` mm beyond it, braked for under `easing`, is folded into it
+    /// (see [`Engine::limits_ahead`]; `memo` keeps the last spare found).
+    ///
+    /// The usual case first, without the spare's square root and divisions: on a chain of
+    /// tiny blocks braking at speed (some forty folds in a cycle of `cycle/profile_worst`
+    /// at its p99, each waiting on the last) the spare past the low alone exceeds the gap
+    /// ([`Engine::spare_exceeds`]), so the room is negative and the search gives `v`
+    /// itself; and `v` is below `low.v` by more than rounding, so below the easing's peak
+    /// (never under `low.v` by more than an ulp: the easing under a jerk no higher than
+    /// the low's rises at least as far as it falls). The low is then passed below from
+    /// `v`: the arithmetic [`Engine::fold_full`] does in that case, so the same bits.
+    #[inline]
+    fn folded(
+        &self,
+        low: Low,
+        easing: Jerk,
+        v: f64,
+        gap: f64,
+        memo: &mut Option<([u64; 4], (f64, f64))>,
+    ) -> f64 {
+        if v < low.v * (1.0 - 1e-12) && self.spare_exceeds(low, easing.jerk, gap) {
+            return low.passed_from(v, easing.jerk.min(low.jerk));
+        }
+        self.fold_full(low, easing, v, gap, memo)
+    }
+
+    /// [`Engine::folded`] the long way: the spare past the low, the highest speed from
+    /// which `v` is reached in the room left, and the low passed below that.
+    fn fold_full(
+        &self,
+        low: Low,
+        easing: Jerk,
+        v: f64,
+        gap: f64,
+        memo: &mut Option<([u64; 4], (f64, f64))>,
+    ) -> f64 {
+        // (Folds in a row into an unchanged limit, under unchanged limits, find the same
+        // spare: kept, not found again.)
+        let key = [low.v, low.acc, low.jerk, easing.jerk].map(f64::to_bits);
+        let (peak, spare) = match *memo {
+            Some((k, found)) if k == key => found,
+            _ => {
+                let found = self.spare(low, easing);
+                *memo = Some((key, found));
+                found
+            }
+        };
+        let room = gap - spare;
+        // (The search ends once it shows the low's easing, `peak`, within reach: the low
+        // is then kept as it is, whatever the rest finds.)
+        let r = reach_within(easing, v, room, peak);
+        low.passed_below(peak, r, easing.jerk.min(low.jerk))
     }
 
     /// Whether the limit `v`, `d` mm ahead with the block `next` beyond it, is kept by
@@ -1450,8 +1541,7 @@ impl Engine {
         let lead = 2.0 * self.t_s * v_max;
         // Where even the lowest jerk in hand sheds all of it, nothing further binds.
         let j_lo = own.jerk.min(self.window.lowest.jerk);
-        let mut i = 0;
-        while let Some(b) = self.window.motion(i) {
+        for b in self.window.held().iter().take_while(|f| f.motion) {
             let tau = (d - lead).max(0.0) / v_max;
             if j_lo * tau >= ceiling {
                 break;
@@ -1459,7 +1549,6 @@ impl Engine {
             let shed = own.jerk.min(b.lim.jerk) * tau;
             ceiling = ceiling.min(b.lim.acc + shed);
             d += b.length_mm;
-            i += 1;
         }
         ceiling
     }

@@ -822,8 +822,13 @@ fn the_window_keeps_each_blocks_figures_beside_it_as_the_ring_wraps() {
             w.push(b);
             next += 1;
         }
+        // A planned end lowered after the block was taken, seen in its figures too
+        // (which are kept twice: see `Window::figs`).
+        w.lower_end(w.len - 1, 0.5 * round as f64);
+        assert_eq!(w.held().len(), w.len);
         for i in 0..w.len {
             let (b, f) = (w.get(i).unwrap(), w.fig(i).unwrap());
+            assert_eq!(w.held()[i].end_mm_per_s, f.end_mm_per_s);
             assert_eq!(f.motion, is_motion(b), "round {round}, {i}");
             assert_eq!(f.length_mm, b.length_mm);
             assert_eq!(f.end_mm_per_s, b.end_feed_mm_per_min / 60.0);
@@ -1199,4 +1204,101 @@ fn a_chain_of_tiny_blocks_with_stops_runs_to_its_end_at_100_us() {
     let last = ticks.last().unwrap();
     assert_eq!(last.state, TickState::Done);
     assert_eq!(last.pos_mm, [3.0 * span, 0.0, 0.0]);
+}
+
+#[test]
+fn reach_within_takes_the_steps_of_a_plain_bisection() {
+    // `reach_within` tests two steps' midpoints at once; its answer must be that of the
+    // plain bisection, one step at a time, to the bit (the set-points depend on it),
+    // early exit included.
+    fn plain(lim: Jerk, v: f64, d: f64, enough: f64) -> f64 {
+        if d <= 0.0 || v >= enough {
+            return v;
+        }
+        let (sat, cub) = ((2.0 * lim.acc * d).sqrt(), lim.jerk * d * d);
+        let (mut lo, mut hi) = (
+            v,
+            v + if sat * sat * sat >= cub {
+                sat
+            } else {
+                cub.cbrt()
+            },
+        );
+        for _ in 0..10 {
+            let mid = 0.5 * (lo + hi);
+            if change_within(lim, mid, v, d) {
+                lo = mid;
+            } else {
+                hi = mid;
+            }
+            if lo >= enough {
+                break;
+            }
+        }
+        lo
+    }
+    let mut n = 0;
+    for (acc, jerk) in [
+        (2000.0, 50_000.0),
+        (300.0, 8000.0),
+        (5000.0, 1e6),
+        (50.0, 100.0),
+    ] {
+        let lim = Jerk { acc, jerk };
+        for v in [0.0, 0.3, 4.0, 27.0, 150.0] {
+            for d in [-1.0, 0.0, 1e-6, 1e-3, 0.01, 0.37, 2.0, 40.0] {
+                for enough in [f64::INFINITY, v, v + 0.01, v + 1.0, v + 30.0, 2.0 * v + 5.0] {
+                    let (a, b) = (reach_within(lim, v, d, enough), plain(lim, v, d, enough));
+                    assert_eq!(a.to_bits(), b.to_bits(), "{lim:?} {v} {d} {enough}");
+                    n += 1;
+                }
+            }
+        }
+    }
+    assert_eq!(n, 960);
+}
+
+#[test]
+fn a_fold_taken_the_short_way_finds_the_bits_of_the_long_way() {
+    // `Engine::folded` skips the spare's square root and the search where the spare
+    // alone exceeds the gap and the limit is below the low by more than rounding; it must
+    // give what `Engine::fold_full` gives, to the bit, whatever it keeps between folds.
+    let lim = Limits {
+        max_following_error_mm: 1.0,
+        ..Limits::new(&Machine::default(), 100_000)
+    };
+    let e = Engine::new(lim, [0.0; 3]);
+    let mut seed = 0x9e37_79b9_7f4a_7c15u64;
+    let mut rnd = move || {
+        seed = seed
+            .wrapping_mul(6_364_136_223_846_793_005)
+            .wrapping_add(1_442_695_040_888_963_407);
+        (seed >> 11) as f64 / (1u64 << 53) as f64
+    };
+    let (mut memo, mut short) = (None, 0);
+    for _ in 0..200_000 {
+        let pick = |x: f64, of: &[f64]| of[((x * of.len() as f64) as usize).min(of.len() - 1)];
+        let low = Low {
+            d: 0.0,
+            v: 40.0 * rnd(),
+            acc: pick(rnd(), &[2000.0, 333.3, 5000.0, 120.0]),
+            jerk: pick(rnd(), &[50_000.0, 8333.3, 1e6, 700.0]),
+        };
+        let easing = Jerk {
+            acc: pick(rnd(), &[2000.0, 333.3]),
+            jerk: pick(rnd(), &[50_000.0, 8333.3, 1e6]),
+        };
+        let v = low.v * pick(rnd(), &[rnd(), 1.0, 1.0 - 1e-13, 0.999, 0.0]);
+        let gap = pick(rnd(), &[0.01 * rnd(), rnd(), 0.0, 1e-5]);
+        let got = e.folded(low, easing, v, gap, &mut memo);
+        let want = e.fold_full(low, easing, v, gap, &mut None);
+        assert_eq!(
+            got.to_bits(),
+            want.to_bits(),
+            "{low:?} {easing:?} {v} {gap}"
+        );
+        short += usize::from(v < low.v * (1.0 - 1e-12) && e.spare_exceeds(low, easing.jerk, gap));
+    }
+    // Both ways taken often.
+    assert!((20_000..180_000).contains(&short), "{short}");
 }
