@@ -104,9 +104,15 @@ fn cycle_work_does_not_allocate() {
     miss_log.start().unwrap();
     let mut feed = FeedStats::default();
     let path = std::env::temp_dir().join(format!("cnc-noalloc-{}.csv", std::process::id()));
-    let mut trace = TraceWriter::create(&path, "cycle,x", 1 << 12, |r: &Rec, s: &mut String| {
-        s.push_str(&format!("{},{}", r.0, r.1[0]));
-    })
+    let mut trace = TraceWriter::create(
+        &path,
+        "cycle,x",
+        1 << 12,
+        |r: &Rec, s: &mut String| {
+            s.push_str(&format!("{},{}", r.0, r.1[0]));
+        },
+        true,
+    )
     .unwrap();
     // The preemption test aid's kick runs inside the cycle too; the preemptor needs
     // SCHED_FIFO (root), and without it that part is left out.

@@ -251,9 +251,9 @@ pub fn run<S: Service>(cfg: &Config) -> Result<Summary, IpcError> {
         "cycle,t_ns,x_mm,y_mm,z_mm,ferr_x_um,ferr_y_um,ferr_z_um",
         1 << 16,
         format_feedback,
+        cfg.clock == ClockMode::Real,
     )
     .map_err(io)?;
-    trace.sync_at_end(cfg.clock == ClockMode::Real);
     let mut drives = Drives::new(cfg.machine.clone(), cfg.period_ns);
     // The drive loop gets the interpolator's real-time set-up (unpinned, a priority
     // below its): starved of the CPU, the drives would go silent and fault a healthy run.

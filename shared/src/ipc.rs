@@ -92,12 +92,12 @@ fn state_parent() -> &'static str {
 
 /// A node of the stack; `role` names it in iceoryx2's introspection.
 pub fn node<S: Service>(role: &str) -> Result<Node<S>, IpcError> {
-    // iceoryx2 warns on every start that no config file exists (we need none); only its
-    // errors are worth the operator's attention unless IOX2_LOG_LEVEL asks for more.
-    set_log_level_from_env_or(LogLevel::Error);
+    // (The configuration first: it sets iceoryx2's log level before anything of iceoryx2
+    // reads its global configuration, see `config`.)
+    let cfg = config();
     let name = NodeName::new(role).map_err(|e| err("node name", e))?;
     let node = NodeBuilder::new()
-        .config(config())
+        .config(cfg)
         .name(&name)
         .signal_handling_mode(SignalHandlingMode::Disabled)
         .create::<S>()

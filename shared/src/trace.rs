@@ -18,27 +18,29 @@ pub struct TraceWriter<T: Copy + Send + 'static> {
     producer: rtrb::Producer<T>,
     dropped: u64,
     stop: Arc<AtomicBool>,
-    /// Whether the file is synced to the disk at the end (see [`TraceWriter::sync_at_end`]).
-    sync: Arc<AtomicBool>,
     thread: Option<JoinHandle<std::io::Result<u64>>>,
 }
 
 impl<T: Copy + Send + 'static> TraceWriter<T> {
     /// Creates `path`, writes `header`, and starts the writer thread. `capacity` records
-    /// are buffered (allocated here, once).
+    /// are buffered (allocated here, once). With `sync_at_end` the file is synced to the
+    /// disk when the writer ends. The real clock's traces record a machine's motion:
+    /// synced. Under the simulated clock they need not be: the run is a computation that
+    /// can be made again, the launcher reads the trace from the page cache a moment later,
+    /// and a sync of the butterfly's 4–6 MB traces waits 10–20 ms for this VM's disk at the
+    /// very end of the run.
     pub fn create(
         path: &Path,
         header: &str,
         capacity: usize,
         format: FormatFn<T>,
+        sync_at_end: bool,
     ) -> std::io::Result<Self> {
         let mut out = BufWriter::with_capacity(1 << 16, File::create(path)?);
         writeln!(out, "{header}")?;
         let (producer, mut consumer) = rtrb::RingBuffer::new(capacity);
         let stop = Arc::new(AtomicBool::new(false));
         let stop2 = stop.clone();
-        let sync = Arc::new(AtomicBool::new(true));
-        let sync2 = sync.clone();
         let thread = std::thread::Builder::new()
             .name("trace-writer".into())
             .spawn(move || {
@@ -63,7 +65,7 @@ impl<T: Copy + Send + 'static> TraceWriter<T> {
                     std::thread::park_timeout(Duration::from_millis(5));
                 }
                 out.flush()?;
-                if sync2.load(Ordering::Acquire) {
+                if sync_at_end {
                     out.get_ref().sync_all()?;
                 }
                 Ok(written)
@@ -72,7 +74,6 @@ impl<T: Copy + Send + 'static> TraceWriter<T> {
             producer,
             dropped: 0,
             stop,
-            sync,
             thread: Some(thread),
         })
     }
@@ -85,15 +86,6 @@ impl<T: Copy + Send + 'static> TraceWriter<T> {
         }
     }
 
-    /// Whether [`TraceWriter::finish`] syncs the file to the disk (it does unless told
-    /// otherwise). Under the simulated clock it need not: the run is a computation that
-    /// can be made again, the launcher reads the trace from the page cache a moment later,
-    /// and a sync of the butterfly's 4–6 MB traces waits 10–20 ms for this VM's disk at the
-    /// very end of the run. The real clock's traces record a machine's motion: synced.
-    pub fn sync_at_end(&mut self, yes: bool) {
-        self.sync.store(yes, Ordering::Release);
-    }
-
     /// Records queued and not yet taken by the writer.
     pub fn queued(&self) -> usize {
         self.producer.buffer().capacity() - self.producer.slots()
@@ -104,7 +96,8 @@ impl<T: Copy + Send + 'static> TraceWriter<T> {
         self.dropped
     }
 
-    /// Drains the ring, flushes and syncs the file; returns the records written.
+    /// Drains the ring, flushes (and, if asked at creation, syncs) the file; returns the
+    /// records written.
     pub fn finish(mut self) -> std::io::Result<u64> {
         self.stop.store(true, Ordering::Release);
         match self.thread.take() {

@@ -453,8 +453,8 @@ pub fn run_with<S: Service>(cfg: &Config, hooks: Hooks) -> Result<Summary, RunEr
         "cycle,t_ns,x_mm,y_mm,z_mm,line",
         1 << 16,
         format_setpoint,
+        !sim,
     )?;
-    trace.sync_at_end(!sim);
     // Misses go through a pre-allocated ring to a thread that keeps them all.
     let (mut timing, mut miss_log) = Timing::new(cfg.period_ns, MISS_RING);
     if !sim {
