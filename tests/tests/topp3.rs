@@ -230,7 +230,7 @@ fn on_a_nurbs_program_it_is_above_the_acceleration_only_optimum_and_converges() 
 /// blocks: `examples/cam-circle.ngc`, a circle of 100 chords blended under `G64 P0.01`
 /// into 0.63 mm blends, on the built-in machine. At the former fixed 0.25 mm (two and
 /// a half cells a blend) the reference's curvature rate was smoothed over most of a blend
-/// and its optimum 1.3 % fast (1.546 s against 1.568 s at 0.1 mm and 1.570 s at
+/// and its optimum 1.4 % fast (1.546 s against 1.568 s at 0.1 mm and 1.570 s at
 /// 0.05 mm); at the table's step now (0.079 mm), halving the grid changes it by less
 /// than 5e-3 (measured 2.1e-3: 1.5699 s, 1.5732 s at half).
 #[test]
