@@ -732,7 +732,6 @@ fn relaxed_at(
         cap,
         ends,
         len,
-        binding: Default::default(),
     };
     let top = machine
         .axes
@@ -749,7 +748,7 @@ fn relaxed_at(
         return lim;
     }
     let acc = if lim.acc.partial_cmp(&top) == Some(std::cmp::Ordering::Less) {
-        highest_fitting(lim.acc, top, 20, |a| env.fits(a, lim.jerk))
+        env.highest_acc(lim.acc, top, 20, lim.jerk)
             .min(ceiling.acc)
             .max(lim.acc)
     } else {
@@ -770,9 +769,6 @@ struct Envelope<'a> {
     cap: f64,
     ends: (f64, f64),
     len: f64,
-    /// The sample that last failed [`Envelope::fits`], looked at first the next time: a
-    /// bisection's failing trials nearly always fail there, and then at once.
-    binding: std::cell::Cell<usize>,
 }
 
 /// One sample of a curve block as [`Envelope`] weighs it: the norms and each axis's
@@ -868,43 +864,119 @@ impl Envelope<'_> {
         cap.min(up.min(down).sqrt())
     }
 
-    /// Whether a profile changing its speed by `a` at most, with the jerk `j`, keeps the
-    /// path's and each axis's acceleration and jerk everywhere.
-    fn fits(&self, a: f64, j: f64) -> bool {
+    /// The least of the path's and each axis's limits that a profile changing its
+    /// speed by `a` at most, with the jerk `j`, leaves unused at sample `f`, each as a
+    /// share of its limit (negative where one is broken): which sample binds, for
+    /// [`Envelope::highest_acc`]'s choice. (Whether a limit is kept is
+    /// [`Envelope::keeps`]'s to say.)
+    fn slack(&self, f: &Figure, a: f64, j: f64) -> f64 {
         let m = self.machine;
         let (a_path, j_path) = (m.path_acc_mm_per_s2, m.path_jerk_mm_per_s3);
-        let axes = m.axes.as_array();
-        let keeps = |f: &Figure| {
-            let v = self.speed(f, a);
-            let an = v * v * f.kappa;
-            let jn = v * v * v * f.dkn;
-            if a * a + an * an > a_path * a_path
-                || 6.0 * v * f.kappa * a + jn > j_path
-                || j + 3.0 * v * a * f.kappa + jn > j_path
-            {
-                return false;
-            }
-            axes.iter().enumerate().all(|(i, ax)| {
-                let (ti, ki, dki) = (f.t[i], f.k[i], f.dk[i]);
-                let jn_i = v * v * v * dki;
-                a * ti + v * v * ki <= ax.max_acc_mm_per_s2
-                    && 6.0 * v * ki * a + jn_i <= ax.max_jerk_mm_per_s3
-                    && j * ti + 3.0 * v * a * ki + jn_i <= ax.max_jerk_mm_per_s3
-            })
-        };
-        if self
-            .figures
-            .get(self.binding.get())
-            .is_some_and(|f| !keeps(f))
+        let v = self.speed(f, a);
+        let an = v * v * f.kappa;
+        let jn = v * v * v * f.dkn;
+        let mut least = 1.0 - (a * a + an * an) / (a_path * a_path);
+        least = least.min(1.0 - (6.0 * v * f.kappa * a + jn) / j_path);
+        least = least.min(1.0 - (j + 3.0 * v * a * f.kappa + jn) / j_path);
+        for (i, ax) in m.axes.as_array().iter().enumerate() {
+            let (ti, ki, dki) = (f.t[i], f.k[i], f.dk[i]);
+            let jn_i = v * v * v * dki;
+            let (acc, jerk) = (ax.max_acc_mm_per_s2, ax.max_jerk_mm_per_s3);
+            least = least.min(1.0 - (a * ti + v * v * ki) / acc);
+            least = least.min(1.0 - (6.0 * v * ki * a + jn_i) / jerk);
+            least = least.min(1.0 - (j * ti + 3.0 * v * a * ki + jn_i) / jerk);
+        }
+        least
+    }
+
+    /// Whether a profile changing its speed by `a` at most, with the jerk `j`, keeps the
+    /// path's and each axis's acceleration and jerk at sample `f`. Each side of each
+    /// comparison is a sum of products of non-negative figures with `a`, `j` and
+    /// [`Envelope::speed`] (itself non-decreasing in `a`), and rounding is monotone: so
+    /// a sample kept at `a` is kept at any lower `a`, in floating point too.
+    #[inline(always)]
+    fn keeps(&self, f: &Figure, a: f64, j: f64) -> bool {
+        let m = self.machine;
+        let (a_path, j_path) = (m.path_acc_mm_per_s2, m.path_jerk_mm_per_s3);
+        let v = self.speed(f, a);
+        let an = v * v * f.kappa;
+        let jn = v * v * v * f.dkn;
+        if a * a + an * an > a_path * a_path
+            || 6.0 * v * f.kappa * a + jn > j_path
+            || j + 3.0 * v * a * f.kappa + jn > j_path
         {
             return false;
         }
-        match self.figures.iter().position(|f| !keeps(f)) {
-            Some(i) => {
-                self.binding.set(i);
-                false
+        m.axes.as_array().iter().enumerate().all(|(i, ax)| {
+            let (ti, ki, dki) = (f.t[i], f.k[i], f.dk[i]);
+            let jn_i = v * v * v * dki;
+            a * ti + v * v * ki <= ax.max_acc_mm_per_s2
+                && 6.0 * v * ki * a + jn_i <= ax.max_jerk_mm_per_s3
+                && j * ti + 3.0 * v * a * ki + jn_i <= ax.max_jerk_mm_per_s3
+        })
+    }
+
+    /// Whether a profile changing its speed by `a` at most, with the jerk `j`, keeps the
+    /// path's and each axis's acceleration and jerk everywhere.
+    #[cfg(test)]
+    fn fits(&self, a: f64, j: f64) -> bool {
+        self.figures.iter().all(|f| self.keeps(f, a, j))
+    }
+
+    /// The sample with the least [`Envelope::slack`] at `a` among those `pick` takes.
+    fn tightest(&self, a: f64, j: f64, pick: impl Fn(&Figure) -> bool) -> Option<usize> {
+        let mut best: Option<(usize, f64)> = None;
+        for (i, f) in self.figures.iter().enumerate() {
+            if pick(f) {
+                let s = self.slack(f, a, j);
+                if best.is_none_or(|(_, b)| s < b) {
+                    best = Some((i, s));
+                }
             }
-            None => true,
+        }
+        best.map(|(i, _)| i)
+    }
+
+    /// `highest_fitting(lo, hi, halvings, |a| fits(a, j))`, every sample asked at every
+    /// step, bit for bit, asking most of the bisection's steps of a sample or two: those
+    /// that bind.
+    ///
+    /// The bisection is run asking only a set of samples (at first the one with the
+    /// least room at its first step, [`Envelope::tightest`]), and its answer `r` is then
+    /// asked of every sample. Where all keep at `r`, every step the set passed (each at
+    /// or below `r`, as the bisection's low end only rises) passes with all samples too
+    /// ([`Envelope::keeps`] is monotone), and every step it failed fails with all: the
+    /// whole bisection takes the same steps. Where some do not keep, the one with the
+    /// least room joins the set and the bisection is run again. Where the set failed
+    /// every step, so do all samples, and the answer is `lo` either way.
+    fn highest_acc(&self, lo: f64, hi: f64, halvings: usize, j: f64) -> f64 {
+        const MOST: usize = 6;
+        let mut set = [0usize; MOST];
+        let Some(first) = self.tightest(0.5 * (lo + hi), j, |_| true) else {
+            return highest_fitting(lo, hi, halvings, |_| true);
+        };
+        set[0] = first;
+        let mut n = 1;
+        loop {
+            let asked = &set[..n];
+            let r = highest_fitting(lo, hi, halvings, |a| {
+                asked.iter().all(|&i| self.keeps(&self.figures[i], a, j))
+            });
+            if r == lo {
+                return r;
+            }
+            match self.tightest(r, j, |f| !self.keeps(f, r, j)) {
+                None => return r,
+                Some(i) if n < MOST => {
+                    set[n] = i;
+                    n += 1;
+                }
+                Some(_) => {
+                    return highest_fitting(lo, hi, halvings, |a| {
+                        self.figures.iter().all(|f| self.keeps(f, a, j))
+                    })
+                }
+            }
         }
     }
 
@@ -2791,7 +2863,6 @@ fn braking_relaxed<B: Plannable>(
             cap: feed / 60.0,
             ends: (v, end),
             len,
-            binding: Default::default(),
         };
         let l = Jerk {
             jerk: env.jerk_left(lim.acc).min(most).max(lim.jerk),

@@ -892,3 +892,71 @@ fn a_braking_over_short_lines_is_one_braking() {
         "1000 lines {chopped} s, one line {one} s"
     );
 }
+
+/// Figures of a made-up curve block for [`Envelope`]: `n` samples whose curvature, rate
+/// and axis shares spread over three orders of magnitude about the built-in machine's
+/// limits at tens of mm/s, so that different samples bind at different accelerations;
+/// some repeated, as an arc's are.
+fn made_up_figures(seed: u64, n: usize) -> Vec<Figure> {
+    let mut x = seed | 1;
+    let mut next = move || {
+        // xorshift64*: a plain, reproducible stream of uniforms in [0, 1).
+        x ^= x >> 12;
+        x ^= x << 25;
+        x ^= x >> 27;
+        (x.wrapping_mul(0x2545_f491_4f6c_dd1d) >> 11) as f64 / (1u64 << 53) as f64
+    };
+    let mut out: Vec<Figure> = Vec::with_capacity(n);
+    for _ in 0..n {
+        if next() < 0.2 {
+            if let Some(&f) = out.last() {
+                out.push(f);
+                continue;
+            }
+        }
+        let scale = 10f64.powf(3.0 * next() - 4.0);
+        let lo = next();
+        out.push(Figure {
+            kappa: scale * next(),
+            dkn: 0.1 * scale * next(),
+            t: [next(), next(), next()],
+            k: [scale * next(), scale * next(), scale * next()],
+            dk: [0.1 * scale * next(), 0.0, 0.1 * scale * next()],
+            lo,
+            hi: lo + (1.0 - lo) * next(),
+        });
+    }
+    out
+}
+
+proptest::proptest! {
+    #![proptest_config(proptest::prelude::ProptestConfig::with_cases(3000))]
+    /// [`Envelope::highest_acc`] takes the same bisection steps as asking every sample at
+    /// every step: the same bits. (Of these cases about two thirds end between the
+    /// bisection's ends, the rest at its low end.)
+    #[test]
+    fn the_acceleration_asked_of_the_binding_samples_is_the_bisection_of_all(
+        seed in 0u64..u64::MAX,
+        n in 0usize..80,
+        cap in 1.0..300.0f64,
+        ends in (0.0..1.0f64, 0.0..1.0f64),
+        len in 0.001..20.0f64,
+        low in 1.0..1500.0f64,
+        j in 1.0..40_000.0f64,
+        halvings in proptest::prop_oneof![proptest::strategy::Just(20usize), 1usize..64],
+    ) {
+        let m = Machine::default();
+        let figures = made_up_figures(seed, n);
+        let env = Envelope {
+            figures: &figures,
+            machine: &m,
+            cap,
+            ends: (ends.0 * cap, ends.1 * cap),
+            len,
+        };
+        let top = 4000.0;
+        let all = highest_fitting(low, top, halvings, |a| env.fits(a, j));
+        let asked = env.highest_acc(low, top, halvings, j);
+        proptest::prop_assert_eq!(asked.to_bits(), all.to_bits(), "{} against {}", asked, all);
+    }
+}
