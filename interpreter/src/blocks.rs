@@ -864,56 +864,65 @@ impl Envelope<'_> {
         cap.min(up.min(down).sqrt())
     }
 
-    /// The least of the path's and each axis's limits that a profile changing its
-    /// speed by `a` at most, with the jerk `j`, leaves unused at sample `f`, each as a
-    /// share of its limit (negative where one is broken): which sample binds, for
-    /// [`Envelope::highest_acc`]'s choice. (Whether a limit is kept is
-    /// [`Envelope::keeps`]'s to say.)
-    fn slack(&self, f: &Figure, a: f64, j: f64) -> f64 {
+    /// What a profile changing its speed by `a` at most, with the jerk `j`, puts on each
+    /// of the path's and each axis's limits at sample `f`, beside the limit: the
+    /// acceleration (the path's squared), the jerk at the most the acceleration's
+    /// change `6·v·|k|·a` takes, and the jerk with the profile's own; then each axis's
+    /// three. Each load is a sum of products of non-negative figures with `a`, `j` and
+    /// [`Envelope::speed`] (itself non-decreasing in `a`), and rounding is monotone: so
+    /// a load never falls as `a` rises, in floating point too.
+    #[inline(always)]
+    fn loads(&self, f: &Figure, a: f64, j: f64) -> [(f64, f64); 12] {
         let m = self.machine;
         let (a_path, j_path) = (m.path_acc_mm_per_s2, m.path_jerk_mm_per_s3);
         let v = self.speed(f, a);
         let an = v * v * f.kappa;
         let jn = v * v * v * f.dkn;
-        let mut least = 1.0 - (a * a + an * an) / (a_path * a_path);
-        least = least.min(1.0 - (6.0 * v * f.kappa * a + jn) / j_path);
-        least = least.min(1.0 - (j + 3.0 * v * a * f.kappa + jn) / j_path);
+        let mut out = [
+            (a * a + an * an, a_path * a_path),
+            (6.0 * v * f.kappa * a + jn, j_path),
+            (j + 3.0 * v * a * f.kappa + jn, j_path),
+            (0.0, 1.0),
+            (0.0, 1.0),
+            (0.0, 1.0),
+            (0.0, 1.0),
+            (0.0, 1.0),
+            (0.0, 1.0),
+            (0.0, 1.0),
+            (0.0, 1.0),
+            (0.0, 1.0),
+        ];
         for (i, ax) in m.axes.as_array().iter().enumerate() {
             let (ti, ki, dki) = (f.t[i], f.k[i], f.dk[i]);
             let jn_i = v * v * v * dki;
             let (acc, jerk) = (ax.max_acc_mm_per_s2, ax.max_jerk_mm_per_s3);
-            least = least.min(1.0 - (a * ti + v * v * ki) / acc);
-            least = least.min(1.0 - (6.0 * v * ki * a + jn_i) / jerk);
-            least = least.min(1.0 - (j * ti + 3.0 * v * a * ki + jn_i) / jerk);
+            out[3 + 3 * i] = (a * ti + v * v * ki, acc);
+            out[4 + 3 * i] = (6.0 * v * ki * a + jn_i, jerk);
+            out[5 + 3 * i] = (j * ti + 3.0 * v * a * ki + jn_i, jerk);
         }
-        least
+        out
+    }
+
+    /// The least share of its limit that any of [`Envelope::loads`] leaves unused
+    /// (negative where one is broken): which sample binds, for
+    /// [`Envelope::highest_acc`]'s choice.
+    fn slack(&self, f: &Figure, a: f64, j: f64) -> f64 {
+        self.loads(f, a, j)
+            .iter()
+            .fold(f64::INFINITY, |least, (load, limit)| {
+                least.min(1.0 - load / limit)
+            })
     }
 
     /// Whether a profile changing its speed by `a` at most, with the jerk `j`, keeps the
-    /// path's and each axis's acceleration and jerk at sample `f`. Each side of each
-    /// comparison is a sum of products of non-negative figures with `a`, `j` and
-    /// [`Envelope::speed`] (itself non-decreasing in `a`), and rounding is monotone: so
-    /// a sample kept at `a` is kept at any lower `a`, in floating point too.
+    /// path's and each axis's acceleration and jerk at sample `f`: every one of
+    /// [`Envelope::loads`] within its limit. A sample kept at `a` is kept at any lower
+    /// `a`.
     #[inline(always)]
     fn keeps(&self, f: &Figure, a: f64, j: f64) -> bool {
-        let m = self.machine;
-        let (a_path, j_path) = (m.path_acc_mm_per_s2, m.path_jerk_mm_per_s3);
-        let v = self.speed(f, a);
-        let an = v * v * f.kappa;
-        let jn = v * v * v * f.dkn;
-        if a * a + an * an > a_path * a_path
-            || 6.0 * v * f.kappa * a + jn > j_path
-            || j + 3.0 * v * a * f.kappa + jn > j_path
-        {
-            return false;
-        }
-        m.axes.as_array().iter().enumerate().all(|(i, ax)| {
-            let (ti, ki, dki) = (f.t[i], f.k[i], f.dk[i]);
-            let jn_i = v * v * v * dki;
-            a * ti + v * v * ki <= ax.max_acc_mm_per_s2
-                && 6.0 * v * ki * a + jn_i <= ax.max_jerk_mm_per_s3
-                && j * ti + 3.0 * v * a * ki + jn_i <= ax.max_jerk_mm_per_s3
-        })
+        self.loads(f, a, j)
+            .iter()
+            .all(|(load, limit)| load <= limit)
     }
 
     /// Whether a profile changing its speed by `a` at most, with the jerk `j`, keeps the
