@@ -1302,3 +1302,100 @@ fn a_fold_taken_the_short_way_finds_the_bits_of_the_long_way() {
     // Both ways taken often.
     assert!((20_000..180_000).contains(&short), "{short}");
 }
+
+#[test]
+fn a_block_taken_ahead_changes_no_tick_no_count_and_no_fault() {
+    // The next block is taken from the source and checked ahead while the window is full
+    // (`Engine::stage`), to be held in the cycle that crosses a block end. Against an
+    // engine that takes none ahead: every tick the same to the bit, the same count of
+    // blocks received after each, and every fault in the same tick.
+    let mut rng = 0x2545_f491_4f6c_dd1du64;
+    let mut next = move || {
+        rng ^= rng << 13;
+        rng ^= rng >> 7;
+        rng ^= rng << 17;
+        rng
+    };
+    /// Block `i` is there from tick `i·every` on (a slow interpreter, in time, not in
+    /// calls: the engine that takes ahead asks more often).
+    struct Timed(Vec<CommandBlock>, usize, u64, u64);
+    impl BlockSource for Timed {
+        fn next_block(&mut self) -> Option<CommandBlock> {
+            if (self.1 as u64) * self.2 > self.3 {
+                return None;
+            }
+            let b = self.0.get(self.1).copied();
+            self.1 += b.is_some() as usize;
+            b
+        }
+    }
+    let mut staged_seen = 0;
+    for case in 0..60 {
+        let n = 12 + (next() % 30) as usize;
+        let mut x = 0.0;
+        let mut blocks: Vec<CommandBlock> = (0..n as u64)
+            .map(|i| {
+                let len = 0.01 + (next() % 1000) as f64 * 1e-3;
+                let f = [600.0, 1200.0, 3000.0][(next() % 3) as usize];
+                let b = line(i, [x, 0.0, 0.0], [x + len, 0.0, 0.0], f, 0.0, 0.0);
+                x += len;
+                b
+            })
+            .collect();
+        // A dwell, a program end, and in most cases one bad block of some kind.
+        let d = 1 + (next() % (n as u64 - 2)) as usize;
+        let seq = blocks[d].seq;
+        blocks[d] = CommandBlock::empty(BlockKind::Dwell, seq, 77);
+        blocks[d].dwell_ns = 3_000_000;
+        blocks.push(CommandBlock::empty(BlockKind::ProgramEnd, n as u64, 99));
+        let k = 1 + (next() % (n as u64 - 1)) as usize;
+        match case % 4 {
+            0 => blocks[k].ctrl[0][1] += 1.0, // starts away from the last end
+            1 => blocks[k].ctrl[1][3] = 0.0,  // invalid weight
+            2 => blocks[k].seq += 1,          // out of sequence
+            _ => {}
+        }
+        let lookahead = 1 + (next() % 6) as usize;
+        let lim = Limits {
+            lookahead_blocks: lookahead,
+            ..limits()
+        };
+        let every = next() % 3;
+        let stop_at = (case % 5 == 4).then(|| next() % 400);
+        let mut ahead = Engine::new(lim, [0.0; 3]);
+        let mut plain = Engine::new(lim, [0.0; 3]);
+        plain.no_staging = true;
+        let (mut src_a, mut src_p) = (
+            Timed(blocks.clone(), 0, every, 0),
+            Timed(blocks.clone(), 0, every, 0),
+        );
+        for cycle in 0..100_000u64 {
+            (src_a.3, src_p.3) = (cycle, cycle);
+            if stop_at == Some(cycle) {
+                ahead.stop();
+                plain.stop();
+            }
+            let (a, p) = (ahead.tick(&mut src_a), plain.tick(&mut src_p));
+            staged_seen += usize::from(matches!(ahead.staged, Some(Ok(()))));
+            assert_eq!(
+                format!("{a:?}"),
+                format!("{p:?}"),
+                "case {case}, cycle {cycle}"
+            );
+            assert_eq!(
+                ahead.blocks_received(),
+                plain.blocks_received(),
+                "case {case}, cycle {cycle}"
+            );
+            match a {
+                Err(_) => {
+                    ahead.stop();
+                    plain.stop();
+                }
+                Ok(t) if t.state == TickState::Done || ahead.at_rest() => break,
+                Ok(_) => {}
+            }
+        }
+    }
+    assert!(staged_seen > 1000, "{staged_seen}");
+}

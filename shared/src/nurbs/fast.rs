@@ -828,13 +828,51 @@ impl FastCurve {
 
     /// Replaces the curve, reusing the evaluator's storage; on error the evaluator keeps
     /// its previous curve.
+    ///
+    /// Field by field in place, the values [`Core::new`] gives (test
+    /// `load_in_place_leaves_what_new_builds`): built on the stack and moved in, the 4.5 KB
+    /// were written twice, and a line's load (at the start of every block, in the cycle
+    /// the interpolator loads the next block ahead) was mostly those copies.
     pub fn load(
         &mut self,
         degree: usize,
         knots: &[f64],
         ctrl: &[[f64; 4]],
     ) -> Result<(), CurveError> {
-        self.core = Core::new(degree, knots, ctrl)?;
+        validate(degree, knots, ctrl, MAX_CTRL)?;
+        let core = &mut self.core;
+        for (i, h) in core.hw.iter_mut().enumerate() {
+            *h = match ctrl.get(i) {
+                Some(c) => [c[0] * c[3], c[1] * c[3], c[2] * c[3], c[3]],
+                None => [0.0; 4],
+            };
+        }
+        let c = &mut core.cursor;
+        for (i, d) in c.knots.iter_mut().enumerate() {
+            *d = knots.get(i).copied().unwrap_or(0.0);
+        }
+        let n_ctrl = ctrl.len();
+        c.degree = degree;
+        c.n_ctrl = n_ctrl;
+        c.u_min = c.knots[degree.min(MAX_KNOTS - 1)];
+        c.u_max = c.knots[n_ctrl.min(MAX_KNOTS - 1)];
+        c.span = degree;
+        c.lo = f64::INFINITY;
+        c.hi = f64::NEG_INFINITY;
+        c.kl = [0.0; ORD];
+        c.kr = [0.0; ORD];
+        c.inv = [[0.0; ORD]; ORD];
+        let first = find_span(degree, c.knots(), n_ctrl, c.u_min);
+        c.load(first);
+        core.win = [[0.0; 4]; ORD];
+        core.q = [[0.0; 4]; ORD];
+        core.s = [[0.0; 4]; ORD];
+        core.mid = 0.0;
+        core.c0 = [[0.0; 4]; ORD];
+        core.c1 = [[0.0; 4]; ORD];
+        core.c2 = [[0.0; 4]; ORD];
+        core.simd = simd_available();
+        core.load_window();
         Ok(())
     }
 
