@@ -366,3 +366,31 @@ fn third_derivative_of_polynomials_is_the_closed_form() {
         assert!(max_abs(d3) < 1e-12 * 50.0, "{u}: {d3:?}");
     }
 }
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(300))]
+
+    /// `FastCurve::load`, which the engine calls at every block's start (or ahead of it),
+    /// fills the evaluator in place instead of building a new one and moving it in: it
+    /// leaves every field as `FastCurve::new` builds it, whatever curve was loaded and
+    /// evaluated before, so the same bits follow (compared through `Debug`, which prints
+    /// every `f64` so that it reads back to the same bits).
+    #[test]
+    fn load_in_place_leaves_what_new_builds(
+        a in random_curve(MAX_DEGREE),
+        b in random_curve(MAX_DEGREE),
+        ts in proptest::collection::vec(0.0f64..=1.0, 4),
+    ) {
+        let mut f = FastCurve::new(a.degree, &a.knots, &a.ctrl).expect("valid curve");
+        for u in a.params(&ts) {
+            f.eval(u);
+        }
+        f.load(b.degree, &b.knots, &b.ctrl).expect("valid curve");
+        let mut g = FastCurve::new(b.degree, &b.knots, &b.ctrl).expect("valid curve");
+        prop_assert_eq!(format!("{f:?}"), format!("{g:?}"));
+        for u in b.params(&ts) {
+            prop_assert_eq!(f.eval(u), g.eval(u));
+        }
+        prop_assert_eq!(format!("{f:?}"), format!("{g:?}"));
+    }
+}
