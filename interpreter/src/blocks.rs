@@ -1164,9 +1164,6 @@ type Samples = (Vec<Frame>, Vec<[f64; 3]>, Vec<f64>, Vec<[f64; 2]>);
 /// A measure of a sample, and the search of it between samples (at a parameter).
 type Measure<'a> = (fn(&Sample) -> f64, &'a dyn Fn(f64) -> Option<f64>);
 
-/// Samples of a curved block for [`shape`]: unit tangent and curvature vector at each,
-/// the curvature's derivative along the path at each, and the curvature jumps at its
-/// interior knots.
 /// Evenly spaced samples of a curve block for each of its control points, and the
 /// fewest a block (before those at its knots, those its tangent's turns add and those
 /// the peak searches find). What keeps a limit from being missed between samples is
@@ -1223,6 +1220,9 @@ pub(crate) fn brent_min(
     crate::brent::minimise(lo, hi, (x, fx), BRENT_STEPS, |_| 0.25e-9 * (hi - lo), f)
 }
 
+/// Samples of a curved block for [`shape`]: unit tangent and curvature vector at each,
+/// the curvature's derivative along the path at each, and the curvature jumps at its
+/// interior knots (with each sample's place along the block where `places` asks).
 fn samples(b: &CommandBlock, places: bool) -> Samples {
     let (u0, u1) = path::domain(b);
     // Hundreds of points a block, nearly all inside the span of the one before:
