@@ -445,6 +445,8 @@ pub fn main() -> ExitCode {
                 tools,
                 offset_tolerance_mm: None,
                 uncompensated: false,
+                // (The machine's, set where the program is checked.)
+                blend_tolerance_mm: 0.0,
                 extensions,
             };
             // Read, planned and checked window by window: only a window of the program

@@ -386,6 +386,8 @@ fn run_inner(args: &RunArgs) -> Result<bool, String> {
         tools,
         offset_tolerance_mm: None,
         uncompensated: false,
+        // (The machine's, set where the program is checked.)
+        blend_tolerance_mm: 0.0,
         extensions: args.extensions.clone(),
     };
     // The run's length in cycles for a progress bar, only where one is drawn: the

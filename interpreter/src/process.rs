@@ -212,6 +212,8 @@ pub fn check_streaming(
         offset_tolerance_mm: opts
             .offset_tolerance_mm
             .or(Some(machine.chord_tolerance_mm)),
+        // A bare G64, and the mode a program starts in, blend within the machine's.
+        blend_tolerance_mm: machine.blend_tolerance_mm,
         ..opts.clone()
     };
     // Nothing leaves this process unless a receiver would accept it: every block is
@@ -767,6 +769,8 @@ pub fn run_streaming<S: Service>(
                     .transpose()?,
                 offset_tolerance_mm: None,
                 uncompensated: false,
+                // (The machine's, set where the program is checked.)
+                blend_tolerance_mm: 0.0,
                 extensions: streaming.extensions.clone(),
             };
             let hold = streaming.hold_before_reading;

@@ -218,6 +218,10 @@ pub struct Options {
     /// Read `G41`/`G42` but leave the moves where the program puts them: the programmed
     /// path of a compensated program, which the report draws beside the tool's.
     pub uncompensated: bool,
+    /// The machine's `blend_tolerance_mm`: the tolerance a bare `G64` (no `P`, or `P0`)
+    /// blends within, and the program's starting mode; 0 (the default) leaves both the
+    /// exact path.
+    pub blend_tolerance_mm: f64,
     /// What the program may do beyond its dialect's control (`--dialect-extension`).
     pub extensions: Vec<dialect::Extension>,
 }
@@ -263,6 +267,8 @@ struct State {
     comp: Option<comp::Comp>,
     /// [`Options::offset_tolerance_mm`], mm.
     offset_tol: f64,
+    /// [`Options::blend_tolerance_mm`], mm.
+    blend_tol: f64,
     /// [`Options::uncompensated`].
     uncompensated: bool,
     /// [`dialect::Extension::FanucNurbsComp`]: `G06.2` under compensation is offset.
@@ -478,6 +484,7 @@ fn interpret_lines(
         cutter_comp: false,
         comp: None,
         offset_tol: opts.offset_tolerance_mm.unwrap_or(DEFAULT_OFFSET_TOL_MM),
+        blend_tol: opts.blend_tolerance_mm,
         uncompensated: opts.uncompensated,
         fanuc_nurbs_comp: opts
             .extensions
@@ -538,6 +545,10 @@ fn interpret_lines(
             crate::pages::prefer_huge_pages(&prog.moves);
         }
         Some(b) => prog.moves.reserve(batch_room(b.every, own_lines)),
+    }
+    // LinuxCNC and Fanuc both start in `G64`: a bare one, within the machine's tolerance.
+    if let Some(control) = bare_g64(st.blend_tol, None) {
+        prog.moves.push(Move::PathMode { line: 1, control });
     }
     let mut units = subfile::Units::default();
     for f in &files {
@@ -990,7 +1001,7 @@ fn execute(st: &mut State, lw: &LineWords, moves: &mut Vec<Move>) -> Result<(), 
     if let Some((w, code)) = codes.path {
         moves.push(Move::PathMode {
             line: lw.line,
-            control: path_control(lw, w, code, unit)?,
+            control: path_control(lw, w, code, unit, st.blend_tol)?,
         });
     }
     if let Some(w) = codes.fanuc_mode {
@@ -1124,7 +1135,22 @@ fn g_codes<'a>(st: &mut State, lw: &'a LineWords, c: &mut LineCodes<'a>) -> Resu
     Ok(())
 }
 
-fn path_control(lw: &LineWords, w: &Word, code: u32, unit: f64) -> Result<PathControl, Diagnostic> {
+/// A bare `G64` (no tolerance, or `P0`) on a machine whose `blend_tolerance_mm` is
+/// `blend_tol`: a blend within it; `None` where it is 0 (the exact path, as before).
+fn bare_g64(blend_tol: f64, naive_cam_mm: Option<f64>) -> Option<PathControl> {
+    (blend_tol > 0.0).then_some(PathControl::Blend {
+        tolerance_mm: Some(blend_tol),
+        naive_cam_mm,
+    })
+}
+
+fn path_control(
+    lw: &LineWords,
+    w: &Word,
+    code: u32,
+    unit: f64,
+    blend_tol: f64,
+) -> Result<PathControl, Diagnostic> {
     let tol = |letter: char| -> Result<Option<f64>, Diagnostic> {
         match lw.get(letter) {
             Some(p) if p.value < 0.0 => Err(lw.err(
@@ -1145,9 +1171,14 @@ fn path_control(lw: &LineWords, w: &Word, code: u32, unit: f64) -> Result<PathCo
             if naive_cam_mm.is_some() && tolerance_mm.is_none() {
                 return Err(lw.err("G64", w.col, "Q needs P too (Q is only read after P)"));
             }
-            PathControl::Blend {
-                tolerance_mm,
-                naive_cam_mm,
+            // (LinuxCNC's `P0` is its bare `G64`.)
+            let bare = tolerance_mm.is_none_or(|t| t == 0.0);
+            match bare.then(|| bare_g64(blend_tol, naive_cam_mm)).flatten() {
+                Some(blend) => blend,
+                None => PathControl::Blend {
+                    tolerance_mm,
+                    naive_cam_mm,
+                },
             }
         }
     })

@@ -21,6 +21,15 @@ pub struct Machine {
     /// Corners sharper than this (between the tangents of consecutive blocks) are taken
     /// with an exact stop.
     pub corner_angle_deg: f64,
+    /// The corner deviation (mm) that a bare `G64` (no `P`, or `P0`) blends the corners
+    /// between feed lines within, and so the mode a program starts in (LinuxCNC and
+    /// Fanuc both start in `G64`). LinuxCNC's bare `G64` keeps "the best speed possible,
+    /// however far from the programmed point"; a tolerance with no bound is none, so here
+    /// the machine builder bounds it. 0 (built in): a bare `G64` follows the exact path
+    /// as `G61` does. Written (and hashed) only when not 0, so older runs' machines hash
+    /// as before.
+    #[serde(skip_serializing_if = "Machine::is_zero")]
+    pub blend_tolerance_mm: f64,
     /// Following error that stops the machine with a fault.
     pub max_following_error_mm: f64,
     /// Shortest and longest interpolation period this machine runs (`--period-us`).
@@ -187,6 +196,7 @@ impl Default for Machine {
             path_jerk_mm_per_s3: 50_000.0,
             chord_tolerance_mm: 0.001,
             corner_angle_deg: 5.0,
+            blend_tolerance_mm: 0.0,
             max_following_error_mm: 2.0,
             min_period_us: 100,
             max_period_us: 10_000,
@@ -315,6 +325,11 @@ impl Machine {
             ),
             ("chord_tolerance_mm".into(), self.chord_tolerance_mm, &CHORD),
             ("corner_angle_deg".into(), self.corner_angle_deg, &CORNER),
+            (
+                "blend_tolerance_mm".into(),
+                self.blend_tolerance_mm,
+                &BLEND_TOLERANCE,
+            ),
             (
                 "max_following_error_mm".into(),
                 self.max_following_error_mm,
@@ -467,6 +482,10 @@ impl Machine {
                 out.push_str(&format!("# {}\n", key_doc("plan_window_moves")));
                 out.push_str(&format!("plan_window_moves = {PLAN_WINDOW_MOVES}\n"));
             }
+            if key == "corner_angle_deg" && Machine::is_zero(&self.blend_tolerance_mm) {
+                out.push_str(&format!("# {}\n", key_doc("blend_tolerance_mm")));
+                out.push_str("blend_tolerance_mm = 0.0\n");
+            }
         }
         out
     }
@@ -479,6 +498,10 @@ impl Machine {
 
     fn plan_window_is_default(moves: &u32) -> bool {
         *moves == PLAN_WINDOW_MOVES
+    }
+
+    fn is_zero(x: &f64) -> bool {
+        *x == 0.0
     }
 
     /// Fingerprint of this machine (FNV-1a of its canonical TOML): what a command log
@@ -626,6 +649,8 @@ pub const JERK: Range = range(1.0, 1e9, "mm/s³");
 pub const CHORD: Range = range(1e-6, 10.0, "mm");
 /// Corner angle: more than 0 (every kink a stop would be 0) to 180 degrees (a reversal).
 pub const CORNER: Range = above(0.0, 180.0, "degrees");
+/// Bare `G64`'s blend tolerance: 0 (the exact path) to 10 mm.
+pub const BLEND_TOLERANCE: Range = range(0.0, 10.0, "mm");
 /// Following-error limit: a nanometre to a metre.
 pub const FOLLOWING: Range = range(1e-6, 1000.0, "mm");
 /// Travel limits.
@@ -748,6 +773,10 @@ const KEY_DOCS: &[(&str, &str)] = &[
     (
         "corner_angle_deg",
         "corners sharper than this are taken with an exact stop, degrees",
+    ),
+    (
+        "blend_tolerance_mm",
+        "corner deviation a bare G64 (the mode a program starts in) blends lines within; 0 = the exact path, mm",
     ),
     (
         "max_following_error_mm",
@@ -904,6 +933,22 @@ mod tests {
         assert!(e.contains("axes.z") && e.contains("min_mm"), "{e}");
     }
 
+    /// A bare `G64`'s tolerance: read, written only when set (the machines of older runs
+    /// hash as before), and shown in the default file with its meaning.
+    #[test]
+    fn the_blend_tolerance_is_read_and_written_only_when_set() {
+        let m = Machine::from_toml("blend_tolerance_mm = 0.05\n").unwrap();
+        assert_eq!(m.blend_tolerance_mm, 0.05);
+        assert!(m.to_toml().contains("blend_tolerance_mm = 0.05"));
+        assert_ne!(m.hash(), Machine::default().hash());
+        assert!(!Machine::default().to_toml().contains("blend_tolerance_mm"));
+        assert_eq!(Machine::from_toml(&m.to_toml()).unwrap(), m);
+        let doc = Machine::default_toml();
+        assert!(doc.contains("\nblend_tolerance_mm = 0.0\n"), "{doc}");
+        assert!(doc.contains("bare G64"), "{doc}");
+        assert_eq!(Machine::from_toml(&doc).unwrap(), Machine::default());
+    }
+
     /// Issue #22: each of these passed the loader and faulted the run (a stall at a
     /// feed of 1e-300, a servo-sim late at its first cycle) or made no sense.
     #[test]
@@ -911,6 +956,8 @@ mod tests {
         for (text, key) in [
             ("corner_angle_deg = 400.0\n", "corner_angle_deg"),
             ("corner_angle_deg = 0.0\n", "corner_angle_deg"),
+            ("blend_tolerance_mm = -0.01\n", "blend_tolerance_mm"),
+            ("blend_tolerance_mm = 11.0\n", "blend_tolerance_mm"),
             ("max_feed_mm_per_min = 1e-300\n", "max_feed_mm_per_min"),
             ("rapid_mm_per_min = 1e12\n", "rapid_mm_per_min"),
             ("path_jerk_mm_per_s3 = 1e300\n", "path_jerk_mm_per_s3"),

@@ -18,6 +18,8 @@
 //! ```
 //!
 //! prints the markdown table of `BENCHMARKS.md` ("Feed against the optimum").
+//! `FEED_TABLE_DIR=FOLDER` runs it (and `feed_losses`) on the programs of any folder
+//! instead.
 //! The small test beside it runs the same machinery on one short program so it cannot
 //! rot; it asserts correctness only (never a timing): our time is not below the optimum
 //! (which would be wrong in one of the two) and the limits hold.
@@ -54,16 +56,23 @@ const LINUXCNC_S: &[(&str, f64)] = &[
     ("g5_curva_chitarra.ngc", 186.401),
 ];
 
-/// Every program of the table: its name and text.
+/// Every program of the table: its name and text. With `FEED_TABLE_DIR` set, the
+/// programs of that folder (`*.ngc`, `*.stp`) instead: any program, not only the named
+/// ones, measured against the same optimum.
 fn programs() -> Vec<(String, String)> {
     let mut files: Vec<PathBuf> = Vec::new();
-    for (dir, ext) in [
-        ("tests/peers/linuxcnc", "ngc"),
-        ("examples", "ngc"),
-        ("examples", "stp"),
-    ] {
-        let mut found: Vec<PathBuf> = std::fs::read_dir(root().join(dir))
-            .unwrap()
+    let own = std::env::var_os("FEED_TABLE_DIR").map(PathBuf::from);
+    let dirs: Vec<(PathBuf, &str)> = match &own {
+        Some(d) => vec![(d.clone(), "ngc"), (d.clone(), "stp")],
+        None => vec![
+            (root().join("tests/peers/linuxcnc"), "ngc"),
+            (root().join("examples"), "ngc"),
+            (root().join("examples"), "stp"),
+        ],
+    };
+    for (dir, ext) in dirs {
+        let mut found: Vec<PathBuf> = std::fs::read_dir(&dir)
+            .unwrap_or_else(|e| panic!("{}: {e}", dir.display()))
             .map(|e| e.unwrap().path())
             .filter(|p| p.extension().is_some_and(|e| e == ext))
             .collect();
@@ -77,10 +86,13 @@ fn programs() -> Vec<(String, String)> {
             (name, std::fs::read_to_string(p).unwrap())
         })
         .collect();
-    let butterfly =
-        std::fs::read_to_string(root().join("tests/peers/linuxcnc/g5_butterfly-xy.ngc")).unwrap();
-    for f in ["F6000", "F600"] {
-        out.push((format!("g5_butterfly-xy {f}"), butterfly.replace("F300", f)));
+    if own.is_none() {
+        let butterfly =
+            std::fs::read_to_string(root().join("tests/peers/linuxcnc/g5_butterfly-xy.ngc"))
+                .unwrap();
+        for f in ["F6000", "F600"] {
+            out.push((format!("g5_butterfly-xy {f}"), butterfly.replace("F300", f)));
+        }
     }
     out
 }
