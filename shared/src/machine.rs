@@ -28,7 +28,7 @@ pub struct Machine {
     /// the machine builder bounds it. 0 (built in): a bare `G64` follows the exact path
     /// as `G61` does. Written (and hashed) only when not 0, so older runs' machines hash
     /// as before.
-    #[serde(skip_serializing_if = "Machine::is_zero")]
+    #[serde(skip_serializing_if = "Machine::blend_tolerance_is_default")]
     pub blend_tolerance_mm: f64,
     /// Following error that stops the machine with a fault.
     pub max_following_error_mm: f64,
@@ -196,7 +196,7 @@ impl Default for Machine {
             path_jerk_mm_per_s3: 50_000.0,
             chord_tolerance_mm: 0.001,
             corner_angle_deg: 5.0,
-            blend_tolerance_mm: 0.0,
+            blend_tolerance_mm: BLEND_TOLERANCE_MM,
             max_following_error_mm: 2.0,
             min_period_us: 100,
             max_period_us: 10_000,
@@ -482,9 +482,11 @@ impl Machine {
                 out.push_str(&format!("# {}\n", key_doc("plan_window_moves")));
                 out.push_str(&format!("plan_window_moves = {PLAN_WINDOW_MOVES}\n"));
             }
-            if key == "corner_angle_deg" && Machine::is_zero(&self.blend_tolerance_mm) {
+            if key == "corner_angle_deg"
+                && Machine::blend_tolerance_is_default(&self.blend_tolerance_mm)
+            {
                 out.push_str(&format!("# {}\n", key_doc("blend_tolerance_mm")));
-                out.push_str("blend_tolerance_mm = 0.0\n");
+                out.push_str(&format!("blend_tolerance_mm = {BLEND_TOLERANCE_MM}\n"));
             }
         }
         out
@@ -500,8 +502,8 @@ impl Machine {
         *moves == PLAN_WINDOW_MOVES
     }
 
-    fn is_zero(x: &f64) -> bool {
-        *x == 0.0
+    fn blend_tolerance_is_default(x: &f64) -> bool {
+        *x == BLEND_TOLERANCE_MM
     }
 
     /// Fingerprint of this machine (FNV-1a of its canonical TOML): what a command log
@@ -649,6 +651,8 @@ pub const JERK: Range = range(1.0, 1e9, "mm/s³");
 pub const CHORD: Range = range(1e-6, 10.0, "mm");
 /// Corner angle: more than 0 (every kink a stop would be 0) to 180 degrees (a reversal).
 pub const CORNER: Range = above(0.0, 180.0, "degrees");
+/// The built-in [`Machine::blend_tolerance_mm`], mm.
+pub const BLEND_TOLERANCE_MM: f64 = 0.01;
 /// Bare `G64`'s blend tolerance: 0 (the exact path) to 10 mm.
 pub const BLEND_TOLERANCE: Range = range(0.0, 10.0, "mm");
 /// Following-error limit: a nanometre to a metre.
@@ -933,8 +937,9 @@ mod tests {
         assert!(e.contains("axes.z") && e.contains("min_mm"), "{e}");
     }
 
-    /// A bare `G64`'s tolerance: read, written only when set (the machines of older runs
-    /// hash as before), and shown in the default file with its meaning.
+    /// A bare `G64`'s tolerance: read, written only when not the built-in value (the
+    /// machines of older runs hash as before), and shown in the default file with its
+    /// meaning.
     #[test]
     fn the_blend_tolerance_is_read_and_written_only_when_set() {
         let m = Machine::from_toml("blend_tolerance_mm = 0.05\n").unwrap();
@@ -944,7 +949,18 @@ mod tests {
         assert!(!Machine::default().to_toml().contains("blend_tolerance_mm"));
         assert_eq!(Machine::from_toml(&m.to_toml()).unwrap(), m);
         let doc = Machine::default_toml();
-        assert!(doc.contains("\nblend_tolerance_mm = 0.0\n"), "{doc}");
+        assert!(
+            doc.contains(&format!("\nblend_tolerance_mm = {BLEND_TOLERANCE_MM}\n")),
+            "{doc}"
+        );
+        // 0 (the exact path) is written, so it reads back as 0, not as the default.
+        let exact = Machine::from_toml("blend_tolerance_mm = 0.0\n").unwrap();
+        assert_eq!(
+            Machine::from_toml(&exact.to_toml())
+                .unwrap()
+                .blend_tolerance_mm,
+            0.0
+        );
         assert!(doc.contains("bare G64"), "{doc}");
         assert_eq!(Machine::from_toml(&doc).unwrap(), Machine::default());
     }

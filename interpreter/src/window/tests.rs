@@ -28,6 +28,7 @@ fn whole(
 ) -> (Vec<CommandBlock>, Vec<String>, Vec<(u32, String)>) {
     let opts = Options {
         offset_tolerance_mm: Some(machine.chord_tolerance_mm),
+        blend_tolerance_mm: machine.blend_tolerance_mm,
         ..opts.clone()
     };
     let shown = |d: Vec<Diagnostic>| d.iter().map(|d| d.to_string()).collect::<Vec<_>>();
