@@ -784,6 +784,9 @@ struct Geometry {
 }
 
 impl Geometry {
+    /// Loads the evaluators of `b`, a block of the window: validated when it was taken
+    /// in ([`Engine::intake`]), so its curve is not checked a second time
+    /// ([`FastCurve::load_valid`]).
     fn load(&mut self, b: &CommandBlock) -> Result<(), Fault> {
         if b.is_surface() {
             let s = path::pass_evaluator(b).map_err(|_| {
@@ -797,7 +800,7 @@ impl Geometry {
         }
         self.surf = None;
         self.curve
-            .load(b.degree as usize, b.knots(), b.ctrl())
+            .load_valid(b.degree as usize, b.knots(), b.ctrl())
             .map_err(|err| Fault::Protocol(ProtocolError::Curve { seq: b.seq, err }))
     }
 

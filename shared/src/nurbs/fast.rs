@@ -65,7 +65,9 @@
 // degree a constant they unroll and the bounds checks fold away.
 #![allow(clippy::needless_range_loop)]
 
-use super::{find_span, validate, CurveError, CurvePoint, MAX_CTRL, MAX_DEGREE, MAX_KNOTS};
+use super::{
+    find_span, validate, validate_shape, CurveError, CurvePoint, MAX_CTRL, MAX_DEGREE, MAX_KNOTS,
+};
 use crate::protocol::CommandBlock;
 
 /// Highest order (degree + 1) any evaluator here handles.
@@ -436,7 +438,8 @@ impl Core {
         let p = self.cursor.degree.min(MAX_DEGREE);
         let (mid, mat) = basis_power_matrix(&self.cursor);
         self.mid = mid;
-        self.c0 = [[0.0; 4]; ORD];
+        // (Past `p`, `c0`, `c1` and `c2` are zero, as [`Core::new`] and
+        // [`FastCurve::load`] leave them and nothing here writes them: not cleared again.)
         for k in 0..=p {
             let mut sum = [0.0f64; 4];
             for j in 0..=p {
@@ -444,8 +447,6 @@ impl Core {
             }
             self.c0[k] = sum;
         }
-        self.c1 = [[0.0; 4]; ORD];
-        self.c2 = [[0.0; 4]; ORD];
         for k in 0..p {
             let f1 = (k + 1) as f64;
             let f2 = ((k + 1) * (k + 2)) as f64;
@@ -840,18 +841,51 @@ impl FastCurve {
         ctrl: &[[f64; 4]],
     ) -> Result<(), CurveError> {
         validate(degree, knots, ctrl, MAX_CTRL)?;
+        self.fill(degree, knots, ctrl);
+        Ok(())
+    }
+
+    /// [`Self::load`] of a curve [`validate`] has already accepted (the interpolator's
+    /// blocks, each validated when taken in: checked a second time, the curve of a line
+    /// was a tenth of its load): the same evaluator, without the check (test
+    /// `load_valid_leaves_what_load_leaves`). Only the curve's shape is checked again
+    /// (its degree and counts, so that no index can leave its array); a curve `validate`
+    /// refuses for anything else (not finite, knots not clamped or decreasing, a weight
+    /// not positive) gives an evaluator of meaningless values, never a panic. Use
+    /// [`Self::load`] for any curve not validated before.
+    pub fn load_valid(
+        &mut self,
+        degree: usize,
+        knots: &[f64],
+        ctrl: &[[f64; 4]],
+    ) -> Result<(), CurveError> {
+        validate_shape(degree, knots.len(), ctrl.len(), MAX_CTRL)?;
+        debug_assert_eq!(validate(degree, knots, ctrl, MAX_CTRL), Ok(()));
+        self.fill(degree, knots, ctrl);
+        Ok(())
+    }
+
+    /// Loads a curve of a valid shape in place. Past the curve held, every slot of the
+    /// evaluator is zero (as [`Core::new`] and this leave them; evaluating writes none of
+    /// them), so only the slots the old or the new curve reaches are written: on a line
+    /// after a line, a few hundred bytes instead of 4.5 KB.
+    fn fill(&mut self, degree: usize, knots: &[f64], ctrl: &[[f64; 4]]) {
         let core = &mut self.core;
-        for (i, h) in core.hw.iter_mut().enumerate() {
+        let c = &mut core.cursor;
+        let n_ctrl = ctrl.len();
+        // How far the old curve and the new reach: control points, knots, order.
+        let n_hw = c.n_ctrl.max(n_ctrl).min(MAX_CTRL);
+        let n_knots = (c.n_ctrl + c.degree + 1).max(knots.len()).min(MAX_KNOTS);
+        let ord = c.degree.max(degree).min(MAX_DEGREE) + 1;
+        for (i, h) in core.hw[..n_hw].iter_mut().enumerate() {
             *h = match ctrl.get(i) {
                 Some(c) => [c[0] * c[3], c[1] * c[3], c[2] * c[3], c[3]],
                 None => [0.0; 4],
             };
         }
-        let c = &mut core.cursor;
-        for (i, d) in c.knots.iter_mut().enumerate() {
+        for (i, d) in c.knots[..n_knots].iter_mut().enumerate() {
             *d = knots.get(i).copied().unwrap_or(0.0);
         }
-        let n_ctrl = ctrl.len();
         c.degree = degree;
         c.n_ctrl = n_ctrl;
         c.u_min = c.knots[degree.min(MAX_KNOTS - 1)];
@@ -859,21 +893,26 @@ impl FastCurve {
         c.span = degree;
         c.lo = f64::INFINITY;
         c.hi = f64::NEG_INFINITY;
-        c.kl = [0.0; ORD];
-        c.kr = [0.0; ORD];
-        c.inv = [[0.0; ORD]; ORD];
+        c.kl[..ord].fill(0.0);
+        c.kr[..ord].fill(0.0);
+        for row in &mut c.inv[..ord] {
+            row[..ord].fill(0.0);
+        }
         let first = find_span(degree, c.knots(), n_ctrl, c.u_min);
         c.load(first);
-        core.win = [[0.0; 4]; ORD];
-        core.q = [[0.0; 4]; ORD];
-        core.s = [[0.0; 4]; ORD];
+        for a in [
+            &mut core.win,
+            &mut core.q,
+            &mut core.s,
+            &mut core.c0,
+            &mut core.c1,
+            &mut core.c2,
+        ] {
+            a[..ord].fill([0.0; 4]);
+        }
         core.mid = 0.0;
-        core.c0 = [[0.0; 4]; ORD];
-        core.c1 = [[0.0; 4]; ORD];
-        core.c2 = [[0.0; 4]; ORD];
         core.simd = simd_available();
         core.load_window();
-        Ok(())
     }
 
     pub fn degree(&self) -> usize {

@@ -84,30 +84,7 @@ pub fn validate(
     ctrl: &[[f64; 4]],
     max_ctrl: usize,
 ) -> Result<(), CurveError> {
-    if degree == 0 || degree > MAX_DEGREE {
-        return Err(CurveError::DegreeOutOfRange {
-            degree: degree as u32,
-        });
-    }
-    let n = ctrl.len();
-    if n < degree + 1 {
-        return Err(CurveError::TooFewControlPoints {
-            n_ctrl: n as u32,
-            degree: degree as u32,
-        });
-    }
-    if n > max_ctrl {
-        return Err(CurveError::TooManyControlPoints {
-            n_ctrl: n as u32,
-            max: max_ctrl as u32,
-        });
-    }
-    if knots.len() != n + degree + 1 {
-        return Err(CurveError::KnotCount {
-            n_knots: knots.len() as u32,
-            expected: (n + degree + 1) as u32,
-        });
-    }
+    validate_shape(degree, knots.len(), ctrl.len(), max_ctrl)?;
     if knots.iter().any(|k| !k.is_finite()) || ctrl.iter().flatten().any(|c| !c.is_finite()) {
         return Err(CurveError::NotFinite);
     }
@@ -127,6 +104,41 @@ pub fn validate(
     }
     if let Some(i) = ctrl.iter().position(|c| c[3] <= 0.0) {
         return Err(CurveError::WeightNotPositive { index: i as u32 });
+    }
+    Ok(())
+}
+
+/// The first checks of [`validate`], on the shape alone: the degree within
+/// `1..=MAX_DEGREE`, enough control points for it and no more than `max_ctrl`, and as
+/// many knots as control points plus order.
+pub fn validate_shape(
+    degree: usize,
+    n_knots: usize,
+    n: usize,
+    max_ctrl: usize,
+) -> Result<(), CurveError> {
+    if degree == 0 || degree > MAX_DEGREE {
+        return Err(CurveError::DegreeOutOfRange {
+            degree: degree as u32,
+        });
+    }
+    if n < degree + 1 {
+        return Err(CurveError::TooFewControlPoints {
+            n_ctrl: n as u32,
+            degree: degree as u32,
+        });
+    }
+    if n > max_ctrl {
+        return Err(CurveError::TooManyControlPoints {
+            n_ctrl: n as u32,
+            max: max_ctrl as u32,
+        });
+    }
+    if n_knots != n + degree + 1 {
+        return Err(CurveError::KnotCount {
+            n_knots: n_knots as u32,
+            expected: (n + degree + 1) as u32,
+        });
     }
     Ok(())
 }

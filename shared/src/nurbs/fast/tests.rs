@@ -393,4 +393,53 @@ proptest! {
         }
         prop_assert_eq!(format!("{f:?}"), format!("{g:?}"));
     }
+
+    /// `FastCurve::load_valid` (the engine's load of a block validated at its intake)
+    /// leaves the evaluator `load` leaves, and `FastCurve::new` builds, over a chain of
+    /// curves whose degrees and counts rise and fall (each load writes only the slots the
+    /// old or the new curve reaches: a slot the old one reached left stale fails here),
+    /// each evaluated before the next is loaded; and `load`, for a curve not validated,
+    /// still refuses what `validate` refuses, keeping its curve.
+    #[test]
+    fn load_valid_leaves_what_load_leaves(
+        chain in proptest::collection::vec(random_curve(MAX_DEGREE), 2..6),
+        ts in proptest::collection::vec(0.0f64..=1.0, 4),
+        spoil in 0usize..4,
+    ) {
+        let first = &chain[0];
+        let mut f = FastCurve::new(first.degree, &first.knots, &first.ctrl).expect("valid curve");
+        let mut g = f.clone();
+        for c in &chain[1..] {
+            f.load_valid(c.degree, &c.knots, &c.ctrl).expect("valid curve");
+            g.load(c.degree, &c.knots, &c.ctrl).expect("valid curve");
+            let mut h = FastCurve::new(c.degree, &c.knots, &c.ctrl).expect("valid curve");
+            prop_assert_eq!(format!("{f:?}"), format!("{g:?}"));
+            prop_assert_eq!(format!("{f:?}"), format!("{h:?}"));
+            for u in c.params(&ts) {
+                let (a, b, e) = (f.eval(u), g.eval(u), h.eval(u));
+                prop_assert_eq!(a, b);
+                prop_assert_eq!(a, e);
+            }
+            prop_assert_eq!(format!("{f:?}"), format!("{h:?}"));
+        }
+        // A curve spoiled in one of the ways only `validate`'s full check sees.
+        let c = &chain[0];
+        let (mut knots, mut ctrl) = (c.knots.clone(), c.ctrl.clone());
+        match spoil {
+            0 => ctrl[0][3] = 0.0,
+            1 => knots[0] -= 1.0,
+            2 => ctrl[c.degree][1] = f64::NAN,
+            _ => knots[c.degree + 1] = knots[0] - 1.0,
+        }
+        let before = format!("{g:?}");
+        prop_assert!(validate(c.degree, &knots, &ctrl, MAX_CTRL).is_err());
+        prop_assert_eq!(g.load(c.degree, &knots, &ctrl), validate(c.degree, &knots, &ctrl, MAX_CTRL));
+        prop_assert_eq!(format!("{g:?}"), before);
+        // A curve of the wrong shape is refused by both, each keeping its curve.
+        let before = format!("{f:?}");
+        let short = &c.knots[..c.knots.len() - 1];
+        prop_assert!(f.load_valid(c.degree, short, &c.ctrl).is_err());
+        prop_assert!(f.load_valid(MAX_DEGREE + 1, &c.knots, &c.ctrl).is_err());
+        prop_assert_eq!(format!("{f:?}"), before);
+    }
 }
