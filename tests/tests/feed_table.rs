@@ -45,7 +45,11 @@ fn machines() -> [(&'static str, Machine); 2] {
 }
 
 /// LinuxCNC 2.9's machining times on its simulated mill (the LinuxCNC machine file), as
-/// measured for issue #23 (`tests/peers/linuxcnc`'s programs; 1 ms, G64 without P).
+/// measured for issue #23 (`tests/peers/linuxcnc`'s programs; 1 ms). The harness of
+/// `tests/peers/linuxcnc/harness` finds them with the `G0`/`G1` corners between the
+/// curves exact (`G61`); under LinuxCNC's default bare `G64`, which cuts those corners,
+/// it is 2–4 % quicker on the butterflies and `g5_nurbs-xy` (BENCHMARKS.md, "Programs
+/// nobody named").
 const LINUXCNC_S: &[(&str, f64)] = &[
     ("g5_butterfly-xy F600", 39.251),
     ("g5_butterfly-xy F6000", 11.095),
