@@ -141,13 +141,14 @@ fn the_chord_tolerance_caps_the_speed() {
     assert_rel("circle r10 at T 10 ms", o.time_s, want, 1e-4);
 }
 
-/// A corner sharper than `corner_angle_deg` (90°) is an exact stop: two trapezoids. A
-/// kink of 3° (below the 5° corner angle) is passed at `A·T/(2 sin 1.5°)` = 19.10 mm/s.
-/// A dwell adds its time. Tolerance 1e-4.
+/// On the exact path (`G61`; a program with no path-mode word blends within the
+/// machine's `blend_tolerance_mm`), a corner sharper than `corner_angle_deg` (90°) is an
+/// exact stop: two trapezoids. A kink of 3° (below the 5° corner angle) is passed at
+/// `A·T/(2 sin 1.5°)` = 19.10 mm/s. A dwell adds its time. Tolerance 1e-4.
 #[test]
 fn corners_stop_kinks_pass_at_the_one_period_bound_and_dwells_add() {
     let m = machine(1000.0);
-    let t = optimum("G1 X50 F6000\nG1 Y50\nM2\n", &m).time_s;
+    let t = optimum("G61\nG1 X50 F6000\nG1 Y50\nM2\n", &m).time_s;
     assert_rel(
         "90° corner",
         t,
@@ -156,7 +157,7 @@ fn corners_stop_kinks_pass_at_the_one_period_bound_and_dwells_add() {
     );
     let (c, s) = (3f64.to_radians().cos(), 3f64.to_radians().sin());
     let text = format!(
-        "G1 X50 F6000\nG1 X{:.12} Y{:.12}\nM2\n",
+        "G61\nG1 X50 F6000\nG1 X{:.12} Y{:.12}\nM2\n",
         50.0 + 50.0 * c,
         50.0 * s
     );
