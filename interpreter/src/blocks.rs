@@ -1415,8 +1415,8 @@ fn samples(b: &CommandBlock, places: bool) -> Samples {
             let reach = 1.5 * (1.0 - (0.5 * MAX_TURN_RAD).cos());
             let searched = |i: usize| peaks.iter().take(refined).any(|&p| p == i || p == i + 1);
             let mut sides: Vec<(f64, usize)> = Vec::new();
-            for k in 1..last {
-                if spans.binary_search_by(|x| x.total_cmp(&us[k])).is_err() {
+            for (k, u) in us.iter().enumerate().take(last).skip(1) {
+                if spans.binary_search_by(|x| x.total_cmp(u)).is_err() {
                     continue;
                 }
                 for (side, other) in [(k - 1, k - 1), (k, k + 1)] {
