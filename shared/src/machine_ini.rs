@@ -13,6 +13,7 @@
 //! | `[AXIS_X/Y/Z]` and their joints' `MIN_LIMIT`, `MAX_LIMIT` | `axes.*.min_mm`, `max_mm`: the tighter |
 //! | `[JOINT_n]FERROR` | `max_following_error_mm`: the least of the joints' |
 //! | `[EMCMOT]SERVO_PERIOD` (ns) | `min_period_us` |
+//! | `[RS274NGC]RS274NGC_STARTUP_CODE`'s `G64 P`, `G61` | `blend_tolerance_mm` (a bare `G64` keeps our default: LinuxCNC's has no bound) |
 //!
 //! Joints belong to axes as `trivkins` says: its `coordinates=` parameter on
 //! `[KINS]KINEMATICS`, else `[TRAJ]COORDINATES`, joint `n` the `n`-th letter (a letter
@@ -403,6 +404,36 @@ pub fn from_ini(
             format!("{n} (the least of the joints'; LinuxCNC's limit at full speed)"),
         );
     }
+    // The path mode programs start in: LinuxCNC's bare `G64` keeps the best speed
+    // however far from the path, which a tolerance with no bound is not; a `P` given
+    // there, or `G61`, says what the machine's builder wants.
+    if let Some((line, code)) = r.get("RS274NGC", "RS274NGC_STARTUP_CODE") {
+        let at = format!("{line} [RS274NGC]RS274NGC_STARTUP_CODE = {code}");
+        match startup_path_mode(&code) {
+            Some(StartMode::Exact(g)) => {
+                m.blend_tolerance_mm = 0.0;
+                r.note(
+                    "blend_tolerance_mm",
+                    format!("from {at}: {g}, the exact path (a bare G64 too)"),
+                );
+            }
+            Some(StartMode::Blend(Some(p))) if p > 0.0 => {
+                m.blend_tolerance_mm = tidy(p * unit);
+                r.note(
+                    "blend_tolerance_mm",
+                    format!("from {at}: G64 P{p} (a bare G64 too)"),
+                );
+            }
+            Some(StartMode::Blend(_)) => r.note(
+                "blend_tolerance_mm",
+                format!(
+                    "{at}: a bare G64, LinuxCNC's best speed however far from the path: \
+                     bounded here by this control's default"
+                ),
+            ),
+            None => {}
+        }
+    }
     m.check().map_err(|e| {
         // Where the value the check refuses came from.
         let whence = r
@@ -462,6 +493,48 @@ pub fn from_ini(
         toml,
         warnings,
     })
+}
+
+/// The path mode a startup code leaves in force (its last path-mode word).
+#[derive(Debug, Clone, PartialEq)]
+enum StartMode {
+    /// `G61` or `G61.1`, as written.
+    Exact(String),
+    /// `G64`, with its `P` if one follows it.
+    Blend(Option<f64>),
+}
+
+/// [`StartMode`] of a LinuxCNC startup code (`G17 G21 G64 P0.01 …`); `None` without a
+/// path-mode word. Words may be written together (`G64P0.01`) or apart, in any case.
+fn startup_path_mode(code: &str) -> Option<StartMode> {
+    let code = code.to_ascii_uppercase();
+    // The words: a letter and the number after it, spaces skipped.
+    let mut words: Vec<(char, String)> = Vec::new();
+    for c in code.chars().filter(|c| !c.is_whitespace()) {
+        match words.last_mut() {
+            Some((_, n)) if c.is_ascii_digit() || c == '.' || c == '-' || c == '+' => n.push(c),
+            _ if c.is_ascii_alphabetic() => words.push((c, String::new())),
+            _ => {}
+        }
+    }
+    let mut mode = None;
+    for (i, (letter, n)) in words.iter().enumerate() {
+        if *letter != 'G' {
+            continue;
+        }
+        match n.parse::<f64>() {
+            Ok(g) if g == 61.0 || g == 61.1 => mode = Some(StartMode::Exact(format!("G{n}"))),
+            Ok(g) if g == 64.0 => {
+                let p = words
+                    .get(i + 1)
+                    .filter(|(l, _)| *l == 'P')
+                    .and_then(|(_, v)| v.parse::<f64>().ok());
+                mode = Some(StartMode::Blend(p));
+            }
+            _ => {}
+        }
+    }
+    mode
 }
 
 /// `v` rounded to a nanometre's worth (nine decimals): an inch config's 30.48 mm/s is
@@ -565,6 +638,43 @@ mod tests {
     }
 
     /// `#INCLUDE` reads the named file in its place; what is wrong is named at its line.
+    #[test]
+    fn the_startup_code_s_path_mode_is_the_blend_tolerance() {
+        let ini = |code: &str| {
+            format!("[TRAJ]\nLINEAR_UNITS = inch\n[RS274NGC]\nRS274NGC_STARTUP_CODE = {code}\n")
+        };
+        let read = |code: &str| from_ini(&ini(code), "m.ini", &none).unwrap();
+        // Inch: P0.001 in is 0.0254 mm.
+        let f = read("G17 G20 G40 G64 P0.001 G90");
+        assert!((f.machine.blend_tolerance_mm - 0.0254).abs() < 1e-12);
+        assert!(
+            f.toml.contains("m.ini:4 [RS274NGC]RS274NGC_STARTUP_CODE"),
+            "{}",
+            f.toml
+        );
+        assert_eq!(read("g17 g64p0.002").machine.blend_tolerance_mm, 0.0508);
+        assert_eq!(read("G64 P0.01 G61.1").machine.blend_tolerance_mm, 0.0);
+        let bare = read("G17 G64 G90");
+        assert_eq!(
+            bare.machine.blend_tolerance_mm,
+            Machine::default().blend_tolerance_mm
+        );
+        assert!(bare.toml.contains("a bare G64"), "{}", bare.toml);
+        assert_eq!(
+            read("G17 G90").machine.blend_tolerance_mm,
+            Machine::default().blend_tolerance_mm
+        );
+        assert_eq!(
+            startup_path_mode("G61"),
+            Some(StartMode::Exact("G61".into()))
+        );
+        assert_eq!(
+            startup_path_mode("G64 P0 X1"),
+            Some(StartMode::Blend(Some(0.0)))
+        );
+        assert_eq!(startup_path_mode("M3 S100"), None);
+    }
+
     #[test]
     fn includes_and_mistakes_at_their_lines() {
         let inc = |name: &str| match name {
