@@ -524,7 +524,7 @@ fn startup_path_mode(code: &str) -> Option<StartMode> {
         }
         match n.parse::<f64>() {
             Ok(g) if g == 61.0 || g == 61.1 => mode = Some(StartMode::Exact(format!("G{n}"))),
-            Ok(g) if g == 64.0 => {
+            Ok(64.0) => {
                 let p = words
                     .get(i + 1)
                     .filter(|(l, _)| *l == 'P')
