@@ -716,6 +716,8 @@ impl Stack {
         // The first fault is the one named: the operator's stop, a process that could not
         // start, one found suspended, one killed from outside (which, at which cycle);
         // else what the processes' own summaries say, and the exit codes last.
+        // Every process has ended: a row a killed one was writing is cut off whole.
+        report::cut_torn_rows(dir);
         let dead = dead_process(dir, &roles);
         let primary = interrupted()
             .map(|sig| operator_stop_text(dir, sig))

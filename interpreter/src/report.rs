@@ -355,6 +355,54 @@ fn measured_scallop(dir: &Path) -> Option<crate::scallop::Scallop> {
     crate::scallop::measure(&blocks, &positions)
 }
 
+/// A trace's last line torn by a process killed while writing it, cut off, once every
+/// process has ended: the kernel may stop a write to a file part way when the writer
+/// gets SIGKILL (between two pages of it), leaving a row half-written. The rows before
+/// it are whole; the torn one is a warning naming the file and how many bytes it had.
+/// Returns the bytes cut from each trace of `dir` (`setpoints.csv`, `feedback.csv`).
+pub(crate) fn cut_torn_rows(dir: &Path) -> Vec<(&'static str, u64)> {
+    use std::io::{Read, Seek, SeekFrom};
+    let mut cut = Vec::new();
+    for name in ["setpoints.csv", "feedback.csv"] {
+        let path = dir.join(name);
+        let Ok(mut f) = std::fs::OpenOptions::new()
+            .read(true)
+            .write(true)
+            .open(&path)
+        else {
+            continue;
+        };
+        let Ok(len) = f.metadata().map(|m| m.len()) else {
+            continue;
+        };
+        // A row is a few hundred bytes: the last newline is within the last 64 KiB, or
+        // the file holds no whole row (a header torn: nothing of it kept).
+        let tail = len.min(64 << 10);
+        let mut buf = vec![0u8; tail as usize];
+        if f.seek(SeekFrom::Start(len - tail)).is_err() || f.read_exact(&mut buf).is_err() {
+            continue;
+        }
+        if buf.last().is_none_or(|b| *b == b'\n') {
+            continue;
+        }
+        let keep = match buf.iter().rposition(|b| *b == b'\n') {
+            Some(i) => len - tail + i as u64 + 1,
+            None if tail == len => 0,
+            // (A row longer than 64 KiB is no row of a trace: left as it is.)
+            None => continue,
+        };
+        if f.set_len(keep).is_ok() {
+            tracing::warn!(
+                "{}: its last row was torn ({} bytes, the process writing it was killed): cut off",
+                path.display(),
+                len - keep
+            );
+            cut.push((name, len - keep));
+        }
+    }
+    cut
+}
+
 /// Whether the run in `dir` is short enough for the page and the measured scallop
 /// ([`CONTOUR_MAX_BYTES`]).
 pub(crate) fn contour_in_memory(dir: &Path) -> bool {
@@ -716,6 +764,44 @@ pub fn write_orphan_report(dir: &Path, program: &str, period_ns: u64) -> Result<
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A killed writer's torn last row is cut; whole traces, a missing one and a torn
+    /// header (no whole row at all) are handled.
+    #[test]
+    fn a_torn_last_row_is_cut_and_whole_traces_are_left() {
+        let dir = std::env::temp_dir().join(format!("cnc-torn-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        std::fs::write(dir.join("setpoints.csv"), "t,x\n1,2\n3,4").unwrap();
+        std::fs::write(dir.join("feedback.csv"), "t,x\n1,2\n").unwrap();
+        assert_eq!(cut_torn_rows(&dir), vec![("setpoints.csv", 3)]);
+        assert_eq!(
+            std::fs::read_to_string(dir.join("setpoints.csv")).unwrap(),
+            "t,x\n1,2\n"
+        );
+        assert_eq!(
+            std::fs::read_to_string(dir.join("feedback.csv")).unwrap(),
+            "t,x\n1,2\n"
+        );
+        assert!(cut_torn_rows(&dir).is_empty());
+        std::fs::write(dir.join("feedback.csv"), "t,").unwrap();
+        std::fs::remove_file(dir.join("setpoints.csv")).unwrap();
+        assert_eq!(cut_torn_rows(&dir), vec![("feedback.csv", 2)]);
+        assert_eq!(std::fs::read(dir.join("feedback.csv")).unwrap().len(), 0);
+        // A long trace: the newline is found in its last 64 KiB.
+        let mut long = String::from("t,x\n");
+        while long.len() < 200_000 {
+            long.push_str("123456.789,-0.001\n");
+        }
+        let whole = long.len();
+        long.push_str("12345");
+        std::fs::write(dir.join("setpoints.csv"), &long).unwrap();
+        assert_eq!(cut_torn_rows(&dir), vec![("setpoints.csv", 5)]);
+        assert_eq!(
+            std::fs::metadata(dir.join("setpoints.csv")).unwrap().len() as usize,
+            whole
+        );
+        let _ = std::fs::remove_dir_all(&dir);
+    }
 
     /// A run whose log and traces are more than the analysis holds is not read (a
     /// million lines of `G1` took the launcher to 7.2 GB at the end of the run).
