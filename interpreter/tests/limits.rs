@@ -1245,3 +1245,87 @@ fn a_stop_between_two_moves_down_keeps_the_jerk() {
         assert!(v <= 1.0 + 1e-4, "{what} {v} times the limit: {w:?}");
     }
 }
+
+/// LinuxCNC's simulated mill (`examples/machine-linuxcnc-sim.toml`).
+fn linuxcnc_machine() -> Machine {
+    let path = concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../examples/machine-linuxcnc-sim.toml"
+    );
+    Machine::from_toml(&std::fs::read_to_string(path).unwrap()).unwrap()
+}
+
+#[test]
+fn alternating_kinks_close_together_are_passed_at_the_feed_within_the_limits() {
+    // CAM output rounded to 0.1 µm on 20 µm chords: a straight cut whose every vertex is
+    // off by the rounding, alternately, so each chord turns by ±0.3° and the turns cancel.
+    // Two steps at F3000 cover five kinks; their turns summed (2·sin(Θ/2) ≈ 0.05) held the
+    // run to 18 mm/s on LinuxCNC's limits, where the tangents' spread about their mean
+    // (two of them, ±0.005 rad) allows the feed. Exact path, so every vertex is kept.
+    let mut text = String::from("G21 G90 G61\nG1 F3000\n");
+    for k in 1..=3000 {
+        let y = if k % 2 == 1 { 0.0001 } else { 0.0 };
+        text += &format!("X{:.4} Y{y:.4}\n", f64::from(k) * 0.02);
+    }
+    text += "M2\n";
+    for machine in [linuxcnc_machine(), Machine::default()] {
+        let (blocks, cycles) = step(&text, &machine);
+        let w = check(&blocks, &cycles, &machine);
+        assert!(w.speed <= 1.0 + 1e-6, "speed {w:?}");
+        assert!(w.acc <= 1.0 + 1e-3, "acceleration {w:?}");
+        assert!(w.axis <= 1.0 + 1e-3, "axis {w:?}");
+        // Away from the ends, every junction at the feed.
+        let middle = &blocks[blocks.len() / 3..2 * blocks.len() / 3];
+        let slowest = middle
+            .iter()
+            .map(|b| b.end_feed_mm_per_min)
+            .fold(f64::INFINITY, f64::min);
+        assert!(slowest >= 0.999 * 3000.0, "a junction at {slowest} mm/min");
+    }
+}
+
+#[test]
+fn jittery_cam_polylines_keep_every_limit() {
+    // Arcs and straight cuts in chords of 10 to 100 µm, each vertex rounded to 0.1 µm or
+    // 1 µm, at F1000 to F6000, exact and blended: where the rounding makes the turns
+    // alternate, a run of close kinks is held by the tangents' spread about their mean
+    // rather than by its summed turns; every limit must hold either way.
+    let mut seed = 0x2545_f491_4f6c_dd1du64;
+    let mut rnd = move || {
+        seed ^= seed << 13;
+        seed ^= seed >> 7;
+        seed ^= seed << 17;
+        (seed >> 11) as f64 / (1u64 << 53) as f64
+    };
+    for machine in [linuxcnc_machine(), Machine::default()] {
+        for case in 0..12 {
+            let chord = 0.01 + 0.09 * rnd();
+            let radius = if case % 3 == 0 {
+                f64::INFINITY
+            } else {
+                2.0 + 40.0 * rnd()
+            };
+            let decimals = if rnd() < 0.5 { 4 } else { 3 };
+            let feed = 1000.0 + 5000.0 * rnd();
+            let mode = if case % 2 == 0 { "G61" } else { "G64 P0.01" };
+            let mut text = format!("G21 G90 {mode}\nG1 F{feed:.0}\n");
+            for k in 1..=400 {
+                let s = f64::from(k) * chord;
+                let (x, y) = if radius.is_finite() {
+                    let a = s / radius;
+                    (radius * a.sin(), radius * (1.0 - a.cos()))
+                } else {
+                    (s * 0.8, s * 0.6)
+                };
+                text += &format!("X{x:.decimals$} Y{y:.decimals$}\n");
+            }
+            text += "M2\n";
+            let (blocks, cycles) = step(&text, &machine);
+            let w = check(&blocks, &cycles, &machine);
+            let what = format!("case {case}: chord {chord:.3} R {radius:.1} F{feed:.0} {mode}");
+            assert!(w.speed <= 1.0 + 1e-6, "speed {w:?} {what}");
+            assert!(w.acc <= 1.0 + 1e-3, "acceleration {w:?} {what}");
+            assert!(w.axis <= 1.0 + 1e-3, "axis {w:?} {what}");
+        }
+    }
+}
