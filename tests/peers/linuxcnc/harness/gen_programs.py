@@ -202,4 +202,18 @@ def with_mode(src, dst, mode, old_note, new_note):
 with_mode("g4_fine_polygon_r50_f6000_g64", "g4_fine_polygon_r50_f6000_g64p0003", "G64 P0.003", "default G64", "G64 P0.003")
 with_mode("e_small_turns_f6000_g64", "e_small_turns_f6000_g64p004", "G64 P0.04", "default G64", "G64 P0.04")
 with_mode("a_polyline_sine_g64", "a_polyline_sine_g64p0006", "G64 P0.006", "no G64 word", "G64 P0.006")
+# ---- fourth batch: dense CAM arcs, their vertices rounded to the decimals a post writes ----
+def dense_arc(name, comment, radius, chord, decimals, n):
+    body = [f"G0 X{f(50 + radius)} Y50 Z0", "G1 F3000"]
+    for i in range(n):
+        a = i * chord / radius
+        x, y = 50 + radius * math.cos(a), 50 + radius * math.sin(a)
+        body.append(f"X{x:.{decimals}f} Y{y:.{decimals}f}")
+    write(name, comment, "G64 P0.01", body)
+
+dense_arc("h1_dense_arc_r10_20um_4dec", "R10 in 2000 chords of 20 um, rounded to 0.1 um, F3000, G64 P0.01",
+          10, 0.02, 4, 2000)
+dense_arc("h2_dense_arc_r10_20um_6dec", "the same, rounded to 1 nm", 10, 0.02, 6, 2000)
+dense_arc("h3_dense_arc_r20_100um_3dec", "R20 in 4000 chords of 0.1 mm, rounded to 1 um, F3000, G64 P0.01",
+          20, 0.1, 3, 4000)
 print(f"{len(os.listdir(OUT))} programs in {OUT}")
