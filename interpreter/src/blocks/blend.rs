@@ -616,42 +616,38 @@ fn turns_within(
     let (Walked::Line(ui, li, fi), Walked::Line(un, ln, fn_)) = (walked(i), walked(next)) else {
         return None;
     };
-    let mut fastest = fi.max(fn_);
-    loop {
-        let reach = window_s * fastest;
-        let mut sum = turn(ui, un);
-        // Back from the start of line `i`.
-        let (mut k, mut u, mut dist) = (i, ui, li);
+    let before = |k: usize| (0..k).rev().find(|k| !path_mode(k));
+    let after = |k: usize| (k + 1..moves.len()).find(|k| !path_mode(k));
+    // The turns met walking from line `k` (direction `u`, `dist` mm from the corner at
+    // its far end) by `step` until `reach`; the fastest feed met raised on the way.
+    let walk = |step: &dyn Fn(usize) -> Option<usize>,
+                (mut k, mut u, mut dist): (usize, [f64; 3], f64),
+                reach: f64,
+                fastest: &mut f64| {
+        let mut sum = 0.0;
         while dist < reach {
-            let Some(p) = (0..k).rev().find(|k| !path_mode(k)) else {
-                break;
-            };
-            match walked(p) {
-                Walked::Line(up, lp, fp) => {
-                    sum += turn(up, u);
-                    fastest = fastest.max(fp);
-                    (k, u, dist) = (p, up, dist + lp);
-                }
-                Walked::Rest => break,
-                Walked::Other => return None,
-            }
-        }
-        // On from the end of line `next`.
-        let (mut k, mut u, mut dist) = (next, un, ln);
-        while dist < reach {
-            let Some(q) = (k + 1..moves.len()).find(|k| !path_mode(k)) else {
+            let Some(q) = step(k) else {
                 break;
             };
             match walked(q) {
                 Walked::Line(uq, lq, fq) => {
                     sum += turn(u, uq);
-                    fastest = fastest.max(fq);
+                    *fastest = fastest.max(fq);
                     (k, u, dist) = (q, uq, dist + lq);
                 }
                 Walked::Rest => break,
                 Walked::Other => return None,
             }
         }
+        Some(sum)
+    };
+    let mut fastest = fi.max(fn_);
+    loop {
+        let reach = window_s * fastest;
+        // Back from the start of line `i`, and on from the end of line `next`.
+        let sum = turn(ui, un)
+            + walk(&before, (i, ui, li), reach, &mut fastest)?
+            + walk(&after, (next, un, ln), reach, &mut fastest)?;
         if window_s * fastest <= reach {
             return Some(sum);
         }
