@@ -642,6 +642,9 @@ fn turns_within(
         Some(sum)
     };
     let mut fastest = fi.max(fn_);
+    if !(fastest.is_finite() && window_s.is_finite()) {
+        return None;
+    }
     loop {
         let reach = window_s * fastest;
         // Back from the start of line `i`, and on from the end of line `next`.
