@@ -216,4 +216,15 @@ dense_arc("h1_dense_arc_r10_20um_4dec", "R10 in 2000 chords of 20 um, rounded to
 dense_arc("h2_dense_arc_r10_20um_6dec", "the same, rounded to 1 nm", 10, 0.02, 6, 2000)
 dense_arc("h3_dense_arc_r20_100um_3dec", "R20 in 4000 chords of 0.1 mm, rounded to 1 um, F3000, G64 P0.01",
           20, 0.1, 3, 4000)
+# arcs of R5/R20/R50 in chords of 0.05 and 0.2 mm at 1 um, F1500 and F6000 (at most 3000 chords)
+for R in (5, 20, 50):
+    for chord in (0.05, 0.2):
+        for F in (1500, 6000):
+            n = int(min(3000, 2 * math.pi * R / chord))
+            body = [f"G0 X{f(50 + R)} Y50 Z0", f"G1 F{F}"]
+            for i in range(1, n + 1):
+                a = i * chord / R
+                body.append(f"X{50 + R * math.cos(a):.3f} Y{50 + R * math.sin(a):.3f}")
+            write(f"i_dense_r{R}_c{f(chord)}_f{F}", f"R{R} in {n} chords of {chord} mm at 1 um, F{F}, G64 P0.01",
+                  "G64 P0.01", body)
 print(f"{len(os.listdir(OUT))} programs in {OUT}")
