@@ -352,6 +352,10 @@ fn dot(a: [f64; 3], b: [f64; 3]) -> f64 {
     a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
 }
 
+fn add(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
+    [a[0] + b[0], a[1] + b[1], a[2] + b[2]]
+}
+
 /// The path's unit tangent and curvature vector `dT/ds` (length the curvature, pointing
 /// to the centre) at `u`.
 #[cfg(test)]
@@ -2211,34 +2215,26 @@ impl CloseKinks {
 /// chords of 20 µm turn by ±0.3° of rounding around a steady 0.1°: summed, the turns made
 /// a 20 mm circle at F3000 run at half the feed on LinuxCNC's limits).
 fn spread<'a>(run: impl Iterator<Item = &'a Kink> + Clone) -> Option<f64> {
-    let mut mean = [0.0; 3];
-    let mut n = 0.0;
-    let mut first = true;
-    for k in run.clone() {
-        let (before, after) = k.tangents?;
-        if first {
-            mean = [
-                mean[0] + before[0],
-                mean[1] + before[1],
-                mean[2] + before[2],
-            ];
-            n += 1.0;
-            first = false;
+    // Each tangent of the run, in order, to `f`: the first kink's before, then every
+    // kink's after.
+    let tangents = |f: &mut dyn FnMut([f64; 3])| -> Option<()> {
+        for (n, k) in run.clone().enumerate() {
+            let (before, after) = k.tangents?;
+            if n == 0 {
+                f(before);
+            }
+            f(after);
         }
-        mean = [mean[0] + after[0], mean[1] + after[1], mean[2] + after[2]];
+        Some(())
+    };
+    let (mut sum, mut n) = ([0.0; 3], 0.0);
+    tangents(&mut |t| {
+        sum = add(sum, t);
         n += 1.0;
-    }
-    let mean = mean.map(|x| x / n);
+    })?;
+    let mean = sum.map(|x| x / n);
     let mut far = 0.0f64;
-    let mut first = true;
-    for k in run {
-        let (before, after) = k.tangents?;
-        if first {
-            far = far.max(path::norm(sub(before, mean)));
-            first = false;
-        }
-        far = far.max(path::norm(sub(after, mean)));
-    }
+    tangents(&mut |t| far = far.max(path::norm(sub(t, mean))))?;
     Some(far)
 }
 

@@ -136,7 +136,7 @@
 //! (a feed hold inside the blend stops "in" that line, as the reports should say). Its
 //! feed is the lower of the two lines' feeds.
 
-use super::{dot, sub};
+use super::{add, dot, sub};
 use crate::program::{Move, PathControl};
 use shared::path::norm;
 use shared::Machine;
@@ -1030,10 +1030,6 @@ fn control_points(c: &Corner, start: [f64; 3], end: [f64; 3]) -> Vec<[f64; 4]> {
         .iter()
         .map(|p| [p[0], p[1], p[2], 1.0])
         .collect()
-}
-
-fn add(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
-    [a[0] + b[0], a[1] + b[1], a[2] + b[2]]
 }
 
 fn cross(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {

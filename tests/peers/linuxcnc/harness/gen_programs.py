@@ -87,34 +87,28 @@ body = ["G0 X5 Y0 Z0", "F3000"] + lap * 5
 write("d_rounded_square_x5_g64", "40 mm square, 5 mm corner radii, 5 laps, F3000, default G64", "", body)
 write("d_rounded_square_x5_g64p001", "40 mm square, 5 mm corner radii, 5 laps, F3000, G64 P0.01", "G64 P0.01", body)
 
-# (e) short segments (0.5-2 mm) with small direction changes (3-10 deg, random sign), F6000
-rng = random.Random(5)
-x = y = 0.0
-ang = 0.0
-pts = [(0.0, 0.0)]
-for i in range(600):
+# (e) short segments (0.5-2 mm) turning by `turn(rng, i, heading)` degrees, F6000
+def walk_body(seed, turn):
+    rng = random.Random(seed)
+    x = y = ang = 0.0
+    pts = [(0.0, 0.0)]
+    for i in range(600):
+        ang += turn(rng, i, ang)
+        l = rng.uniform(0.5, 2.0)
+        x += l * math.cos(math.radians(ang)); y += l * math.sin(math.radians(ang))
+        pts.append((x, y))
+    return ["G0 X0 Y0 Z0", "G1 F6000"] + [f"X{f(px)} Y{f(py)}" for px, py in pts[1:]]
+
+def small_turn(rng, i, ang):
+    # 3-10 deg, random sign, the heading kept within +-60 deg of +X so the path progresses
     d = rng.uniform(3, 10) * (1 if rng.random() < 0.5 else -1)
-    # keep the heading within +-60 deg of +X so the path progresses
-    if abs(ang + d) > 60:
-        d = -d
-    ang += d
-    l = rng.uniform(0.5, 2.0)
-    x += l * math.cos(math.radians(ang)); y += l * math.sin(math.radians(ang))
-    pts.append((x, y))
-body = ["G0 X0 Y0 Z0", "G1 F6000"] + [f"X{f(px)} Y{f(py)}" for px, py in pts[1:]]
+    return -d if abs(ang + d) > 60 else d
+
+body = walk_body(5, small_turn)
 write("e_small_turns_f6000_g64", "600 G1 segments 0.5-2 mm, turns 3-10 deg, F6000, default G64", "", body)
 write("e_small_turns_f6000_g64p001", "600 G1 segments 0.5-2 mm, turns 3-10 deg, F6000, G64 P0.01", "G64 P0.01", body)
 # same but smaller turns 1-4 deg (a finely tessellated curve at full feed)
-rng = random.Random(6)
-x = y = ang = 0.0
-pts = [(0.0, 0.0)]
-for i in range(600):
-    d = rng.uniform(1, 4) * (1 if (i // 15) % 2 == 0 else -1)
-    ang += d
-    l = rng.uniform(0.5, 2.0)
-    x += l * math.cos(math.radians(ang)); y += l * math.sin(math.radians(ang))
-    pts.append((x, y))
-body = ["G0 X0 Y0 Z0", "G1 F6000"] + [f"X{f(px)} Y{f(py)}" for px, py in pts[1:]]
+body = walk_body(6, lambda rng, i, ang: rng.uniform(1, 4) * (1 if (i // 15) % 2 == 0 else -1))
 write("e2_tiny_turns_f6000_g64", "600 G1 segments 0.5-2 mm, turns 1-4 deg in runs of 15, F6000, default G64", "", body)
 
 # (f1) helical bore: radius 5, 10 turns, 1 mm pitch, F2000
@@ -203,9 +197,10 @@ with_mode("g4_fine_polygon_r50_f6000_g64", "g4_fine_polygon_r50_f6000_g64p0003",
 with_mode("e_small_turns_f6000_g64", "e_small_turns_f6000_g64p004", "G64 P0.04", "default G64", "G64 P0.04")
 with_mode("a_polyline_sine_g64", "a_polyline_sine_g64p0006", "G64 P0.006", "no G64 word", "G64 P0.006")
 # ---- fourth batch: dense CAM arcs, their vertices rounded to the decimals a post writes ----
-def dense_arc(name, comment, radius, chord, decimals, n):
-    body = [f"G0 X{f(50 + radius)} Y50 Z0", "G1 F3000"]
-    for i in range(n):
+def dense_arc(name, comment, radius, chord, decimals, n, feed=3000, first=0):
+    """Chords `first` .. `first + n - 1` of an arc about (50, 50), from angle 0 on."""
+    body = [f"G0 X{f(50 + radius)} Y50 Z0", f"G1 F{feed}"]
+    for i in range(first, first + n):
         a = i * chord / radius
         x, y = 50 + radius * math.cos(a), 50 + radius * math.sin(a)
         body.append(f"X{x:.{decimals}f} Y{y:.{decimals}f}")
@@ -221,10 +216,6 @@ for R in (5, 20, 50):
     for chord in (0.05, 0.2):
         for F in (1500, 6000):
             n = int(min(3000, 2 * math.pi * R / chord))
-            body = [f"G0 X{f(50 + R)} Y50 Z0", f"G1 F{F}"]
-            for i in range(1, n + 1):
-                a = i * chord / R
-                body.append(f"X{50 + R * math.cos(a):.3f} Y{50 + R * math.sin(a):.3f}")
-            write(f"i_dense_r{R}_c{f(chord)}_f{F}", f"R{R} in {n} chords of {chord} mm at 1 um, F{F}, G64 P0.01",
-                  "G64 P0.01", body)
+            dense_arc(f"i_dense_r{R}_c{f(chord)}_f{F}", f"R{R} in {n} chords of {chord} mm at 1 um, F{F}, G64 P0.01",
+                      R, chord, 3, n, feed=F, first=1)
 print(f"{len(os.listdir(OUT))} programs in {OUT}")
