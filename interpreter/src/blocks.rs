@@ -48,6 +48,7 @@ pub mod blend;
 mod cache;
 mod eval;
 mod hodograph;
+pub mod naive_cam;
 
 /// Most quadratic segments (of at most 90°) in one arc block: 2n+1 control points.
 const ARC_SEGMENTS_PER_BLOCK: usize = (MAX_CTRL - 1) / 2;

@@ -73,8 +73,8 @@ pub enum PathControl {
     /// `G61.1`: come to a stop at the end of every move.
     ExactStop,
     /// `G64 [P…] [Q…]`: blend corners, within `tolerance_mm` of the path when given
-    /// (`P`); `naive_cam_mm` (`Q`) is LinuxCNC's tolerance for merging collinear short
-    /// moves.
+    /// (`P`); `naive_cam_mm` is LinuxCNC's tolerance for merging nearly collinear short
+    /// moves (`Q`, else `P`; none for a bare `G64`), see `blocks::naive_cam`.
     Blend {
         tolerance_mm: Option<f64>,
         naive_cam_mm: Option<f64>,
@@ -1171,6 +1171,8 @@ fn path_control(
             if naive_cam_mm.is_some() && tolerance_mm.is_none() {
                 return Err(lw.err("G64", w.col, "Q needs P too (Q is only read after P)"));
             }
+            // Without `Q`, LinuxCNC merges within `P` (`crate::blocks::naive_cam`).
+            let naive_cam_mm = naive_cam_mm.or(tolerance_mm).filter(|q| *q > 0.0);
             // (LinuxCNC's `P0` is its bare `G64`.)
             let bare = tolerance_mm.is_none_or(|t| t == 0.0);
             match bare.then(|| bare_g64(blend_tol, naive_cam_mm)).flatten() {

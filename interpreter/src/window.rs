@@ -251,6 +251,10 @@ fn plan_once(
         };
         let mut prog = read?;
         w.take(std::mem::take(&mut prog.moves));
+        let held = w.cam.finish();
+        if !held.is_empty() {
+            w.take_merged(held);
+        }
         let rest = std::mem::take(&mut w.pending);
         w.plan(rest);
         let bad = w.checker.finish();
@@ -362,6 +366,8 @@ struct Windows<'a, 'h> {
     short: usize,
     /// Plans windows that follow a rest beside this thread ([`Stream::spare_cores`]).
     helper: Option<Helper>,
+    /// `G64 Q`'s merge of the moves read, before they are cut into windows.
+    cam: blocks::naive_cam::NaiveCam,
 }
 
 /// The junction between two feed blocks where a window handed on ended at speed: the
@@ -475,6 +481,7 @@ impl<'a, 'h> Windows<'a, 'h> {
             rough_seams: 0,
             short: 0,
             helper: None,
+            cam: blocks::naive_cam::NaiveCam::new(machine),
         }
     }
 }
@@ -495,6 +502,12 @@ impl Windows<'_, '_> {
                 self.feeds.push(*line, *feed);
             }
         }
+        let moves = self.cam.take(moves);
+        self.take_merged(moves);
+    }
+
+    /// [`Windows::take`] after the naive CAM merge.
+    fn take_merged(&mut self, moves: Vec<Move>) {
         if self.pending.is_empty() {
             self.pending = moves;
         } else {

@@ -249,10 +249,18 @@ struct Decided {
     exact: Vec<Option<PathControl>>,
 }
 
+/// The period ways are timed at: [`DECISION_PERIOD_NS`], within the machine's periods.
+pub(super) fn decision_period(machine: &Machine) -> u64 {
+    DECISION_PERIOD_NS.clamp(
+        machine.min_period_us * 1000,
+        machine.max_period_us.max(machine.min_period_us) * 1000,
+    )
+}
+
 /// The speed (mm/s) and the distance to stop from it (mm) that bound a corner's
 /// neighbourhood: what the machine's weakest acceleration and jerk (path or axis) need to
 /// stop from the faster of the two lines' feeds, jerk-limited.
-fn stop_distance(v: f64, machine: &Machine) -> f64 {
+pub(super) fn stop_distance(v: f64, machine: &Machine) -> f64 {
     let axes = machine.axes.as_array();
     let a = axes
         .iter()
@@ -272,10 +280,7 @@ fn stop_distance(v: f64, machine: &Machine) -> f64 {
 /// Each corner of `plans`, in program order, kept or left exact by which of the two is
 /// quicker through its neighbourhood ([`time_around`]).
 fn decide(moves: &[Move], plans: &[Option<Corner>], machine: &Machine) -> Decided {
-    let period_ns = DECISION_PERIOD_NS.clamp(
-        machine.min_period_us * 1000,
-        machine.max_period_us.max(machine.min_period_us) * 1000,
-    );
+    let period_ns = decision_period(machine);
     // The line each blended corner comes from, by the line it goes into.
     let mut prev = vec![None; moves.len()];
     for (i, c) in plans.iter().enumerate() {
@@ -800,8 +805,14 @@ fn window_cycles(
             })
         })
         .collect();
-    let window = emit(&window, &wplans);
-    let mut blocks = super::build(&window, machine);
+    cycles_of(&emit(&window, &wplans), machine, period_ns)
+}
+
+/// The cycles `moves` (from the origin, where the engine starts, to an end) take,
+/// built, planned by [`super::plan`] and stepped by the interpreter's engine
+/// ([`crate::estimate`]). `None` when either refuses.
+pub(super) fn cycles_of(moves: &[Move], machine: &Machine, period_ns: u64) -> Option<u64> {
+    let mut blocks = super::build(moves, machine);
     super::plan(&mut blocks, machine, period_ns);
     // (Each block made a command block as it is stepped: a chain may be the whole program.)
     let commands = blocks.iter().enumerate().map(|(i, b)| b.command(i as u64));

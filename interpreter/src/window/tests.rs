@@ -36,7 +36,9 @@ fn whole(
         Ok(p) => p,
         Err(d) => return (Vec::new(), shown(d), Vec::new()),
     };
-    let mut all = blocks::build(&prog.moves, machine);
+    // (`G64 Q`'s merge runs on the moves as they are read, before any window.)
+    let moves = blocks::naive_cam::merge(prog.moves.clone(), machine);
+    let mut all = blocks::build(&moves, machine);
     blocks::plan(&mut all, machine, PERIOD_NS);
     let mut check = Checker::new(text, machine);
     for (i, b) in all.iter().enumerate() {
@@ -382,8 +384,9 @@ fn a_stretch_with_no_rest_is_cut_at_speed() {
     // twice as many.)
     assert!(a.most <= 128, "{} blocks at once", a.most);
     assert_eq!((a.rough, a.differ, a.short), (0, 0, 0));
-    // Blended corners: a seam only where two lines meet unblended.
-    let a = at_speed(&spiral(1500, "G64 P0.01"), lcnc, 256);
+    // Blended corners: a seam only where two lines meet unblended. (`Q0`: the chords
+    // are not merged, `blocks::naive_cam`.)
+    let a = at_speed(&spiral(1500, "G64 P0.01 Q0"), lcnc, 256);
     assert!(a.blocks > 2000, "{} blocks: blends kept", a.blocks);
     assert!(a.at_speed >= 1, "{} windows at speed", a.at_speed);
     assert_eq!((a.rough, a.differ), (0, 0));
