@@ -1,6 +1,8 @@
 //! LinuxCNC's "naive CAM detector", `G64 P<p> Q<q>`: a run of straight feed moves at
 //! one feed whose points lie within `q` of one straight line is made that one line,
-//! before the corners are blended ([`super::blend`]), where that is not slower.
+//! before the corners are blended ([`super::blend`]); or a stretch of such runs is made
+//! one smooth curve within `p + q`; whichever of these and the moves as programmed is
+//! quickest.
 //!
 //! CAM output writes curves as thousands of short chords, each vertex rounded to the
 //! decimals of the post. Followed exactly, every vertex is a kink: the rounding alone
@@ -18,12 +20,11 @@
 //!   start the run's last point, joins the run while every point of the run so far (the
 //!   ends of its moves) lies within `q` of the segment from `B` to the new move's end,
 //!   and at most 101 points are joined (LinuxCNC's bound). Anything else (a rapid, an
-//!   arc that is not merged, a curve, a dwell, a stop, a spindle or path-mode change, a
-//!   new feed, a move back to `B`) ends the run.
+//!   arc, a curve, a dwell, a stop, a spindle or path-mode change, a new feed, a move
+//!   back to `B`) ends the run. (LinuxCNC also makes a small XY arc two lines that may
+//!   join a run; not done here.)
 //! * The run becomes one line from `B` to its last point, carrying the last move's
 //!   source line: the lines it swallowed make no block of their own.
-//!
-//! # The path it leaves
 //!
 //! The merged line and the programmed moves are within `q` of each other, both ways.
 //! Every joined point lies within `q` of the segment, and so does every point of the
@@ -32,19 +33,35 @@
 //! point of the moves on it, within `q`. The `P` blend then keeps within `p` of the
 //! merged path's corners: the tool is within `p + q` of the program, as on LinuxCNC.
 //!
-//! # Merged where it pays
+//! # Smoothed
+//!
+//! The merged lines' corners, blended within `p`, bring the curvature in bursts, and on
+//! a machine with a jerk limit those bursts hold the feed down (R20 in 0.05 mm chords at
+//! F6000 on the built-in machine: 2.868 s merged, 2.050 s for the same circle as one
+//! `G3`). So a stretch of runs may also be made the C2 cubic spline through the merged
+//! lines' vertices (programmed points), by chord length, leaving along the first
+//! programmed move and arriving along the last: one cubic Bézier piece per run,
+//! carrying the run's last source line, the pieces meeting in tangent and curvature
+//! ([`smoothed`]). It is kept only where each piece and the moves it replaces are within
+//! `p + q` of each other both ways, the same envelope, certified by samples close enough
+//! that nothing between them can stray further (2.312 s for that circle).
+//!
+//! # The quickest kept
 //!
 //! LinuxCNC merges every run it can. Its machine has no jerk limit, and there the
-//! merged lines always win: the kinks that rounded vertices put every few µm cost more
-//! than the merged corners, blended. A machine with a jerk limit may pass the blends
-//! of the unmerged chords quicker than those of the merged lines, whose curvature comes
-//! in bursts at each corner: R5 in 0.2 mm chords at F6000, `P0.01`, takes 1.731 s
-//! merged on the built-in machine and 1.419 s not. `Q` is a bound, not an order, so the
-//! runs are weighed: adjacent runs are gathered into a stretch about four times as long
-//! as the machine needs to stop from their feed ([`super::blend::stop_distance`]), and
-//! the stretch is stepped through the interpreter's engine both ways, from rest to rest
-//! under the path mode in force, blends decided as the planner decides them
-//! ([`super::blend::cycles_of`]); it is merged only if that is not slower.
+//! merged lines always win. A machine with a jerk limit may pass the blends of the
+//! unmerged chords quicker than those of the merged lines: R5 in 0.2 mm chords at F6000,
+//! `P0.01`, takes 1.731 s merged on the built-in machine and 1.419 s not. `Q` is a
+//! bound, not an order, so the ways are weighed. Adjacent runs are gathered into a
+//! stretch about sixteen times as long as the machine needs to stop from their feed
+//! ([`super::blend::stop_distance`]). A stretch is merged where every kink of the merged
+//! lines is passed at the feed, and kept as programmed where every kink of the moves is
+//! (the corner screen's bound, [`passed_at_feed`]). Otherwise the merged lines, the moves
+//! and the smoothed curve are each stepped through the interpreter's engine from rest to
+//! rest under the path mode in force, after the moves handed out just before and with
+//! the start of the next stretch, as programmed, after them (what a way costs the
+//! stretch after it counts too), blends decided as the planner decides them
+//! ([`super::blend::cycles_of`]), and the quickest is kept (a tie to the merge).
 //!
 //! The merge is streamed ([`NaiveCam::take`]): a stretch is held back only while it may
 //! still grow, so how a program is handed over in batches does not change the merge.
@@ -269,11 +286,7 @@ impl NaiveCam {
             return;
         };
         let reach = 2.0 * stop_distance(first.feed / 60.0, &self.machine);
-        if self
-            .lead
-            .last()
-            .is_some_and(|m| !matches!(m, Move::Line { to, .. } if *to == first.start))
-        {
+        if self.lead.last().and_then(end_of) != Some(first.start) {
             self.lead.clear();
         }
         let mut tail = Vec::new();
@@ -287,78 +300,122 @@ impl NaiveCam {
                 r.programmed(&mut tail);
             }
         }
-        let lead = self.lead.len();
-        let mut programmed = self.lead.clone();
+        let mut programmed = Vec::new();
         stretch.iter().for_each(|r| r.programmed(&mut programmed));
-        let ends = programmed.len();
         let chosen = if stretch.iter().all(|r| r.points.len() == 1) {
             programmed
         } else {
-            let mut merged = self.lead.clone();
+            let mut merged = Vec::new();
             stretch.iter().for_each(|r| r.merged(&mut merged));
-            let ends_merged = merged.len();
             // Merged, every kink passed at the feed: no slower, and fewer blocks.
-            if passed_at_feed(&merged[lead..], &self.machine) {
+            if passed_at_feed(&merged, &self.machine) {
                 merged
-            } else if passed_at_feed(&programmed[lead..], &self.machine) {
+            } else if passed_at_feed(&programmed, &self.machine) {
                 programmed
             } else {
-                merged.extend_from_slice(&tail);
-                programmed.extend_from_slice(&tail);
-                if self.quicker(&merged, &programmed) {
-                    merged.truncate(ends_merged);
-                    merged
-                } else {
-                    programmed.truncate(ends);
-                    programmed
+                // Each way timed between the lead and the next stretch's start; the
+                // first of the quickest kept (a tie to the merge, then to the program).
+                let mut ways = vec![merged, programmed];
+                if let Some(smooth) = self.budget().and_then(|b| smoothed(stretch, b)) {
+                    ways.push(smooth);
                 }
+                let cycles: Vec<Option<u64>> = ways
+                    .iter()
+                    .map(|w| self.time(&[&self.lead[..], w, &tail].concat()))
+                    .collect();
+                let best = (0..ways.len())
+                    .filter(|&k| cycles[k].is_some())
+                    .min_by_key(|&k| (cycles[k], k))
+                    .unwrap_or(0);
+                ways.swap_remove(best)
             }
         };
-        // The lead for the next: the last lines, as long as the machine needs to stop.
+        // The lead for the next: the last moves, as long as the machine needs to stop.
         let mut along = 0.0;
-        let keep = chosen[lead..]
+        let keep = chosen
             .iter()
             .rev()
             .take_while(|m| {
                 let more = along < reach;
-                if let Move::Line { from, to, .. } = m {
-                    along += norm(sub(*to, *from));
+                if let (Some(a), Some(b)) = (start_of(m), end_of(m)) {
+                    along += norm(sub(b, a));
                 }
                 more
             })
             .count();
         self.lead = chosen[chosen.len() - keep..].to_vec();
-        out.extend_from_slice(&chosen[lead..]);
+        out.extend(chosen);
     }
 
-    /// Whether the lines `a` take no more cycles than `b`, from rest to rest under the
-    /// path mode in force (`a` where either cannot be timed: it is what LinuxCNC runs).
-    fn quicker(&self, a: &[Move], b: &[Move]) -> bool {
-        let period_ns = decision_period(&self.machine);
-        let time = |lines: &[Move]| {
-            let Some(Move::Line { from: o, .. }) = lines.first() else {
-                return None;
-            };
-            let o = *o;
-            let mut w = Vec::with_capacity(lines.len() + 2);
-            w.extend(self.mode.map(|control| Move::PathMode { line: 0, control }));
-            w.extend(lines.iter().map(|m| match m {
-                Move::Line {
-                    line,
-                    from,
-                    to,
-                    feed,
-                    ..
-                } => line_move(*line, sub(*from, o), sub(*to, o), *feed),
-                m => m.clone(),
-            }));
-            w.push(Move::End { line: 0 });
-            cycles_of(&w, &self.machine, period_ns)
-        };
-        match (time(a), time(b)) {
-            (Some(ta), Some(tb)) => ta <= tb,
-            _ => true,
+    /// How far a smoothed stretch may stray from the programmed moves: `P + Q`, the
+    /// envelope LinuxCNC's merge and blends keep.
+    fn budget(&self) -> Option<f64> {
+        match self.mode? {
+            PathControl::Blend {
+                tolerance_mm: Some(p),
+                naive_cam_mm: Some(q),
+            } if p > 0.0 && q > 0.0 => Some(p + q),
+            _ => None,
         }
+    }
+
+    /// The cycles `moves` take from rest to rest under the path mode in force, moved to
+    /// the origin, where the engine starts.
+    fn time(&self, moves: &[Move]) -> Option<u64> {
+        let o = moves.first().and_then(start_of)?;
+        let mut w = Vec::with_capacity(moves.len() + 2);
+        w.extend(self.mode.map(|control| Move::PathMode { line: 0, control }));
+        w.extend(moves.iter().map(|m| moved(m, o)));
+        w.push(Move::End { line: 0 });
+        cycles_of(&w, &self.machine, decision_period(&self.machine))
+    }
+}
+
+/// Where a line or a curve starts.
+fn start_of(m: &Move) -> Option<[f64; 3]> {
+    match m {
+        Move::Line { from, .. } => Some(*from),
+        Move::Nurbs { ctrl, .. } => ctrl.first().map(|c| [c[0], c[1], c[2]]),
+        _ => None,
+    }
+}
+
+/// Where a line or a (polynomial) curve ends.
+fn end_of(m: &Move) -> Option<[f64; 3]> {
+    match m {
+        Move::Line { to, .. } => Some(*to),
+        Move::Nurbs { ctrl, .. } => ctrl.last().map(|c| [c[0], c[1], c[2]]),
+        _ => None,
+    }
+}
+
+/// A line or a polynomial curve moved by `-o`.
+fn moved(m: &Move, o: [f64; 3]) -> Move {
+    match m {
+        Move::Line {
+            line,
+            from,
+            to,
+            feed,
+            ..
+        } => line_move(*line, sub(*from, o), sub(*to, o), *feed),
+        Move::Nurbs {
+            line,
+            degree,
+            knots,
+            ctrl,
+            feed,
+        } => Move::Nurbs {
+            line: *line,
+            degree: *degree,
+            knots: knots.clone(),
+            ctrl: ctrl
+                .iter()
+                .map(|c| [c[0] - o[0], c[1] - o[1], c[2] - o[2], c[3]])
+                .collect(),
+            feed: *feed,
+        },
+        m => m.clone(),
     }
 }
 
@@ -421,6 +478,172 @@ fn passed_at_feed(lines: &[Move], machine: &Machine) -> bool {
         super::KINK_SHARE * weakest * period_s
             >= v * 2.0 * (0.5 * sum.min(std::f64::consts::PI)).sin()
     })
+}
+
+/// Most samples a smoothed piece is certified with: a piece that needs more is not
+/// smoothed.
+const MAX_SAMPLES: usize = 1 << 14;
+
+/// The stretch smoothed: the C2 cubic spline through the ends of its runs (the merged
+/// lines' vertices, each a programmed point), by chord length, leaving the first
+/// programmed move's direction and arriving along the last's, one cubic Bézier curve per
+/// run carrying the run's last source line. `None` unless every piece is within `tol` of
+/// its run's programmed moves both ways, certified by samples: each piece's distance to
+/// the moves, and each move's to the piece, at samples close enough that the distance
+/// between them cannot grow by more than a tenth of `tol` (distances are 1-Lipschitz,
+/// and the piece's speed is bounded by its control polygon's).
+fn smoothed(stretch: &[Run], tol: f64) -> Option<Vec<Move>> {
+    let feed = stretch.first()?.feed;
+    if stretch.iter().any(|r| r.feed != feed) {
+        return None;
+    }
+    let mut p = vec![stretch[0].start];
+    p.extend(stretch.iter().map(Run::end));
+    let m = p.len() - 1;
+    let h: Vec<f64> = p.windows(2).map(|w| norm(sub(w[1], w[0]))).collect();
+    if h.iter().any(|&x| x.is_nan() || x <= 0.0) {
+        return None;
+    }
+    let unit = |a: [f64; 3], b: [f64; 3]| {
+        let d = sub(b, a);
+        let l = norm(d);
+        (l > 0.0).then(|| d.map(|x| x / l))
+    };
+    let first = &stretch[0];
+    let last = &stretch[m - 1];
+    let before_end = last
+        .points
+        .len()
+        .checked_sub(2)
+        .map_or(last.start, |k| last.points[k].0);
+    let mut d = vec![[0.0; 3]; m + 1];
+    d[0] = unit(first.start, first.points[0].0)?;
+    d[m] = unit(before_end, last.end())?;
+    // C2 at each inner vertex i: h_i·D_{i-1} + 2(h_{i-1} + h_i)·D_i + h_{i-1}·D_{i+1} =
+    // 3·(h_i/h_{i-1}·(P_i − P_{i-1}) + h_{i-1}/h_i·(P_{i+1} − P_i)); the ends given.
+    // Tridiagonal and diagonally dominant: solved forward then back (Thomas).
+    if m > 1 {
+        let n = m - 1;
+        let mut c = vec![0.0; n];
+        let mut r = vec![[0.0; 3]; n];
+        for k in 0..n {
+            let i = k + 1;
+            let (a, bb, cc) = (h[i], 2.0 * (h[i - 1] + h[i]), h[i - 1]);
+            let mut rhs = [0.0; 3];
+            for x in 0..3 {
+                rhs[x] = 3.0
+                    * (h[i] / h[i - 1] * (p[i][x] - p[i - 1][x])
+                        + h[i - 1] / h[i] * (p[i + 1][x] - p[i][x]));
+            }
+            if k == 0 {
+                for x in 0..3 {
+                    rhs[x] -= a * d[0][x];
+                }
+            }
+            if k == n - 1 {
+                for x in 0..3 {
+                    rhs[x] -= cc * d[m][x];
+                }
+            }
+            let (lower, prev_c, prev_r) = if k == 0 {
+                (0.0, 0.0, [0.0; 3])
+            } else {
+                (a, c[k - 1], r[k - 1])
+            };
+            let den = bb - lower * prev_c;
+            c[k] = if k + 1 < n { cc / den } else { 0.0 };
+            for x in 0..3 {
+                r[k][x] = (rhs[x] - lower * prev_r[x]) / den;
+            }
+        }
+        for k in (0..n).rev() {
+            let next = if k + 1 < n { d[k + 2] } else { [0.0; 3] };
+            for x in 0..3 {
+                d[k + 1][x] = r[k][x] - c[k] * next[x];
+            }
+        }
+    }
+    let mut out = Vec::with_capacity(m);
+    for (i, run) in stretch.iter().enumerate() {
+        let b = [
+            p[i],
+            std::array::from_fn(|x| p[i][x] + h[i] * d[i][x] / 3.0),
+            std::array::from_fn(|x| p[i + 1][x] - h[i] * d[i + 1][x] / 3.0),
+            p[i + 1],
+        ];
+        if !within(&b, run, tol) {
+            return None;
+        }
+        let line = run.points.last()?.1;
+        out.push(Move::Nurbs {
+            line,
+            degree: 3,
+            knots: vec![0.0, 0.0, 0.0, 0.0, 1.0, 1.0, 1.0, 1.0],
+            ctrl: b.iter().map(|q| [q[0], q[1], q[2], 1.0]).collect(),
+            feed,
+        });
+    }
+    Some(out)
+}
+
+/// The cubic Bézier curve `b` at `u`.
+fn bezier(b: &[[f64; 3]; 4], u: f64) -> [f64; 3] {
+    let v = 1.0 - u;
+    let w = [v * v * v, 3.0 * u * v * v, 3.0 * u * u * v, u * u * u];
+    std::array::from_fn(|x| w[0] * b[0][x] + w[1] * b[1][x] + w[2] * b[2][x] + w[3] * b[3][x])
+}
+
+/// Whether the cubic `b` and the run's programmed moves are within `tol` of each other
+/// both ways (see [`smoothed`]).
+fn within(b: &[[f64; 3]; 4], run: &Run, tol: f64) -> bool {
+    let slack = 0.1 * tol;
+    let speed = 3.0
+        * (0..3)
+            .map(|k| norm(sub(b[k + 1], b[k])))
+            .fold(0.0, f64::max);
+    let n = (speed / (2.0 * slack)).ceil() as usize + 1;
+    if !(speed.is_finite() && n <= MAX_SAMPLES) {
+        return false;
+    }
+    let curve: Vec<[f64; 3]> = (0..=n).map(|k| bezier(b, k as f64 / n as f64)).collect();
+    let mut moves = Vec::with_capacity(run.points.len());
+    let mut from = run.start;
+    for &(to, _) in &run.points {
+        moves.push((from, to));
+        from = to;
+    }
+    // The curve to the moves: between samples at most `speed/(2n)` <= `slack` farther.
+    let near = curve.iter().all(|c| {
+        moves
+            .iter()
+            .any(|&(a, z)| off_segment(*c, a, z) <= tol - slack)
+    });
+    if !near {
+        return false;
+    }
+    // The moves to the curve: each move at steps of `slack` (a point between two is at
+    // most `slack` farther), each step's distance bounded by that to the samples near
+    // the last one found nearest (any sample gives a bound).
+    let mut at = 0;
+    for &(a, z) in &moves {
+        let len = norm(sub(z, a));
+        let steps = (len / slack).ceil().max(1.0) as usize;
+        if steps > MAX_SAMPLES {
+            return false;
+        }
+        for j in 0..=steps {
+            let t = j as f64 / steps as f64;
+            let x: [f64; 3] = std::array::from_fn(|k| a[k] + t * (z[k] - a[k]));
+            let dist = |k: usize| norm(sub(curve[k], x));
+            while at + 1 < curve.len() && dist(at + 1) <= dist(at) {
+                at += 1;
+            }
+            if dist(at) > tol - slack {
+                return false;
+            }
+        }
+    }
+    true
 }
 
 /// The whole of `moves`, merged for `machine`.
