@@ -32,7 +32,9 @@ struct Cycle {
 
 fn step(text: &str, machine: &Machine) -> (Vec<CommandBlock>, Vec<Cycle>) {
     let program = interpret(text).unwrap_or_else(|e| panic!("{e:?}\n{text}"));
-    let mut blocks = build(&program.moves, machine);
+    // As the planner takes them: `G64 Q`'s runs merged or smoothed where that is quicker.
+    let moves = interpreter::blocks::naive_cam::merge(program.moves, machine);
+    let mut blocks = build(&moves, machine);
     plan(&mut blocks, machine, PERIOD_NS);
     step_blocks(commands(&blocks), machine)
 }

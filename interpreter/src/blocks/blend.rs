@@ -257,19 +257,26 @@ pub(super) fn decision_period(machine: &Machine) -> u64 {
     )
 }
 
+/// The machine's weakest acceleration and jerk, path or axis.
+pub(super) fn weakest(machine: &Machine) -> shared::profile::Limits {
+    let axes = machine.axes.as_array();
+    shared::profile::Limits {
+        acc: axes
+            .iter()
+            .map(|x| x.max_acc_mm_per_s2)
+            .fold(machine.path_acc_mm_per_s2, f64::min),
+        jerk: axes
+            .iter()
+            .map(|x| x.max_jerk_mm_per_s3)
+            .fold(machine.path_jerk_mm_per_s3, f64::min),
+    }
+}
+
 /// The speed (mm/s) and the distance to stop from it (mm) that bound a corner's
 /// neighbourhood: what the machine's weakest acceleration and jerk (path or axis) need to
 /// stop from the faster of the two lines' feeds, jerk-limited.
 pub(super) fn stop_distance(v: f64, machine: &Machine) -> f64 {
-    let axes = machine.axes.as_array();
-    let a = axes
-        .iter()
-        .map(|x| x.max_acc_mm_per_s2)
-        .fold(machine.path_acc_mm_per_s2, f64::min);
-    let j = axes
-        .iter()
-        .map(|x| x.max_jerk_mm_per_s3)
-        .fold(machine.path_jerk_mm_per_s3, f64::min);
+    let shared::profile::Limits { acc: a, jerk: j } = weakest(machine);
     if v * j <= a * a {
         v * (v / j).sqrt()
     } else {
@@ -507,17 +514,7 @@ fn screen(
     if v_b.is_nan() || v_b <= 0.0 || !len_b.is_finite() {
         return None;
     }
-    let axes = machine.axes.as_array();
-    let lim = shared::profile::Limits {
-        acc: axes
-            .iter()
-            .map(|x| x.max_acc_mm_per_s2)
-            .fold(machine.path_acc_mm_per_s2, f64::min),
-        jerk: axes
-            .iter()
-            .map(|x| x.max_jerk_mm_per_s3)
-            .fold(machine.path_jerk_mm_per_s3, f64::min),
-    };
+    let lim = weakest(machine);
     let lost = |u: f64, len: f64| {
         let u = u.min(v);
         let t = lim.change_time(v - u);
@@ -562,13 +559,8 @@ fn run_at_feed(
     let Some(turn) = turns_within(moves, i, next, 2.0 * period_s, machine) else {
         return false;
     };
-    let weakest = machine
-        .axes
-        .as_array()
-        .iter()
-        .map(|x| x.max_acc_mm_per_s2)
-        .fold(machine.path_acc_mm_per_s2, f64::min);
-    super::KINK_SHARE * weakest * period_s >= v * 2.0 * (0.5 * turn.min(std::f64::consts::PI)).sin()
+    super::KINK_SHARE * weakest(machine).acc * period_s
+        >= v * 2.0 * (0.5 * turn.min(std::f64::consts::PI)).sin()
 }
 
 /// A move as [`turns_within`] walks it: a feed line (its unit direction, length and

@@ -66,7 +66,7 @@
 //! The merge is streamed ([`NaiveCam::take`]): a stretch is held back only while it may
 //! still grow, so how a program is handed over in batches does not change the merge.
 
-use super::blend::{cycles_of, decision_period, stop_distance};
+use super::blend::{cycles_of, decision_period, stop_distance, weakest};
 use crate::program::{Move, PathControl};
 use shared::path::{norm, sub};
 use shared::Machine;
@@ -422,18 +422,13 @@ fn moved(m: &Move, o: [f64; 3]) -> Move {
 /// Whether the planner passes every kink of `lines` at its feed: every run of kinks
 /// within two steps of each other at the feed turns, in all, less than the acceleration
 /// it may take over two steps allows (as the corner screen of [`super::blend`] bounds
-/// it, `run_at_feed`). Then merging cannot be quicker but for the few µm of path it cuts,
-/// and the stretch is not stepped both ways: dense output of tiny turns (a million
-/// lines of a spiral of 0.08 mm chords, `cnc check` 4.95 s without the merge) took
-/// 23.5 s with every stretch stepped.
+/// it, `run_at_feed`). Such a way gains nothing on the others but the few µm of path
+/// they cut, and the stretch is not stepped every way: dense output of tiny turns (a
+/// million lines of a spiral of 0.08 mm chords, `cnc check` 4.95 s without the merge)
+/// took 23.5 s with every stretch stepped.
 fn passed_at_feed(lines: &[Move], machine: &Machine) -> bool {
     let period_s = decision_period(machine) as f64 * 1e-9;
-    let weakest = machine
-        .axes
-        .as_array()
-        .iter()
-        .map(|x| x.max_acc_mm_per_s2)
-        .fold(machine.path_acc_mm_per_s2, f64::min);
+    let weakest = weakest(machine).acc;
     // Each line's unit direction, length and feed (mm/s).
     let mut dirs = Vec::with_capacity(lines.len());
     for m in lines {
