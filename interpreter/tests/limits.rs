@@ -1331,3 +1331,51 @@ fn jittery_cam_polylines_keep_every_limit() {
         }
     }
 }
+
+#[test]
+fn merged_and_smoothed_chords_keep_every_limit() {
+    // Random walks of short chords (0.05 to 1 mm, turning a few degrees, rounded to
+    // 1 µm) under `G64 P0.01` and `P0.05`, at F1000 to F6000: `G64 Q`'s runs merged, or
+    // smoothed into cubic pieces, where that is quicker (`blocks::naive_cam`); every
+    // limit must hold on what the planner keeps, and some cases must be smoothed.
+    let mut seed = 0x9e37_79b9_7f4a_7c15u64;
+    let mut rnd = move || {
+        seed ^= seed << 13;
+        seed ^= seed >> 7;
+        seed ^= seed << 17;
+        (seed >> 11) as f64 / (1u64 << 53) as f64
+    };
+    let mut smoothed = 0;
+    for machine in [linuxcnc_machine(), Machine::default()] {
+        for case in 0..8 {
+            let chord = 0.05 + 0.95 * rnd() * rnd();
+            let bend = (0.5 + 4.0 * rnd()).to_radians();
+            let feed = 1000.0 + 5000.0 * rnd();
+            let mode = if case % 2 == 0 {
+                "G64 P0.01"
+            } else {
+                "G64 P0.05"
+            };
+            let mut text = format!("G21 G90 {mode}\nG1 F{feed:.0}\n");
+            let (mut x, mut y, mut a) = (0.0f64, 0.0f64, 0.0f64);
+            for k in 0..300 {
+                // Turning one way for a while, then the other.
+                let sign = if (k / 60) % 2 == 0 { 1.0 } else { -1.0 };
+                a += sign * bend * (0.5 + rnd());
+                x += chord * a.cos();
+                y += chord * a.sin();
+                text += &format!("X{x:.3} Y{y:.3}\n");
+            }
+            text += "M2\n";
+            let (blocks, cycles) = step(&text, &machine);
+            smoothed += blocks.iter().filter(|b| b.degree == 3).count();
+            let w = check(&blocks, &cycles, &machine);
+            let what = format!("case {case}: chord {chord:.3} bend {bend:.4} F{feed:.0} {mode}");
+            assert!(w.speed <= 1.0 + 1e-6, "speed {w:?} {what}");
+            assert!(w.acc <= 1.0 + 1e-3, "acceleration {w:?} {what}");
+            assert!(w.jerk <= 1.0 + 1e-2, "jerk {w:?} {what}");
+            assert!(w.axis <= 1.0 + 1e-3, "axis {w:?} {what}");
+        }
+    }
+    assert!(smoothed > 0, "no case was smoothed");
+}
