@@ -343,7 +343,7 @@ impl FeedNotes {
 }
 
 /// A figure as a user reads it: at most three decimals, no trailing zeros.
-fn shown(v: f64) -> String {
+pub(crate) fn shown(v: f64) -> String {
     let s = format!("{v:.3}");
     s.trim_end_matches('0').trim_end_matches('.').to_string()
 }

@@ -266,7 +266,11 @@ fn plan_once(
             messages: prog.messages,
             compensated: prog.compensated,
             blocks: w.seq,
-            notes: w.feeds.finish("move"),
+            notes: {
+                let mut notes = w.feeds.finish("move");
+                notes.extend(w.cam.note());
+                notes
+            },
             windows: w.windows,
             at_speed: w.at_speed,
             rough_seams: w.rough_seams,

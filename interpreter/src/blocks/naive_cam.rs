@@ -68,6 +68,10 @@
 //! stretch after it counts too), blends decided as the planner decides them
 //! ([`super::blend::cycles_of`]), and the quickest is kept (a tie to the merge).
 //!
+//! What was merged or smoothed, how many moves and within what envelope, is said once,
+//! as a note at the first line changed ([`NaiveCam::note`], with `cnc check`'s feed
+//! notes): the tool no longer passes every programmed vertex there.
+//!
 //! The merge is streamed ([`NaiveCam::take`]): a stretch is held back only while it may
 //! still grow, so how a program is handed over in batches does not change the merge.
 
@@ -128,6 +132,18 @@ fn line_move(line: u32, from: [f64; 3], to: [f64; 3], feed: f64) -> Move {
     }
 }
 
+/// What was merged and smoothed ([`NaiveCam::note`]): the first source line changed,
+/// the moves replaced, the lines and curve pieces they became, and the widest envelope
+/// they keep (mm).
+#[derive(Debug, Default)]
+struct Told {
+    first: Option<u32>,
+    moves: usize,
+    lines: usize,
+    pieces: usize,
+    envelope: f64,
+}
+
 /// The merge as moves stream through it (see the module page).
 #[derive(Debug)]
 pub struct NaiveCam {
@@ -144,6 +160,8 @@ pub struct NaiveCam {
     /// The stretch before, complete, waiting for the start of the next to be weighed
     /// with: what a merge costs the lines after it counts too.
     waiting: Vec<Run>,
+    /// What was merged and smoothed, for [`NaiveCam::note`].
+    told: Told,
     /// The end of the stretch handed out last, as handed out, where the stretch being
     /// gathered continues it: both ways are timed after it, so a stretch is weighed at
     /// the speed it is entered at, with the seam between them.
@@ -161,6 +179,7 @@ impl NaiveCam {
             stretch: Vec::new(),
             stretch_mm: 0.0,
             waiting: Vec::new(),
+            told: Told::default(),
             lead: Vec::new(),
         }
     }
@@ -180,6 +199,29 @@ impl NaiveCam {
             self.push(m, &mut out);
         }
         out
+    }
+
+    /// What a machinist is told once the program is read: where moves were merged or
+    /// smoothed, how many, and within what of the program (a note at the first line
+    /// changed), or nothing.
+    pub fn note(&self) -> Option<(u32, String)> {
+        let t = &self.told;
+        let line = t.first?;
+        let into = match (t.lines, t.pieces) {
+            (l, 0) => format!("{l} merged lines"),
+            (0, p) => format!("{p} smoothed curve pieces"),
+            (l, p) => format!("{l} merged lines and {p} smoothed curve pieces"),
+        };
+        Some((
+            line,
+            format!(
+                "G64 P: {} short moves from here on run as {into}, within P + Q of the program \
+                 ({} mm at most here), where that is quicker (LinuxCNC's naive CAM merge: Q \
+                 is P where no Q is given); G64 P<tol> Q0 follows every move as programmed",
+                t.moves,
+                crate::process::shown(t.envelope)
+            ),
+        ))
     }
 
     /// The stretch held back, if any.
@@ -344,6 +386,30 @@ impl NaiveCam {
                 ways.swap_remove(best)
             }
         };
+        // What the machinist is told ([`NaiveCam::note`]).
+        let moves: usize = stretch.iter().map(|r| r.points.len()).sum();
+        let pieces = chosen
+            .iter()
+            .filter(|m| matches!(m, Move::Nurbs { .. }))
+            .count();
+        if pieces > 0 || chosen.len() < moves {
+            let envelope = match self.mode {
+                Some(PathControl::Blend {
+                    naive_cam_mm: Some(q),
+                    ..
+                }) => self.budget().unwrap_or(q),
+                _ => 0.0,
+            };
+            let told = &mut self.told;
+            told.first.get_or_insert(first.points[0].1);
+            told.envelope = told.envelope.max(envelope);
+            told.moves += moves;
+            if pieces > 0 {
+                told.pieces += pieces;
+            } else {
+                told.lines += chosen.len();
+            }
+        }
         // The lead for the next: the last moves, as long as the machine needs to stop.
         let mut along = 0.0;
         let keep = chosen

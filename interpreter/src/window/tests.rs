@@ -37,7 +37,9 @@ fn whole(
         Err(d) => return (Vec::new(), shown(d), Vec::new()),
     };
     // (`G64 Q`'s merge runs on the moves as they are read, before any window.)
-    let moves = blocks::naive_cam::merge(prog.moves.clone(), machine);
+    let mut cam = blocks::naive_cam::NaiveCam::new(machine);
+    let mut moves = cam.take(prog.moves.clone());
+    moves.extend(cam.finish());
     let mut all = blocks::build(&moves, machine);
     blocks::plan(&mut all, machine, PERIOD_NS);
     let mut check = Checker::new(text, machine);
@@ -48,11 +50,11 @@ fn whole(
     if !bad.is_empty() {
         return (Vec::new(), shown(bad), Vec::new());
     }
-    (
-        commands(&all),
-        Vec::new(),
-        crate::process::notes(&prog, machine),
-    )
+    (commands(&all), Vec::new(), {
+        let mut notes = crate::process::notes(&prog, machine);
+        notes.extend(cam.note());
+        notes
+    })
 }
 
 /// `text` planned whole (as [`whole`]), in the smallest windows it can be, and in

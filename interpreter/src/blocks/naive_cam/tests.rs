@@ -374,3 +374,25 @@ fn a_polygon_of_chords_that_merge_nothing_is_smoothed_where_that_is_quicker() {
     let (before, after) = (cycles(&moves, &machine), cycles(&out, &machine));
     assert!(after * 100 < before * 90, "{after} cycles against {before}");
 }
+
+#[test]
+fn the_machinist_is_told_where_moves_were_merged_or_smoothed() {
+    let machine = linuxcnc();
+    let told = |mode: &str| {
+        let moves = interpret(&dense_arc(20.0, 0.05, 800, 6000, mode))
+            .unwrap()
+            .moves;
+        let mut cam = NaiveCam::new(&machine);
+        let _ = cam.take(moves);
+        let _ = cam.finish();
+        cam.note()
+    };
+    // The first chord is line 4 (after the mode, the rapid and the feed).
+    let (line, text) = told("G64 P0.01").unwrap();
+    assert_eq!(line, 4);
+    assert!(
+        text.contains("800 short moves") && text.contains("(0.02 mm at most here)"),
+        "{text}"
+    );
+    assert_eq!(told("G64 P0.01 Q0"), None);
+}
