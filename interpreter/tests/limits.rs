@@ -1286,19 +1286,23 @@ fn alternating_kinks_close_together_are_passed_at_the_feed_within_the_limits() {
     }
 }
 
+/// Numbers in `[0, 1)` from `seed` (xorshift64, the top 53 bits).
+fn uniform01(mut seed: u64) -> impl FnMut() -> f64 {
+    move || {
+        seed ^= seed << 13;
+        seed ^= seed >> 7;
+        seed ^= seed << 17;
+        (seed >> 11) as f64 / (1u64 << 53) as f64
+    }
+}
+
 #[test]
 fn jittery_cam_polylines_keep_every_limit() {
     // Arcs and straight cuts in chords of 10 to 100 µm, each vertex rounded to 0.1 µm or
     // 1 µm, at F1000 to F6000, exact and blended: where the rounding makes the turns
     // alternate, a run of close kinks is held by the tangents' spread about their mean
     // rather than by its summed turns; every limit must hold either way.
-    let mut seed = 0x2545_f491_4f6c_dd1du64;
-    let mut rnd = move || {
-        seed ^= seed << 13;
-        seed ^= seed >> 7;
-        seed ^= seed << 17;
-        (seed >> 11) as f64 / (1u64 << 53) as f64
-    };
+    let mut rnd = uniform01(0x2545_f491_4f6c_dd1d);
     for machine in [linuxcnc_machine(), Machine::default()] {
         for case in 0..12 {
             let chord = 0.01 + 0.09 * rnd();
@@ -1338,13 +1342,7 @@ fn merged_and_smoothed_chords_keep_every_limit() {
     // 1 µm) under `G64 P0.01` and `P0.05`, at F1000 to F6000: `G64 Q`'s runs merged, or
     // smoothed into cubic pieces, where that is quicker (`blocks::naive_cam`); every
     // limit must hold on what the planner keeps, and some cases must be smoothed.
-    let mut seed = 0x9e37_79b9_7f4a_7c15u64;
-    let mut rnd = move || {
-        seed ^= seed << 13;
-        seed ^= seed >> 7;
-        seed ^= seed << 17;
-        (seed >> 11) as f64 / (1u64 << 53) as f64
-    };
+    let mut rnd = uniform01(0x9e37_79b9_7f4a_7c15);
     let mut smoothed = 0;
     for machine in [linuxcnc_machine(), Machine::default()] {
         for case in 0..8 {

@@ -1,5 +1,4 @@
 use super::*;
-use crate::blocks::{build, commands, plan};
 use crate::program::interpret;
 
 fn example(name: &str) -> String {
@@ -29,11 +28,7 @@ fn dense_arc(r: f64, chord: f64, n: usize, feed: u32, mode: &str) -> String {
 
 /// The cycles a move list takes on `machine` at 1 ms, as `cnc check --estimate` steps it.
 fn cycles(ms: &[Move], machine: &Machine) -> u64 {
-    let mut blocks = build(ms, machine);
-    plan(&mut blocks, machine, 1_000_000);
-    crate::estimate::estimate(&commands(&blocks), machine, 1_000_000)
-        .unwrap()
-        .cycles
+    cycles_of(ms, machine, 1_000_000).unwrap()
 }
 
 fn lines(ms: &[Move]) -> Vec<([f64; 3], [f64; 3], u32, f64)> {
