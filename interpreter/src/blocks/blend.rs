@@ -571,6 +571,11 @@ enum Walked {
     Other,
 }
 
+/// The angle (radians) between the unit directions `a` and `b`.
+pub(super) fn turn_between(a: [f64; 3], b: [f64; 3]) -> f64 {
+    2.0 * super::half_turn_sin(dot(a, b)).min(1.0).asin()
+}
+
 /// The sum of the turns (radians) of the programmed corners less than a reach from the
 /// corner at the end of line `i` (into line `next`) along the path on either side, that
 /// corner's own included, and the reach: `window_s` (s) at the highest feed of the
@@ -609,7 +614,6 @@ fn turns_within(
         _ => Walked::Other,
     };
     let path_mode = |k: &usize| matches!(moves[*k], Move::PathMode { .. });
-    let turn = |a: [f64; 3], b: [f64; 3]| 2.0 * super::half_turn_sin(dot(a, b)).min(1.0).asin();
     let (Walked::Line(ui, li, fi), Walked::Line(un, ln, fn_)) = (walked(i), walked(next)) else {
         return None;
     };
@@ -628,7 +632,7 @@ fn turns_within(
             };
             match walked(q) {
                 Walked::Line(uq, lq, fq) => {
-                    sum += turn(u, uq);
+                    sum += turn_between(u, uq);
                     *fastest = fastest.max(fq);
                     (k, u, dist) = (q, uq, dist + lq);
                 }
@@ -645,7 +649,7 @@ fn turns_within(
     loop {
         let reach = window_s * fastest;
         // Back from the start of line `i`, and on from the end of line `next`.
-        let sum = turn(ui, un)
+        let sum = turn_between(ui, un)
             + walk(&before, (i, ui, li), reach, &mut fastest)?
             + walk(&after, (next, un, ln), reach, &mut fastest)?;
         if window_s * fastest <= reach {

@@ -75,7 +75,8 @@
 //! The merge is streamed ([`NaiveCam::take`]): a stretch is held back only while it may
 //! still grow, so how a program is handed over in batches does not change the merge.
 
-use super::blend::{cycles_of, decision_period, stop_distance, weakest};
+use super::blend::{cycles_of, decision_period, stop_distance, turn_between, weakest};
+use super::dot;
 use crate::program::{Move, PathControl};
 use shared::path::{norm, sub};
 use shared::Machine;
@@ -148,9 +149,8 @@ struct Told {
 #[derive(Debug)]
 pub struct NaiveCam {
     machine: Machine,
-    /// The path mode in force, and the merge tolerance it sets, where it sets one.
+    /// The path mode in force (its merge tolerance: [`tolerance`]).
     mode: Option<PathControl>,
-    q: Option<f64>,
     /// The run growing.
     run: Option<Run>,
     /// The runs before it, each starting where the one before ended: the stretch that
@@ -174,7 +174,6 @@ impl NaiveCam {
         NaiveCam {
             machine: machine.clone(),
             mode: None,
-            q: None,
             run: None,
             stretch: Vec::new(),
             stretch_mm: 0.0,
@@ -187,7 +186,7 @@ impl NaiveCam {
     /// The moves that follow those taken before, merged; a stretch that may still grow
     /// is held back for the next call (or [`NaiveCam::finish`]).
     pub fn take(&mut self, moves: Vec<Move>) -> Vec<Move> {
-        if self.q.is_none()
+        if self.q().is_none()
             && self.run.is_none()
             && self.waiting.is_empty()
             && !moves.iter().any(is_mode)
@@ -241,7 +240,7 @@ impl NaiveCam {
                 rapid: false,
                 feed,
             },
-        ) = (self.q, &m)
+        ) = (self.q(), &m)
         {
             self.see(*line, *from, *to, *feed, q, out);
             return;
@@ -249,7 +248,6 @@ impl NaiveCam {
         self.flush(out);
         if let Move::PathMode { control, .. } = &m {
             self.mode = Some(*control);
-            self.q = tolerance(control);
         }
         out.push(m);
     }
@@ -314,8 +312,9 @@ impl NaiveCam {
     /// and it waits for the next.
     fn complete(&mut self, out: &mut Vec<Move>) {
         let waiting = std::mem::take(&mut self.waiting);
-        self.weigh(&waiting, &self.stretch.clone(), out);
-        self.waiting = std::mem::take(&mut self.stretch);
+        let stretch = std::mem::take(&mut self.stretch);
+        self.weigh(&waiting, &stretch, out);
+        self.waiting = stretch;
         self.stretch_mm = 0.0;
     }
 
@@ -455,6 +454,11 @@ impl NaiveCam {
         [leave, arrive]
     }
 
+    /// The merge tolerance in force, where there is one.
+    fn q(&self) -> Option<f64> {
+        self.mode.as_ref().and_then(tolerance)
+    }
+
     /// How far a smoothed stretch may stray from the programmed moves: `P + Q`, the
     /// envelope LinuxCNC's merge and blends keep.
     fn budget(&self) -> Option<f64> {
@@ -554,11 +558,7 @@ fn passed_at_feed(lines: &[Move], machine: &Machine) -> bool {
             feed.min(machine.max_feed_mm_per_min) / 60.0,
         ));
     }
-    let turn = |k: usize| {
-        let (a, b) = (dirs[k - 1].0, dirs[k].0);
-        let cos = a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
-        2.0 * super::half_turn_sin(cos).min(1.0).asin()
-    };
+    let turn = |k: usize| turn_between(dirs[k - 1].0, dirs[k].0);
     // The kink between line k − 1 and line k, for k in 1..n.
     (1..dirs.len()).all(|k| {
         let v = dirs[k - 1].2.max(dirs[k].2);
@@ -607,11 +607,6 @@ fn smoothed(stretch: &[Run], tol: f64, ends: [Option<[f64; 3]>; 2]) -> Option<Ve
     if h.iter().any(|&x| x.is_nan() || x <= 0.0) {
         return None;
     }
-    let unit = |a: [f64; 3], b: [f64; 3]| {
-        let d = sub(b, a);
-        let l = norm(d);
-        (l > 0.0).then(|| d.map(|x| x / l))
-    };
     let first = &stretch[0];
     let last = &stretch[m - 1];
     let before_end = last
@@ -622,11 +617,11 @@ fn smoothed(stretch: &[Run], tol: f64, ends: [Option<[f64; 3]>; 2]) -> Option<Ve
     let mut d = vec![[0.0; 3]; m + 1];
     d[0] = match ends[0] {
         Some(u) => u,
-        None => unit(first.start, first.points[0].0)?,
+        None => unit_of(sub(first.points[0].0, first.start))?,
     };
     d[m] = match ends[1] {
         Some(u) => u,
-        None => unit(before_end, last.end())?,
+        None => unit_of(sub(last.end(), before_end))?,
     };
     // C2 at each inner vertex i: h_i·D_{i-1} + 2(h_{i-1} + h_i)·D_i + h_{i-1}·D_{i+1} =
     // 3·(h_i/h_{i-1}·(P_i − P_{i-1}) + h_{i-1}/h_i·(P_{i+1} − P_i)); the ends given.
@@ -802,9 +797,9 @@ fn tolerance(control: &PathControl) -> Option<f64> {
 fn off_segment(p: [f64; 3], a: [f64; 3], b: [f64; 3]) -> f64 {
     let m = sub(b, a);
     let d = sub(p, a);
-    let mm = m[0] * m[0] + m[1] * m[1] + m[2] * m[2];
+    let mm = dot(m, m);
     let t = if mm > 0.0 {
-        ((d[0] * m[0] + d[1] * m[1] + d[2] * m[2]) / mm).clamp(0.0, 1.0)
+        (dot(d, m) / mm).clamp(0.0, 1.0)
     } else {
         0.0
     };
