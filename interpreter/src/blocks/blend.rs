@@ -110,11 +110,12 @@
 //!   the repository's programs and halved `cnc check` on a zigzag of short lines, 8.3 →
 //!   4.8 s for 5 000 lines);
 //! * then each chain of corners (each at the end of the line the one before goes into,
-//!   [`chains`]) is stepped whole, from rest to rest, as decided and with every corner the
-//!   screen left open blended, and the quicker kept. Corner by corner, one blend among
-//!   exact stops may not pay where the chain blended does: a zigzag of 0.5 mm lines at
-//!   22.6°, `P0.01`, F3000 on the built-in machine was left exact at every corner, 4.141 s
-//!   for 60 lines against 2.528 s blended.
+//!   [`chains`]) is stepped from rest to rest as decided and with every corner the screen
+//!   left open blended, and the quicker kept: not whole, but each stretch of it where the
+//!   two differ, with four stopping distances on either side ([`differing_stretches`]).
+//!   Corner by corner, one blend among exact stops may not pay where the chain blended
+//!   does: a zigzag of 0.5 mm lines at 22.6°, `P0.01`, F3000 on the built-in machine was
+//!   left exact at every corner, 4.141 s for 60 lines against 2.528 s blended.
 //!
 //! The corners left exact are put under `G61` (a path-mode change before the line that
 //! ends at the corner and the mode in force back after it), so the result is final:
@@ -330,7 +331,12 @@ fn decide(moves: &[Move], plans: &[Option<Corner>], machine: &Machine) -> Decide
     // stops does not pay where the whole chain blended does (a zigzag of 0.5 mm lines at
     // 22°, P0.01, F3000 on the built-in machine, 300 of them: 22.617 s corner by corner, 14.369 s with
     // every corner the screen leaves open blended). So each chain of corners is also
-    // stepped whole both ways, and the quicker kept.
+    // stepped both ways, every corner the screen leaves open blended against the corners
+    // as decided, and the quicker kept: not the whole chain, but each stretch of it where
+    // the two ways differ, with what the machine needs to stop twice over on either side
+    // ([`differing_stretches`]). (Stepped whole, a raster whose every row end was weighed
+    // stepped the whole program twice: 100 000 lines of `G1` in 0.5 mm steps, `cnc check`
+    // 1.57 s, 0.91 s without the chains.)
     for (first, last) in chains(plans, &prev) {
         let mut lines = vec![first];
         let mut k = first;
@@ -366,12 +372,42 @@ fn decide(moves: &[Move], plans: &[Option<Corner>], machine: &Machine) -> Decide
             })
             .collect();
         let Some(segs) = segs else { continue };
-        let cycles =
-            |chosen: &[Option<Corner>]| window_cycles(&segs, |w| chosen[w], machine, period_ns);
-        if let (Some(o), Some(g)) = (cycles(&open), cycles(&greedy)) {
-            if o < g {
-                for (&k, c) in lines.iter().zip(open) {
-                    kept[k] = c;
+        let v = segs
+            .iter()
+            .map(|s| s.2)
+            .fold(0.0, f64::max)
+            .min(machine.max_feed_mm_per_min)
+            / 60.0;
+        let trim = lines
+            .iter()
+            .filter_map(|&k| plans[k].map(|c| c.trim_mm))
+            .fold(0.0, f64::max);
+        // (Four stopping distances: with two, as a corner's own neighbourhood, the
+        // generated programs' estimates moved by -0.3 to +0.1 %, the sine polyline under a
+        // bare `G64` 15.047 -> 15.059 s; with four none is slower than stepped whole.)
+        let reach = 4.0 * stop_distance(v, machine) + 2.0 * trim;
+        let trims: Vec<f64> = lines
+            .iter()
+            .map(|&k| plans[k].map_or(0.0, |c| c.trim_mm))
+            .collect();
+        for st in differing_stretches(&segs, &open, &greedy, &trims, reach) {
+            let part = &segs[st.lo..=st.hi];
+            let mut cut = part.to_vec();
+            let first = &mut cut[0];
+            first.0 = add(
+                first.1,
+                unit_from(first.1, first.0).map(|x| x * st.first_len),
+            );
+            let last = &mut cut[part.len() - 1];
+            last.1 = add(last.0, unit_from(last.0, last.1).map(|x| x * st.last_len));
+            let cycles = |chosen: &[Option<Corner>]| {
+                window_cycles(&cut, |w| chosen[st.lo + w], machine, period_ns)
+            };
+            if let (Some(o), Some(g)) = (cycles(&open), cycles(&greedy)) {
+                if o < g {
+                    for w in st.lo..=st.hi {
+                        kept[lines[w]] = open[w];
+                    }
                 }
             }
         }
@@ -386,6 +422,83 @@ fn decide(moves: &[Move], plans: &[Option<Corner>], machine: &Machine) -> Decide
         })
         .collect();
     Decided { plans: kept, exact }
+}
+
+/// A stretch of a chain of lines that [`decide`] weighs both ways: the lines `lo..=hi`,
+/// the first kept for its last `first_len` mm, the last for its first `last_len` mm.
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct Stretch {
+    lo: usize,
+    hi: usize,
+    first_len: f64,
+    last_len: f64,
+}
+
+/// The unit direction from `a` to `b` (zero where they meet).
+fn unit_from(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
+    let d = sub(b, a);
+    let l = norm(d);
+    if l > 0.0 {
+        d.map(|x| x / l)
+    } else {
+        [0.0; 3]
+    }
+}
+
+/// Where the two ways `a` and `b` of a chain of lines `segs` (the corner at the end of
+/// each line, or none) differ, each with `reach` (mm) of the chain on either side of
+/// it, overlapping ones joined. Outside them the two ways are the same corners, and what
+/// lies farther than a few stopping distances from a corner where they differ changes
+/// little of the time through it (the reasoning of [`time_around`]'s neighbourhood,
+/// which is stepped the same way, from rest to rest). The far lines
+/// are cut to the reach, but never below what the blend at their inner end takes of them
+/// (`trims`: each line's end corner's trim), as in [`time_around`].
+fn differing_stretches(
+    segs: &[([f64; 3], [f64; 3], f64)],
+    a: &[Option<Corner>],
+    b: &[Option<Corner>],
+    trims: &[f64],
+    reach: f64,
+) -> Vec<Stretch> {
+    let n = segs.len();
+    // Where each line ends along the chain.
+    let mut ends = Vec::with_capacity(n);
+    let mut s = 0.0;
+    for seg in segs {
+        s += norm(sub(seg.1, seg.0));
+        ends.push(s);
+    }
+    let start_of = |w: usize| if w == 0 { 0.0 } else { ends[w - 1] };
+    let differ = (0..n.saturating_sub(1)).filter(|&w| a[w].is_some() != b[w].is_some());
+    let mut spans: Vec<(f64, f64)> = Vec::new();
+    for w in differ {
+        let (lo, hi) = (ends[w] - reach, ends[w] + reach);
+        match spans.last_mut() {
+            Some(last) if lo <= last.1 => last.1 = hi,
+            _ => spans.push((lo, hi)),
+        }
+    }
+    spans
+        .into_iter()
+        .map(|(from, to)| {
+            // The line `from` falls in (the first whose end is past it), and `to`'s.
+            let lo = ends.partition_point(|&e| e <= from).min(n - 1);
+            let hi = ends.partition_point(|&e| e < to).min(n - 1);
+            let len = |w: usize| ends[w] - start_of(w);
+            let first_len = (ends[lo] - from.max(start_of(lo)))
+                .max(2.0 * trims[lo])
+                .min(len(lo));
+            let last_len = (to.min(ends[hi]) - start_of(hi))
+                .max(2.0 * if hi > 0 { trims[hi - 1] } else { 0.0 })
+                .min(len(hi));
+            Stretch {
+                lo,
+                hi,
+                first_len,
+                last_len,
+            }
+        })
+        .collect()
 }
 
 /// Each chain of corners as the lines `(first, last)` whose end corners begin and end it:
@@ -438,81 +551,35 @@ fn screen(
     };
     let f = feed(i)?.min(feed(c.next)?).min(machine.max_feed_mm_per_min);
     let v = f / 60.0;
-    let planned = |ms: &[Move]| {
-        let mut blocks = super::build(ms, machine);
-        super::plan(&mut blocks, machine, period_ns);
-        super::commands(&blocks)
-    };
-    // The exact corner between two lines long enough to reach the feed and stop from it.
-    let leg = 2.0 * stop_distance(v, machine) + c.trim_mm;
-    let (a, b) = (c.u1.map(|x| -x * leg), c.u2.map(|x| x * leg));
-    let exact = planned(&[
-        Move::Line {
-            line: 0,
-            from: a,
-            to: [0.0; 3],
-            rapid: false,
-            feed: f,
-        },
-        Move::Line {
-            line: 0,
-            from: [0.0; 3],
-            to: b,
-            rapid: false,
-            feed: f,
-        },
-        Move::End { line: 0 },
-    ]);
-    let ends: Vec<f64> = exact
-        .iter()
-        .filter(|b| b.length_mm > 0.0)
-        .map(|b| b.end_feed_mm_per_min)
-        .collect();
-    let v_e = ends[..ends.len().saturating_sub(1)]
-        .iter()
-        .fold(f, |m, x| m.min(*x))
-        / 60.0;
     // The exact corner's speed holds in the program only where the kinks on either side
     // are at least two steps away: closer kinks are slowed as a run (`CloseKinks`), which
-    // the two long lines do not show.
+    // the two long lines below do not show.
     let leg = |k: usize| match &moves[k] {
         Move::Line { from, to, .. } => norm(sub(*to, *from)),
         _ => 0.0,
     };
     let period_s = period_ns as f64 * 1e-9;
     let alone = leg(i).min(leg(c.next)) >= 2.0 * v * period_s;
+    let mut beside: Option<bool> = None;
+    let mut beside_at_feed = || {
+        *beside.get_or_insert_with(|| alone || run_at_feed(moves, i, c.next, v, machine, period_s))
+    };
     // A corner passed at the feed loses nothing to blend (the blend, never faster than
     // the feed, can at most tie): left exact without planning the blend. So too where
     // closer kinks stand beside it, when every run of them it may be slowed in is
     // passed at the feed as well ([`run_at_feed`]): dense CAM output of tiny turns,
     // whose every corner was otherwise stepped both ways (a spiral of 0.08 mm chords
-    // turning 0.11°, `G64 P0.01`, F3000: 95 µs a line in `cnc check`).
-    if v_e >= v && (alone || run_at_feed(moves, i, c.next, v, machine, period_s)) {
+    // turning 0.11°, `G64 P0.01`, F3000: 95 µs a line in `cnc check`). Where the turn is
+    // far too small to slow the feed ([`surely_at_feed`]) that is known without planning
+    // the two lines (nearly every corner of dense CAM output: a raster of 0.5 mm steps
+    // whose heights bend it by a few hundredths of a degree, 2 µs a corner planned).
+    let at_feed = surely_at_feed(&c, v, machine, period_s);
+    if at_feed && beside_at_feed() {
         return Some(false);
     }
-    // The blend alone, about the origin.
-    let o = c.corner;
-    let local = Corner {
-        corner: [0.0; 3],
-        ..c
-    };
-    let start = sub(sub(c.corner, c.u1.map(|x| x * c.trim_mm)), o);
-    let end = sub(add(c.corner, c.u2.map(|x| x * c.trim_mm)), o);
-    let blend = planned(&[
-        Move::Nurbs {
-            line: 0,
-            degree: 5,
-            knots: vec![0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0],
-            ctrl: control_points(&local, start, end),
-            feed: f,
-        },
-        Move::End { line: 0 },
-    ]);
-    let motion = || blend.iter().filter(|b| b.length_mm > 0.0);
-    let v_b = motion().map(|b| b.feed_mm_per_min).fold(f, f64::min) / 60.0;
-    let len_b: f64 = motion().map(|b| b.length_mm).sum();
-    if v_b.is_nan() || v_b <= 0.0 || !len_b.is_finite() {
-        return None;
+    let v_e = exact_corner_speed(&c, f, machine, period_ns) / 60.0;
+    if v_e >= v && !at_feed && beside_at_feed() {
+        return Some(false);
     }
     let lim = weakest(machine);
     let lost = |u: f64, len: f64| {
@@ -525,7 +592,22 @@ fn screen(
         };
         2.0 * (t - lim.change_distance(v, u) / v) + slow
     };
-    let (lb, le) = (lost(v_b, len_b), lost(v_e, 0.0));
+    let le = lost(v_e, 0.0);
+    // Where even the blend's highest possible speed loses clearly more than the exact
+    // corner, it is left exact without planning the blend: the same answer as below, as
+    // the loss only grows as the speed falls and the length grows
+    // ([`blend_speed_bound`]; the spiral of the bench, 1° turns in 0.04 mm chords at
+    // F3000 under a bare `G64`: 90 % of `cnc check` was planning blends alone here).
+    let (v_up, len_down) = blend_speed_bound(&c, v, machine);
+    if le * SCREEN_FACTOR + SCREEN_MARGIN_S <= lost(v_up, len_down) {
+        return Some(false);
+    }
+    let (v_b, len_b) = blend_alone(&c, f, machine, period_ns);
+    let v_b = v_b / 60.0;
+    if v_b.is_nan() || v_b <= 0.0 || !len_b.is_finite() {
+        return None;
+    }
+    let lb = lost(v_b, len_b);
     if alone && v_e >= v_b {
         Some(false)
     } else if lb * SCREEN_FACTOR + SCREEN_MARGIN_S <= le {
@@ -535,6 +617,176 @@ fn screen(
     } else {
         None
     }
+}
+
+/// The speed (mm/min) the planner passes the corner `c` at, left exact, between two
+/// lines at the feed `f` (mm/min) long enough to reach it and stop from it.
+fn exact_corner_speed(c: &Corner, f: f64, machine: &Machine, period_ns: u64) -> f64 {
+    let leg = 2.0 * stop_distance(f / 60.0, machine) + c.trim_mm;
+    let (a, b) = (c.u1.map(|x| -x * leg), c.u2.map(|x| x * leg));
+    let line = |from, to| Move::Line {
+        line: 0,
+        from,
+        to,
+        rapid: false,
+        feed: f,
+    };
+    let mut blocks = super::build(
+        &[line(a, [0.0; 3]), line([0.0; 3], b), Move::End { line: 0 }],
+        machine,
+    );
+    super::plan(&mut blocks, machine, period_ns);
+    let ends: Vec<f64> = super::commands(&blocks)
+        .iter()
+        .filter(|b| b.length_mm > 0.0)
+        .map(|b| b.end_feed_mm_per_min)
+        .collect();
+    ends[..ends.len().saturating_sub(1)]
+        .iter()
+        .fold(f, |m, x| m.min(*x))
+}
+
+/// The cap (mm/min) the planner gives the blend of the corner `c` planned alone at the
+/// feed `f` (mm/min), and its length (mm).
+fn blend_alone(c: &Corner, f: f64, machine: &Machine, period_ns: u64) -> (f64, f64) {
+    // About the origin.
+    let o = c.corner;
+    let local = Corner {
+        corner: [0.0; 3],
+        ..*c
+    };
+    let start = sub(sub(c.corner, c.u1.map(|x| x * c.trim_mm)), o);
+    let end = sub(add(c.corner, c.u2.map(|x| x * c.trim_mm)), o);
+    let moves = [
+        Move::Nurbs {
+            line: 0,
+            degree: 5,
+            knots: vec![0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0],
+            ctrl: control_points(&local, start, end),
+            feed: f,
+        },
+        Move::End { line: 0 },
+    ];
+    let mut blocks = super::build(&moves, machine);
+    super::plan(&mut blocks, machine, period_ns);
+    let planned = super::commands(&blocks);
+    let motion = || planned.iter().filter(|b| b.length_mm > 0.0);
+    (
+        motion().map(|b| b.feed_mm_per_min).fold(f, f64::min),
+        motion().map(|b| b.length_mm).sum(),
+    )
+}
+
+/// The control points of a Bézier curve's derivative (`M` = `N − 1` of them).
+fn hodograph_of<const N: usize, const M: usize>(q: [[f64; 3]; N]) -> [[f64; 3]; M] {
+    debug_assert_eq!(M + 1, N);
+    let n = M as f64;
+    std::array::from_fn(|i| sub(q[i + 1], q[i]).map(|x| x * n))
+}
+
+/// A Bézier curve's point at `t` (de Casteljau; plain loops, which the compiler keeps
+/// inline: `[T; N]::map` here was not, and took most of the screen's time).
+fn de_casteljau<const N: usize>(mut b: [[f64; 3]; N], t: f64) -> [f64; 3] {
+    for k in (1..N).rev() {
+        for i in 0..k {
+            let next = b[i + 1];
+            for (x, n) in b[i].iter_mut().zip(next) {
+                *x += t * (n - *x);
+            }
+        }
+    }
+    b[0]
+}
+
+/// Samples of a blend for [`blend_speed_bound`].
+const BOUND_SAMPLES: usize = 16;
+/// The margin [`blend_speed_bound`] keeps on its speed and its length.
+const BOUND_MARGIN: f64 = 1.01;
+
+/// A speed (mm/s) no lower than the cap the planner gives the blend of `c` at the feed
+/// `v` (mm/s) and a length (mm) no longer than the blend's, without planning it: the
+/// path's acceleration and jerk at the largest curvature `κ` and curvature rate
+/// `|dκ/ds|` of [`BOUND_SAMPLES`] samples, `min(v, √(A/κ), ∛(J/|dκ/ds|))`, and the
+/// chords between the samples. The planner holds every sample of its own (its peaks
+/// searched) within the limits, at shares of them, with the rate of the curvature
+/// vector, which is no less than the rate of its length. So its cap is lower, and a
+/// margin of a hundredth covers a sample near a peak the planner's do not hit (the
+/// property test `a_blends_speed_bound_is_no_lower_than_its_planned_cap`).
+fn blend_speed_bound(c: &Corner, v: f64, machine: &Machine) -> (f64, f64) {
+    let ctrl = control_points(
+        c,
+        sub(c.corner, c.u1.map(|x| x * c.trim_mm)),
+        add(c.corner, c.u2.map(|x| x * c.trim_mm)),
+    );
+    // The control points of the curve and of its first three derivatives.
+    let p: [[f64; 3]; 6] = std::array::from_fn(|i| [ctrl[i][0], ctrl[i][1], ctrl[i][2]]);
+    let d1: [[f64; 3]; 5] = hodograph_of(p);
+    let d2: [[f64; 3]; 4] = hodograph_of(d1);
+    let d3: [[f64; 3]; 3] = hodograph_of(d2);
+    let (mut kappa, mut rate, mut len) = (0.0f64, 0.0f64, 0.0);
+    let mut last = p[0];
+    for i in 0..=BOUND_SAMPLES {
+        let t = i as f64 / BOUND_SAMPLES as f64;
+        let (e1, e2, e3) = (
+            de_casteljau(d1, t),
+            de_casteljau(d2, t),
+            de_casteljau(d3, t),
+        );
+        let sp = norm(e1);
+        let x = cross(e1, e2);
+        let xn = norm(x);
+        if sp > 0.0 {
+            kappa = kappa.max(xn / sp.powi(3));
+            if xn > 0.0 {
+                // d|x|/dt and d|e1|/dt, so dκ/dt = (d|x|/dt)/s³ − 3|x|·(ds/dt)/s⁴.
+                let dxn = dot(x, cross(e1, e3)) / xn;
+                let dsp = dot(e1, e2) / sp;
+                rate = rate.max(((dxn / sp.powi(3) - 3.0 * xn * dsp / sp.powi(4)) / sp).abs());
+            }
+        }
+        let q = de_casteljau(p, t);
+        len += norm(sub(q, last));
+        last = q;
+    }
+    let by_acc = if kappa > 0.0 {
+        (machine.path_acc_mm_per_s2 / kappa).sqrt()
+    } else {
+        f64::INFINITY
+    };
+    let by_jerk = if rate > 0.0 {
+        (machine.path_jerk_mm_per_s3 / rate).cbrt()
+    } else {
+        f64::INFINITY
+    };
+    (
+        v.min(BOUND_MARGIN * by_acc.min(by_jerk)),
+        len / BOUND_MARGIN,
+    )
+}
+
+/// How far within the planner's kink bound [`surely_at_feed`] asks a corner to be.
+const SURE_MARGIN: f64 = 0.5;
+/// And within each axis's velocity (the planner's line cap is that bound itself: only
+/// its rounding is left out).
+const SURE_VEL_MARGIN: f64 = 1.0 - 1e-9;
+
+/// Whether the planner surely passes the exact corner `c` at the speed `v` (mm/s)
+/// between two lines long enough to reach it, without planning them: both lines' axis
+/// velocities at `v` within [`SURE_VEL_MARGIN`] of their limits, and the direction
+/// change at `v` in one period (`v·2·sin(θ/2)/T`, which bounds every axis's share too)
+/// within [`SURE_MARGIN`] of the weakest acceleration's kink share. The planner's kink speed is the least of those bounds at
+/// their full share, so this only says "at the feed" where planning would too (the
+/// property test `a_corner_surely_at_feed_is_planned_at_feed`); where it says no, the
+/// screen plans the two lines.
+fn surely_at_feed(c: &Corner, v: f64, machine: &Machine, period_s: f64) -> bool {
+    let axes = machine.axes.as_array();
+    let within_vel = |u: [f64; 3]| {
+        (0..3).all(|k| v * u[k].abs() <= SURE_VEL_MARGIN * axes[k].max_vel_mm_per_min / 60.0)
+    };
+    let half_sin = super::half_turn_sin(dot(c.u1, c.u2));
+    within_vel(c.u1)
+        && within_vel(c.u2)
+        && v * 2.0 * half_sin <= SURE_MARGIN * super::KINK_SHARE * weakest(machine).acc * period_s
 }
 
 /// Whether every run of close kinks the planner may slow the corner at the end of line

@@ -893,19 +893,24 @@ fn a_braking_over_short_lines_is_one_braking() {
     );
 }
 
+/// A plain, reproducible stream of uniforms in `[0, 1)` from `seed` (xorshift64*), for
+/// the planner's property tests.
+pub(super) fn uniforms(seed: u64) -> impl FnMut() -> f64 {
+    let mut x = seed | 1;
+    move || {
+        x ^= x >> 12;
+        x ^= x << 25;
+        x ^= x >> 27;
+        (x.wrapping_mul(0x2545_f491_4f6c_dd1d) >> 11) as f64 / (1u64 << 53) as f64
+    }
+}
+
 /// Figures of a made-up curve block for [`Envelope`]: `n` samples whose curvature, rate
 /// and axis shares spread over three orders of magnitude about the built-in machine's
 /// limits at tens of mm/s, so that different samples bind at different accelerations;
 /// some repeated, as an arc's are.
 fn made_up_figures(seed: u64, n: usize) -> Vec<Figure> {
-    let mut x = seed | 1;
-    let mut next = move || {
-        // xorshift64*: a plain, reproducible stream of uniforms in [0, 1).
-        x ^= x >> 12;
-        x ^= x << 25;
-        x ^= x >> 27;
-        (x.wrapping_mul(0x2545_f491_4f6c_dd1d) >> 11) as f64 / (1u64 << 53) as f64
-    };
+    let mut next = uniforms(seed);
     let mut out: Vec<Figure> = Vec::with_capacity(n);
     for _ in 0..n {
         if next() < 0.2 {

@@ -711,3 +711,155 @@ fn the_kinks_within_two_steps_are_summed_up_to_a_rest() {
     let first = turns_within(&ms, lines[0], lines[1], 1.5e-3, &m).unwrap();
     assert!(close(first, all), "{first} {turns:?}");
 }
+
+#[test]
+fn a_corner_surely_at_feed_is_planned_at_feed() {
+    // `surely_at_feed` spares the screen planning the exact corner: wherever it says the
+    // corner is passed at the feed, the two lines planned pass it at the feed. Random
+    // directions in space, turns from 1e-4 rad to about 10°, feeds from a fiftieth of
+    // the machine's highest to past it, tolerances 1 µm to 1 mm, on both machines.
+    let mut next = crate::blocks::tests::uniforms(11);
+    let mut sure = 0;
+    let mut not_sure = 0;
+    for machine in [Machine::default(), linuxcnc()] {
+        let period_ns = decision_period(&machine);
+        let period_s = period_ns as f64 * 1e-9;
+        for _ in 0..1500 {
+            let mut unit = || {
+                let d = [2.0 * next() - 1.0, 2.0 * next() - 1.0, 2.0 * next() - 1.0];
+                d.map(|x| x / norm(d))
+            };
+            let (u1, w) = (unit(), unit());
+            // u2: u1 turned by `theta` towards the part of `w` across it.
+            let across = sub(w, u1.map(|x| x * dot(w, u1)));
+            let across = across.map(|x| x / norm(across));
+            let theta = 10f64.powf(-4.0 + 2.8 * next());
+            let u2 = [0, 1, 2].map(|k| theta.cos() * u1[k] + theta.sin() * across[k]);
+            let f = machine.max_feed_mm_per_min * (0.02 + 1.1 * next());
+            let tol = 10f64.powf(-3.0 + 3.0 * next());
+            let Some(c) = corner(u1.map(|x| -x), [0.0; 3], [0.0; 3], u2, tol) else {
+                continue;
+            };
+            let f = f.min(machine.max_feed_mm_per_min);
+            if !surely_at_feed(&c, f / 60.0, &machine, period_s) {
+                not_sure += 1;
+                continue;
+            }
+            sure += 1;
+            let v_e = exact_corner_speed(&c, f, &machine, period_ns);
+            // (At the feed within its rounding: the planner's speeds go through mm/s.)
+            assert!(
+                v_e >= f * (1.0 - 1e-12),
+                "turn {theta} rad at F{f}, tolerance {tol}: said at the feed, planned at F{v_e}"
+            );
+        }
+    }
+    assert!(sure > 1000 && not_sure > 300, "{sure} sure, {not_sure} not");
+}
+
+#[test]
+fn a_chain_is_weighed_only_where_its_two_ways_differ() {
+    // 100 lines of 1 mm; the ways differ at the corners after lines 10, 11 and 80.
+    let segs: Vec<([f64; 3], [f64; 3], f64)> = (0..100)
+        .map(|k| {
+            (
+                [f64::from(k), 0.0, 0.0],
+                [f64::from(k + 1), 0.0, 0.0],
+                3000.0,
+            )
+        })
+        .collect();
+    let c = corner(
+        [0.0; 3],
+        [1.0, 0.0, 0.0],
+        [1.0, 0.0, 0.0],
+        [2.0, 1.0, 0.0],
+        0.01,
+    );
+    let a: Vec<Option<Corner>> = (0..100)
+        .map(|k| c.filter(|_| k % 2 == 0 || k == 11))
+        .collect();
+    let mut b = a.clone();
+    for k in [10, 11, 80] {
+        b[k] = if a[k].is_some() { None } else { c };
+    }
+    let trims = vec![0.2; 100];
+    let st = differing_stretches(&segs, &a, &b, &trims, 2.5);
+    // Corners at 11, 12 (ends of lines 10, 11) joined: lines 8.5..14.5, that is 8 to 14,
+    // the first kept for 0.5 mm, the last for 0.5 mm; and 78.5..83.5 about corner 81.
+    assert_eq!(st.len(), 2, "{st:?}");
+    assert_eq!((st[0].lo, st[0].hi), (8, 14));
+    assert!((st[0].first_len - 0.5).abs() < 1e-12 && (st[0].last_len - 0.5).abs() < 1e-12);
+    assert_eq!((st[1].lo, st[1].hi), (78, 83));
+    // A cut never leaves less than the blend at the line's inner end takes (twice its
+    // trim), and never more than the line.
+    let st = differing_stretches(&segs, &a, &b, &vec![0.4; 100], 2.5);
+    assert!((st[0].first_len - 0.8).abs() < 1e-12 && (st[0].last_len - 0.8).abs() < 1e-12);
+    let st = differing_stretches(&segs, &a, &b, &vec![0.9; 100], 2.5);
+    assert_eq!((st[0].first_len, st[0].last_len), (1.0, 1.0));
+    // Where the ways are the same, nothing is weighed.
+    assert!(differing_stretches(&segs, &a, &a, &trims, 2.5).is_empty());
+}
+
+#[test]
+fn a_blends_speed_bound_is_no_lower_than_its_planned_cap() {
+    // `blend_speed_bound` spares the screen planning a blend that clearly loses: its
+    // speed may only be above the cap the planner gives the blend, its length only
+    // below the blend's. Random corners in space, turns from 1e-4 rad to 170°, legs and
+    // tolerances from 1 µm to 1 mm, feeds up to past the highest, both machines.
+    let mut next = crate::blocks::tests::uniforms(5);
+    let (mut n, mut binding, mut tightest) = (0, 0, 0.0f64);
+    for machine in [Machine::default(), linuxcnc()] {
+        let period_ns = decision_period(&machine);
+        for _ in 0..400 {
+            let mut unit = || {
+                let d = [2.0 * next() - 1.0, 2.0 * next() - 1.0, 2.0 * next() - 1.0];
+                d.map(|x| x / norm(d))
+            };
+            let (u1, w) = (unit(), unit());
+            let across = sub(w, u1.map(|x| x * dot(w, u1)));
+            let across = across.map(|x| x / norm(across));
+            let theta = if next() < 0.5 {
+                10f64.powf(-4.0 + 3.0 * next())
+            } else {
+                MAX_TURN_DEG.to_radians() * next()
+            };
+            let u2 = [0, 1, 2].map(|k| theta.cos() * u1[k] + theta.sin() * across[k]);
+            let (l1, l2) = (
+                10f64.powf(-3.0 + 4.0 * next()),
+                10f64.powf(-3.0 + 4.0 * next()),
+            );
+            let tol = 10f64.powf(-3.0 + 3.0 * next());
+            let Some(c) = corner(
+                u1.map(|x| -x * l1),
+                [0.0; 3],
+                [0.0; 3],
+                u2.map(|x| x * l2),
+                tol,
+            ) else {
+                continue;
+            };
+            let f = machine.max_feed_mm_per_min * (0.02 + 1.1 * next());
+            let f = f.min(machine.max_feed_mm_per_min);
+            let (v_up, len_down) = blend_speed_bound(&c, f / 60.0, &machine);
+            let (cap, len) = blend_alone(&c, f, &machine, period_ns);
+            assert!(
+                cap / 60.0 <= v_up && len_down <= len,
+                "turn {theta} rad, legs {l1} {l2}, tolerance {tol}, F{f}: bound {v_up} mm/s \
+                 over {len_down} mm, planned {} mm/s over {len} mm",
+                cap / 60.0
+            );
+            n += 1;
+            if v_up < f / 60.0 {
+                binding += 1;
+                tightest = tightest.max(cap / 60.0 / v_up);
+            }
+        }
+    }
+    // (Not a bound that never binds: in most corners it is below the feed, and in some
+    // the planned cap comes within a fifth of it.)
+    assert!(
+        n > 600 && binding > n / 2 && tightest > 0.8,
+        "{n} corners, {binding} bound, cap/bound up to {tightest}"
+    );
+}
