@@ -75,7 +75,7 @@
 //! The merge is streamed ([`NaiveCam::take`]): a stretch is held back only while it may
 //! still grow, so how a program is handed over in batches does not change the merge.
 
-use super::blend::{cycles_of, decision_period, stop_distance, turn_between, weakest};
+use super::blend::{cycles_of_quick, decision_period, stop_distance, turn_between, weakest};
 use super::dot;
 use crate::program::{Move, PathControl};
 use shared::path::{norm, sub};
@@ -479,7 +479,7 @@ impl NaiveCam {
         w.extend(self.mode.map(|control| Move::PathMode { line: 0, control }));
         w.extend(moves.iter().map(|m| moved(m, o)));
         w.push(Move::End { line: 0 });
-        cycles_of(&w, &self.machine, decision_period(&self.machine))
+        cycles_of_quick(&w, &self.machine, decision_period(&self.machine))
     }
 }
 

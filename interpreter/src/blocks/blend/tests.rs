@@ -863,3 +863,55 @@ fn a_blends_speed_bound_is_no_lower_than_its_planned_cap() {
         "{n} corners, {binding} bound, cap/bound up to {tightest}"
     );
 }
+
+#[test]
+fn open_corners_close_together_are_weighed_as_one_cluster_when_asked() {
+    // A zigzag whose corners the screen leaves open, each within the reach of the next,
+    // then two corners 36 mm apart: weighed in clusters (how a way is timed before it is
+    // planned), the zigzag's corners are blended or left exact together, none weighed
+    // alone, and the two lone corners are each weighed alone.
+    let mut text = String::from("G21 G90 G64 P0.01\nG1 F3000\n");
+    for k in 1..=40 {
+        let y = if k % 2 == 1 { 0.1 } else { 0.0 };
+        text += &format!("X{} Y{y}\n", f64::from(k) * 0.5);
+    }
+    text += "X60 Y0\nX90 Y20\nX120 Y20\nM2\n";
+    let ms = moves(&text);
+    for machine in [Machine::default(), linuxcnc()] {
+        let plans = plan_corners(&ms);
+        let period_ns = decision_period(&machine);
+        let screened: Vec<Option<bool>> = (0..ms.len())
+            .map(|i| screen(&ms, &plans, i, &machine, period_ns))
+            .collect();
+        let mut prev = vec![None; ms.len()];
+        for (i, c) in plans.iter().enumerate() {
+            if let Some(c) = c {
+                prev[c.next] = Some(i);
+            }
+        }
+        let open: Vec<usize> = (0..ms.len())
+            .filter(|&i| plans[i].is_some() && screened[i].is_none())
+            .collect();
+        let beside: Vec<bool> = open
+            .iter()
+            .map(|&i| open_beside(&ms, &plans, &screened, &prev, i, &machine))
+            .collect();
+        // The lone corners (the last two open) have no open corner within their reach.
+        assert!(open.len() >= 30, "{} corners left open", open.len());
+        let n = beside.len();
+        assert!(
+            beside[..n - 2].iter().all(|b| *b) && !beside[n - 2] && !beside[n - 1],
+            "{beside:?}"
+        );
+        let clustered = corners_weighed(&ms, &machine, Weighing::Clusters);
+        let zigzag = &clustered[..clustered
+            .iter()
+            .position(|m| matches!(m, Move::Line { from, to, .. } if to[0] - from[0] > 10.0))
+            .unwrap()];
+        let (blended, exact) = (blends(zigzag).len(), exact_marks(zigzag));
+        assert!(
+            blended == 0 || exact == 0,
+            "{blended} blends and {exact} exact corners in one cluster"
+        );
+    }
+}

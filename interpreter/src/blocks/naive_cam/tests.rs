@@ -1,4 +1,5 @@
 use super::*;
+use crate::blocks::blend::cycles_of;
 use crate::program::interpret;
 
 fn example(name: &str) -> String {
