@@ -99,7 +99,10 @@
 //!   lines. Each costs `2·(T(F→v) − D(F→v)/F) + ℓ·(1/v − 1/F)` against running on at `F`
 //!   (`T`, `D`: the jerk-limited speed change's time and distance under the machine's
 //!   weakest acceleration and jerk). Where one way loses at least twice as little (and
-//!   2 ms less), that way is taken;
+//!   2 ms less), that way is taken. Two closed forms spare most of the planning there,
+//!   each giving the answer planning gives: a turn far below the kink's bound is passed
+//!   at the feed ([`surely_at_feed`]), and a blend whose highest possible speed
+//!   ([`blend_speed_bound`]) already loses clearly more is not planned;
 //! * otherwise both ways are planned and stepped through the interpolator's engine
 //!   ([`crate::estimate`], what `cnc check --estimate` runs) over the corner's
 //!   neighbourhood: the lines joined to it by blendable corners, as far as the machine
