@@ -353,6 +353,12 @@ fn dot(a: [f64; 3], b: [f64; 3]) -> f64 {
     a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
 }
 
+/// `d` made a unit vector, if it has a length.
+fn unit_of(d: [f64; 3]) -> Option<[f64; 3]> {
+    let l = path::norm(d);
+    (l > 0.0 && l.is_finite()).then(|| d.map(|x| x / l))
+}
+
 fn add(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
     [a[0] + b[0], a[1] + b[1], a[2] + b[2]]
 }

@@ -415,15 +415,19 @@ fn decide(moves: &[Move], plans: &[Option<Corner>], machine: &Machine, how: Weig
             .map(|&k| plans[k].map_or(0.0, |c| c.trim_mm))
             .collect();
         for st in differing_stretches(&segs, &open, &greedy, &trims, reach) {
-            let part = &segs[st.lo..=st.hi];
-            let mut cut = part.to_vec();
-            let first = &mut cut[0];
-            first.0 = add(
-                first.1,
-                unit_from(first.1, first.0).map(|x| x * st.first_len),
-            );
-            let last = &mut cut[part.len() - 1];
-            last.1 = add(last.0, unit_from(last.0, last.1).map(|x| x * st.last_len));
+            // The far lines cut from their outer ends.
+            let towards = |a, b, len: f64| {
+                add(
+                    a,
+                    super::unit_of(sub(b, a))
+                        .unwrap_or([0.0; 3])
+                        .map(|x| x * len),
+                )
+            };
+            let mut cut = segs[st.lo..=st.hi].to_vec();
+            let n = cut.len();
+            cut[0].0 = towards(cut[0].1, cut[0].0, st.first_len);
+            cut[n - 1].1 = towards(cut[n - 1].0, cut[n - 1].1, st.last_len);
             let cycles = |chosen: &[Option<Corner>]| {
                 window_cycles(&cut, |w| chosen[st.lo + w], machine, period_ns)
             };
@@ -456,17 +460,6 @@ struct Stretch {
     hi: usize,
     first_len: f64,
     last_len: f64,
-}
-
-/// The unit direction from `a` to `b` (zero where they meet).
-fn unit_from(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
-    let d = sub(b, a);
-    let l = norm(d);
-    if l > 0.0 {
-        d.map(|x| x / l)
-    } else {
-        [0.0; 3]
-    }
 }
 
 /// Where the two ways `a` and `b` of a chain of lines `segs` (the corner at the end of
@@ -525,9 +518,23 @@ fn differing_stretches(
         .collect()
 }
 
+/// How far along the path the corner `here` at the end of line `i` is weighed on either
+/// side ([`time_around`]): twice what the machine needs to stop from the faster of its
+/// two lines' feeds, and twice its trim. `None` unless both are lines.
+fn reach_of(moves: &[Move], i: usize, here: &Corner, machine: &Machine) -> Option<f64> {
+    let feed = |k: usize| match &moves[k] {
+        Move::Line { feed, .. } => Some(*feed),
+        _ => None,
+    };
+    let v = feed(i)?
+        .max(feed(here.next)?)
+        .min(machine.max_feed_mm_per_min)
+        / 60.0;
+    Some(2.0 * stop_distance(v, machine) + 2.0 * here.trim_mm)
+}
+
 /// Whether another corner the screen left open stands within the reach of the corner at
-/// the end of line `i` along its chain, either way: [`time_around`]'s reach, twice what
-/// the machine needs to stop from the faster of its two lines' feeds and twice its trim.
+/// the end of line `i` along its chain, either way ([`reach_of`]).
 fn open_beside(
     moves: &[Move],
     plans: &[Option<Corner>],
@@ -536,23 +543,19 @@ fn open_beside(
     i: usize,
     machine: &Machine,
 ) -> bool {
-    let Some(here) = plans[i] else {
+    let Some((here, reach)) = plans[i].and_then(|c| Some((c, reach_of(moves, i, &c, machine)?)))
+    else {
         return false;
     };
     let line = |k: usize| match &moves[k] {
-        Move::Line { from, to, feed, .. } => Some((norm(sub(*to, *from)), *feed)),
+        Move::Line { from, to, .. } => Some(norm(sub(*to, *from))),
         _ => None,
     };
-    let (Some((_, f1)), Some((_, f2))) = (line(i), line(here.next)) else {
-        return false;
-    };
-    let v = f1.max(f2).min(machine.max_feed_mm_per_min) / 60.0;
-    let reach = 2.0 * stop_distance(v, machine) + 2.0 * here.trim_mm;
     let open = |k: usize| plans[k].is_some() && screened[k].is_none();
     // Back: the corner at the start of each line walked, while within the reach.
     let (mut k, mut along) = (i, 0.0);
     while let Some(p) = prev[k] {
-        along += line(k).map_or(f64::INFINITY, |l| l.0);
+        along += line(k).unwrap_or(f64::INFINITY);
         if along >= reach {
             break;
         }
@@ -565,7 +568,7 @@ fn open_beside(
     let mut k = here.next;
     let mut along = 0.0;
     while let Some(c) = plans[k] {
-        along += line(k).map_or(f64::INFINITY, |l| l.0);
+        along += line(k).unwrap_or(f64::INFINITY);
         if along >= reach {
             return false;
         }
@@ -654,7 +657,7 @@ fn screen(
         return Some(false);
     }
     let v_e = exact_corner_speed(&c, f, machine, period_ns) / 60.0;
-    if v_e >= v && !at_feed && beside_at_feed() {
+    if v_e >= v && beside_at_feed() {
         return Some(false);
     }
     let lim = weakest(machine);
@@ -722,10 +725,9 @@ fn exact_corner_speed(c: &Corner, f: f64, machine: &Machine, period_ns: u64) -> 
         .fold(f, |m, x| m.min(*x))
 }
 
-/// The cap (mm/min) the planner gives the blend of the corner `c` planned alone at the
-/// feed `f` (mm/min), and its length (mm).
-fn blend_alone(c: &Corner, f: f64, machine: &Machine, period_ns: u64) -> (f64, f64) {
-    // About the origin.
+/// The control points of the blend of the corner `c`, moved so that its corner is at the
+/// origin (where [`blend_alone`] plans it and [`blend_speed_bound`] samples it).
+fn local_blend(c: &Corner) -> Vec<[f64; 4]> {
     let o = c.corner;
     let local = Corner {
         corner: [0.0; 3],
@@ -733,12 +735,18 @@ fn blend_alone(c: &Corner, f: f64, machine: &Machine, period_ns: u64) -> (f64, f
     };
     let start = sub(sub(c.corner, c.u1.map(|x| x * c.trim_mm)), o);
     let end = sub(add(c.corner, c.u2.map(|x| x * c.trim_mm)), o);
+    control_points(&local, start, end)
+}
+
+/// The cap (mm/min) the planner gives the blend of the corner `c` planned alone at the
+/// feed `f` (mm/min), and its length (mm).
+fn blend_alone(c: &Corner, f: f64, machine: &Machine, period_ns: u64) -> (f64, f64) {
     let moves = [
         Move::Nurbs {
             line: 0,
             degree: 5,
             knots: vec![0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0],
-            ctrl: control_points(&local, start, end),
+            ctrl: local_blend(c),
             feed: f,
         },
         Move::End { line: 0 },
@@ -789,11 +797,7 @@ const BOUND_MARGIN: f64 = 1.01;
 /// margin of a hundredth covers a sample near a peak the planner's do not hit (the
 /// property test `a_blends_speed_bound_is_no_lower_than_its_planned_cap`).
 fn blend_speed_bound(c: &Corner, v: f64, machine: &Machine) -> (f64, f64) {
-    let ctrl = control_points(
-        c,
-        sub(c.corner, c.u1.map(|x| x * c.trim_mm)),
-        add(c.corner, c.u2.map(|x| x * c.trim_mm)),
-    );
+    let ctrl = local_blend(c);
     // The control points of the curve and of its first three derivatives.
     let p: [[f64; 3]; 6] = std::array::from_fn(|i| [ctrl[i][0], ctrl[i][1], ctrl[i][2]]);
     let d1: [[f64; 3]; 5] = hodograph_of(p);
@@ -1009,10 +1013,7 @@ fn time_around(
         Move::Line { from, to, feed, .. } => Some((*from, *to, *feed)),
         _ => None,
     };
-    let (_, _, f1) = line(i)?;
-    let (_, _, f2) = line(here.next)?;
-    let v = f1.max(f2).min(machine.max_feed_mm_per_min) / 60.0;
-    let reach = 2.0 * stop_distance(v, machine) + 2.0 * here.trim_mm;
+    let reach = reach_of(moves, i, &here, machine)?;
     // The lines of the neighbourhood, by index, and the length kept of each far one.
     let mut back = vec![i];
     let mut along = 0.0;

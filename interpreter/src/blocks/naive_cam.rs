@@ -76,7 +76,7 @@
 //! still grow, so how a program is handed over in batches does not change the merge.
 
 use super::blend::{cycles_of_quick, decision_period, stop_distance, turn_between, weakest};
-use super::dot;
+use super::{dot, unit_of};
 use crate::program::{Move, PathControl};
 use shared::path::{norm, sub};
 use shared::Machine;
@@ -688,12 +688,6 @@ fn smoothed(stretch: &[Run], tol: f64, ends: [Option<[f64; 3]>; 2]) -> Option<Ve
         });
     }
     Some(out)
-}
-
-/// `d` made a unit vector, if it has a length.
-fn unit_of(d: [f64; 3]) -> Option<[f64; 3]> {
-    let l = norm(d);
-    (l > 0.0 && l.is_finite()).then(|| d.map(|x| x / l))
 }
 
 /// Bessel's tangent at `b` between `a` and `c`: the direction of the parabola through the

@@ -720,13 +720,9 @@ fn the_kinks_within_two_steps_are_summed_up_to_a_rest() {
 /// A random unit direction in space and the same turned by `theta` (radians) towards
 /// another random direction.
 fn turned(next: &mut impl FnMut() -> f64, theta: f64) -> ([f64; 3], [f64; 3]) {
-    let mut unit = || {
-        let d = [2.0 * next() - 1.0, 2.0 * next() - 1.0, 2.0 * next() - 1.0];
-        d.map(|x| x / norm(d))
-    };
-    let (u1, w) = (unit(), unit());
-    let across = sub(w, u1.map(|x| x * dot(w, u1)));
-    let across = across.map(|x| x / norm(across));
+    let mut random = || unit([2.0 * next() - 1.0, 2.0 * next() - 1.0, 2.0 * next() - 1.0]);
+    let (u1, w) = (random(), random());
+    let across = unit(sub(w, u1.map(|x| x * dot(w, u1))));
     (
         u1,
         [0, 1, 2].map(|k| theta.cos() * u1[k] + theta.sin() * across[k]),
