@@ -25,9 +25,9 @@ pub struct Machine {
     /// between feed lines within, and so the mode a program starts in (LinuxCNC and
     /// Fanuc both start in `G64`). LinuxCNC's bare `G64` keeps "the best speed possible,
     /// however far from the programmed point"; a tolerance with no bound is none, so here
-    /// the machine builder bounds it. 0 (built in): a bare `G64` follows the exact path
-    /// as `G61` does. Written (and hashed) only when not 0, so older runs' machines hash
-    /// as before.
+    /// the machine builder bounds it (0.01 mm built in). 0: a bare `G64` follows the
+    /// exact path as `G61` does. Written (and hashed) only when not the built-in value,
+    /// so older runs' machines hash as before.
     #[serde(skip_serializing_if = "Machine::blend_tolerance_is_default")]
     pub blend_tolerance_mm: f64,
     /// Following error that stops the machine with a fault.
