@@ -769,8 +769,9 @@ fn hodograph_of<const N: usize, const M: usize>(q: [[f64; 3]; N]) -> [[f64; 3]; 
 }
 
 /// A Bézier curve's point at `t` (de Casteljau; plain loops, which the compiler keeps
-/// inline: `[T; N]::map` here was not, and took most of the screen's time).
-fn de_casteljau<const N: usize>(mut b: [[f64; 3]; N], t: f64) -> [f64; 3] {
+/// inline: `[T; N]::map` here was not, and took most of the screen's time). Also the
+/// naive CAM merge's smoothed pieces, certified by sampling.
+pub(super) fn de_casteljau<const N: usize>(mut b: [[f64; 3]; N], t: f64) -> [f64; 3] {
     for k in (1..N).rev() {
         for i in 0..k {
             let next = b[i + 1];

@@ -75,7 +75,9 @@
 //! The merge is streamed ([`NaiveCam::take`]): a stretch is held back only while it may
 //! still grow, so how a program is handed over in batches does not change the merge.
 
-use super::blend::{cycles_of_quick, decision_period, stop_distance, turn_between, weakest};
+use super::blend::{
+    cycles_of_quick, de_casteljau, decision_period, stop_distance, turn_between, weakest,
+};
 use super::{dot, unit_of};
 use crate::program::{Move, PathControl};
 use shared::path::{norm, sub};
@@ -704,13 +706,6 @@ fn bessel(a: [f64; 3], b: [f64; 3], c: [f64; 3]) -> Option<[f64; 3]> {
     }))
 }
 
-/// The cubic Bézier curve `b` at `u`.
-fn bezier(b: &[[f64; 3]; 4], u: f64) -> [f64; 3] {
-    let v = 1.0 - u;
-    let w = [v * v * v, 3.0 * u * v * v, 3.0 * u * u * v, u * u * u];
-    std::array::from_fn(|x| w[0] * b[0][x] + w[1] * b[1][x] + w[2] * b[2][x] + w[3] * b[3][x])
-}
-
 /// Whether the cubic `b` and the run's programmed moves are within `tol` of each other
 /// both ways (see [`smoothed`]).
 fn within(b: &[[f64; 3]; 4], run: &Run, tol: f64) -> bool {
@@ -723,7 +718,9 @@ fn within(b: &[[f64; 3]; 4], run: &Run, tol: f64) -> bool {
     if !(speed.is_finite() && n <= MAX_SAMPLES) {
         return false;
     }
-    let curve: Vec<[f64; 3]> = (0..=n).map(|k| bezier(b, k as f64 / n as f64)).collect();
+    let curve: Vec<[f64; 3]> = (0..=n)
+        .map(|k| de_casteljau(*b, k as f64 / n as f64))
+        .collect();
     let mut moves = Vec::with_capacity(run.points.len());
     let mut from = run.start;
     for &(to, _) in &run.points {

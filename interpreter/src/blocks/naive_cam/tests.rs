@@ -307,7 +307,9 @@ fn smoothed_chords_stay_within_p_plus_q_both_ways_and_join_in_curvature() {
         let k0 = chords.iter().position(|c| c.0 == b[0]).unwrap();
         let k1 = chords.iter().position(|c| c.1 == b[3]).unwrap();
         let run = &chords[k0..=k1];
-        let curve: Vec<[f64; 3]> = (0..=2000).map(|k| bezier(b, k as f64 / 2000.0)).collect();
+        let curve: Vec<[f64; 3]> = (0..=2000)
+            .map(|k| de_casteljau(*b, k as f64 / 2000.0))
+            .collect();
         for x in &curve {
             let d = run
                 .iter()
