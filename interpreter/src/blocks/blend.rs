@@ -66,6 +66,11 @@
 //! reversal. Between rows they are interpolated linearly; the deviation formula holds for
 //! any `c1, c2`.
 //!
+//! That shape is right where the jerk binds. Where the acceleration does (a machine
+//! whose jerk is high next to its acceleration, as LinuxCNC's limits), a rounder shape
+//! passes gentle turns faster: [`corners_on`] chooses each corner's shape for its
+//! machine ([`shape`]), [`corners`] keeps the table's.
+//!
 //! # Blends that pay
 //!
 //! A blend is passed at the speed its curvature and its rate of change allow, and the
@@ -212,22 +217,23 @@ pub fn mid_weight(c1: f64, c2: f64) -> f64 {
 /// pays or not (see [`corners_on`]); the moves themselves, not a copy, when the program
 /// never selects `G64 P` with a tolerance.
 pub fn corners(moves: &[Move]) -> Cow<'_, [Move]> {
-    match eligible(moves) {
+    match eligible(moves, None) {
         Some(plans) => Cow::Owned(emit(moves, &plans)),
         None => Cow::Borrowed(moves),
     }
 }
 
-/// The blend planned at each eligible corner; `None` where there is none (the program
-/// never selects `G64 P` with a tolerance, or no corner qualifies).
-fn eligible(moves: &[Move]) -> Option<Vec<Option<Corner>>> {
+/// The blend planned at each eligible corner, shaped for the curvature's limits `normal`
+/// ([`shape::choose`]; the table's shapes without them); `None` where there is none (the
+/// program never selects `G64 P` with a tolerance, or no corner qualifies).
+fn eligible(moves: &[Move], normal: Option<shape::Normal>) -> Option<Vec<Option<Corner>>> {
     let blends_anywhere = moves.iter().any(|m| {
         matches!(m, Move::PathMode { control: PathControl::Blend { tolerance_mm: Some(t), .. }, .. } if *t > 0.0)
     });
     if !blends_anywhere {
         return None;
     }
-    let plans = plan_corners(moves);
+    let plans = plan_corners(moves, normal);
     (!plans.iter().all(Option::is_none)).then_some(plans)
 }
 
@@ -256,11 +262,21 @@ enum Weighing {
 
 /// [`corners_on`], weighing as asked.
 fn corners_weighed<'a>(moves: &'a [Move], machine: &Machine, how: Weighing) -> Cow<'a, [Move]> {
-    let Some(plans) = eligible(moves) else {
+    let Some(plans) = eligible(moves, Some(normal_of(machine))) else {
         return Cow::Borrowed(moves);
     };
     let decided = decide(moves, &plans, machine, how);
     Cow::Owned(emit_marked(moves, &decided.plans, &decided.exact))
+}
+
+/// The limits a blend's curvature may take on `machine`: its weakest acceleration and
+/// jerk at the curvature's share ([`shape::choose`]).
+fn normal_of(machine: &Machine) -> shape::Normal {
+    let w = weakest(machine);
+    shape::Normal {
+        acc: super::NORMAL_SHARE * w.acc,
+        jerk: shape::JERK_WEIGHT * super::NORMAL_SHARE * w.jerk,
+    }
 }
 
 /// The corners [`corners_on`] keeps, and the mode in force on each line whose end corner
@@ -1217,7 +1233,7 @@ struct Corner {
 
 /// The tolerance in force for each move (mm; `None` where corners are not blended) and,
 /// for each feed line that ends at a corner to blend, the corner.
-fn plan_corners(moves: &[Move]) -> Vec<Option<Corner>> {
+fn plan_corners(moves: &[Move], normal: Option<shape::Normal>) -> Vec<Option<Corner>> {
     let mut plans = vec![None; moves.len()];
     let mut tol: Option<f64> = None;
     for (i, m) in moves.iter().enumerate() {
@@ -1251,7 +1267,7 @@ fn plan_corners(moves: &[Move]) -> Vec<Option<Corner>> {
                         ..
                     } = &moves[j]
                     {
-                        plans[i] = corner(*from, *to, *f2, *t2, t).map(|mut c| {
+                        plans[i] = corner(*from, *to, *f2, *t2, t, normal).map(|mut c| {
                             c.next = j;
                             c
                         });
@@ -1265,8 +1281,15 @@ fn plan_corners(moves: &[Move]) -> Vec<Option<Corner>> {
 }
 
 /// The blend of the corner between the lines `a0 → a1` and `b0 → b1` within `tol`, if
-/// it gets one.
-fn corner(a0: [f64; 3], a1: [f64; 3], b0: [f64; 3], b1: [f64; 3], tol: f64) -> Option<Corner> {
+/// it gets one, shaped for `normal` ([`shape::choose`]).
+fn corner(
+    a0: [f64; 3],
+    a1: [f64; 3],
+    b0: [f64; 3],
+    b1: [f64; 3],
+    tol: f64,
+    normal: Option<shape::Normal>,
+) -> Option<Corner> {
     let (da, db) = (sub(a1, a0), sub(b1, b0));
     let (la, lb) = (norm(da), norm(db));
     if la < MIN_LEG_MM || lb < MIN_LEG_MM || norm(sub(b0, a1)) > MIN_REST_MM {
@@ -1279,11 +1302,7 @@ fn corner(a0: [f64; 3], a1: [f64; 3], b0: [f64; 3], b1: [f64; 3], tol: f64) -> O
     if !(MIN_TURN_RAD..=MAX_TURN_DEG.to_radians()).contains(&theta) {
         return None;
     }
-    let (c1, c2) = ratios(theta.to_degrees());
-    let m = mid_weight(c1, c2);
-    let trim_mm = (tol / (2.0 * m * (0.5 * theta).sin()))
-        .min(0.5 * la)
-        .min(0.5 * lb);
+    let (c1, c2, trim_mm) = shape::choose(theta, tol, (0.5 * la).min(0.5 * lb), normal);
     Some(Corner {
         next: 0,
         corner: a1,
@@ -1392,6 +1411,7 @@ fn cross(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
     ]
 }
 
+mod shape;
 #[cfg(test)]
 mod tests;
 
