@@ -965,3 +965,43 @@ proptest::proptest! {
         proptest::prop_assert_eq!(asked.to_bits(), all.to_bits(), "{} against {}", asked, all);
     }
 }
+
+#[test]
+fn a_chain_of_blends_is_known_and_a_lone_blend_or_a_programmed_curve_is_not() {
+    // A zigzag of equal legs (1, ±0.1) turning 11.4° under `P0.04`: each blend uses up
+    // half of both lines, so the blends follow one another with no line between them.
+    let mut text = String::from("G21 G90 G64 P0.04 Q0\nG1 F3000 X0 Y0\n");
+    for k in 1..=8 {
+        text += &format!("X{k} Y{}\n", if k % 2 == 1 { "0.1" } else { "0" });
+    }
+    text += "M2\n";
+    let machine = Machine::default();
+    let blocks = build(&interpret(&text).unwrap().moves, &machine);
+    let motion: Vec<Block> = blocks.into_iter().filter(|b| b.is_motion()).collect();
+    let curves: Vec<usize> = (0..motion.len())
+        .filter(|&i| matches!(motion[i].geometry(), Geometry::Curve(_)))
+        .collect();
+    assert!(curves.len() >= 4, "{} blends", curves.len());
+    let (a, b) = (curves[1], curves[2]);
+    assert_eq!(b, a + 1, "two blends in a row");
+    assert!(chain_of_blends(&motion[a..=b]));
+    // One blend alone is no chain; nor is a run with a line in it.
+    assert!(!chain_of_blends(&motion[a..=a]));
+    let with_line = (0..motion.len() - 1)
+        .find(|&i| matches!(motion[i].geometry(), Geometry::Straight(_)))
+        .unwrap();
+    assert!(!chain_of_blends(&motion[with_line..=with_line + 1]));
+    // A programmed quadratic NURBS is not a blend, however short.
+    let curve = build(
+        &interpret("G21 G90 G1 X0 Y0 F600\nG5.2 X1 Y0 P1 L3\nX2 Y1 P1\nX3 Y0 P1\nG5.3\nM2\n")
+            .unwrap()
+            .moves,
+        &machine,
+    );
+    let curve: Vec<Block> = curve
+        .into_iter()
+        .filter(|b| b.is_motion() && matches!(b.geometry(), Geometry::Curve(_)))
+        .collect();
+    assert!(curve.len() >= 2);
+    assert!(!chain_of_blends(&curve[..2]));
+}
