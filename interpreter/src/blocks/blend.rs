@@ -448,8 +448,10 @@ fn decide(moves: &[Move], plans: &[Option<Corner>], machine: &Machine, how: Weig
                 window_cycles(&cut, |w| chosen[st.lo + w], machine, period_ns)
             };
             if let (Some(o), Some(g)) = (cycles(&open), cycles(&greedy)) {
+                // Only the corners stepped: those at the ends of the lines `lo..hi` (the
+                // last line is cut inside, its end corner left to its own stretch).
                 if o < g {
-                    for w in st.lo..=st.hi {
+                    for w in st.lo..st.hi {
                         kept[lines[w]] = open[w];
                     }
                 }

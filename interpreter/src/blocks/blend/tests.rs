@@ -892,7 +892,10 @@ fn open_corners_close_together_are_weighed_as_one_cluster_when_asked() {
     // A zigzag whose corners the screen leaves open, each within the reach of the next,
     // then two corners 36 mm apart: weighed in clusters (how a way is timed before it is
     // planned), the zigzag's corners are blended or left exact together, none weighed
-    // alone, and the two lone corners are each weighed alone.
+    // alone, and the two lone corners are each weighed alone. (The corner out of the
+    // zigzag into the long line is in no cluster's stretch of the chain's stepping: it
+    // is decided by its own, and was blended with the zigzag's only while a stretch also
+    // decided the corner at the end of its last line, which it does not step.)
     let text = zigzag(40) + "X60 Y0\nX90 Y20\nX120 Y20\nM2\n";
     let ms = moves(&text);
     for machine in [Machine::default(), linuxcnc()] {
@@ -926,9 +929,19 @@ fn open_corners_close_together_are_weighed_as_one_cluster_when_asked() {
             .iter()
             .position(|m| matches!(m, Move::Line { from, to, .. } if to[0] - from[0] > 10.0))
             .unwrap()];
-        let (blended, exact) = (blends(zigzag).len(), exact_marks(zigzag));
+        // The corners between the zigzag's own lines: not the one out of its last line into
+        // the long line, which the chain's stepping weighs in a stretch of its own.
+        let last = zigzag
+            .iter()
+            .rposition(|m| matches!(m, Move::Line { .. }))
+            .unwrap();
+        let mut inner = &zigzag[..last];
+        while let [rest @ .., Move::PathMode { .. }] = inner {
+            inner = rest;
+        }
+        let (blended, exact) = (blends(inner).len(), exact_marks(inner));
         assert!(
-            blended == 0 || exact == 0,
+            blended + exact >= 38 && (blended == 0 || exact == 0),
             "{blended} blends and {exact} exact corners in one cluster"
         );
     }
