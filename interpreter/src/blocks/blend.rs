@@ -801,31 +801,18 @@ pub(super) fn de_casteljau<const N: usize>(mut b: [[f64; 3]; N], t: f64) -> [f64
     b[0]
 }
 
-/// Samples of a blend for [`blend_speed_bound`].
-const BOUND_SAMPLES: usize = 16;
-/// The margin [`blend_speed_bound`] keeps on its speed and its length.
-const BOUND_MARGIN: f64 = 1.01;
-
-/// A speed (mm/s) no lower than the cap the planner gives the blend of `c` at the feed
-/// `v` (mm/s) and a length (mm) no longer than the blend's, without planning it: the
-/// path's acceleration and jerk at the largest curvature `κ` and curvature rate
-/// `|dκ/ds|` of [`BOUND_SAMPLES`] samples, `min(v, √(A/κ), ∛(J/|dκ/ds|))`, and the
-/// chords between the samples. The planner holds every sample of its own (its peaks
-/// searched) within the limits, at shares of them, with the rate of the curvature
-/// vector, which is no less than the rate of its length. So its cap is lower, and a
-/// margin of a hundredth covers a sample near a peak the planner's do not hit (the
-/// property test `a_blends_speed_bound_is_no_lower_than_its_planned_cap`).
-fn blend_speed_bound(c: &Corner, v: f64, machine: &Machine) -> (f64, f64) {
-    let ctrl = local_blend(c);
-    // The control points of the curve and of its first three derivatives.
-    let p: [[f64; 3]; 6] = std::array::from_fn(|i| [ctrl[i][0], ctrl[i][1], ctrl[i][2]]);
+/// The largest curvature and rate of change of curvature (per arc length) of the
+/// quintic Bézier curve `p` at `samples + 1` evenly spaced parameters, and the length of
+/// the chords between them ([`blend_speed_bound`], [`shape::figures`]).
+pub(super) fn peaks_of(p: [[f64; 3]; 6], samples: usize) -> (f64, f64, f64) {
+    // The control points of the curve's first three derivatives.
     let d1: [[f64; 3]; 5] = hodograph_of(p);
     let d2: [[f64; 3]; 4] = hodograph_of(d1);
     let d3: [[f64; 3]; 3] = hodograph_of(d2);
     let (mut kappa, mut rate, mut len) = (0.0f64, 0.0f64, 0.0);
     let mut last = p[0];
-    for i in 0..=BOUND_SAMPLES {
-        let t = i as f64 / BOUND_SAMPLES as f64;
+    for i in 0..=samples {
+        let t = i as f64 / samples as f64;
         let (e1, e2, e3) = (
             de_casteljau(d1, t),
             de_casteljau(d2, t),
@@ -847,6 +834,27 @@ fn blend_speed_bound(c: &Corner, v: f64, machine: &Machine) -> (f64, f64) {
         len += norm(sub(q, last));
         last = q;
     }
+    (kappa, rate, len)
+}
+
+/// Samples of a blend for [`blend_speed_bound`].
+const BOUND_SAMPLES: usize = 16;
+/// The margin [`blend_speed_bound`] keeps on its speed and its length.
+const BOUND_MARGIN: f64 = 1.01;
+
+/// A speed (mm/s) no lower than the cap the planner gives the blend of `c` at the feed
+/// `v` (mm/s) and a length (mm) no longer than the blend's, without planning it: the
+/// path's acceleration and jerk at the largest curvature `κ` and curvature rate
+/// `|dκ/ds|` of [`BOUND_SAMPLES`] samples, `min(v, √(A/κ), ∛(J/|dκ/ds|))`, and the
+/// chords between the samples. The planner holds every sample of its own (its peaks
+/// searched) within the limits, at shares of them, with the rate of the curvature
+/// vector, which is no less than the rate of its length. So its cap is lower, and a
+/// margin of a hundredth covers a sample near a peak the planner's do not hit (the
+/// property test `a_blends_speed_bound_is_no_lower_than_its_planned_cap`).
+fn blend_speed_bound(c: &Corner, v: f64, machine: &Machine) -> (f64, f64) {
+    let ctrl = local_blend(c);
+    let p: [[f64; 3]; 6] = std::array::from_fn(|i| [ctrl[i][0], ctrl[i][1], ctrl[i][2]]);
+    let (kappa, rate, len) = peaks_of(p, BOUND_SAMPLES);
     let by_acc = if kappa > 0.0 {
         (machine.path_acc_mm_per_s2 / kappa).sqrt()
     } else {

@@ -19,7 +19,7 @@
 //! the planner then plans the blend chosen like any other, and the deviation formula of
 //! the module page holds for every shape (each candidate keeps `1 > c1 > c2 >= 0`).
 
-use super::{mid_weight, ratios};
+use super::{mid_weight, peaks_of, ratios};
 use std::sync::OnceLock;
 
 /// How far the rounder end of the candidates moves `(c1, c2)` from the table's: more of
@@ -59,64 +59,19 @@ const LAST_DEG: usize = ROUNDER_UP_TO_DEG as usize + 1;
 
 /// The peak curvature and peak rate of change of curvature (per arc length) of the
 /// planar blend of trim length 1 through a turn of `theta` (radians) with the shape
-/// `(c1, c2)`, from [`SAMPLES`] samples.
+/// `(c1, c2)`, from [`SAMPLES`] samples ([`peaks_of`], as the screen's speed bound).
 pub(super) fn figures(c1: f64, c2: f64, theta: f64) -> (f64, f64) {
-    let (s, c) = theta.sin_cos();
-    let u1 = [1.0, 0.0];
-    let u2 = [c, s];
-    let on = |u: [f64; 2], k: f64| [u[0] * k, u[1] * k];
-    let p = [
-        on(u1, -1.0),
-        on(u1, -c1),
-        on(u1, -c2),
-        on(u2, c2),
-        on(u2, c1),
-        on(u2, 1.0),
-    ];
-    // The control points of the first three derivatives.
-    let d1: [[f64; 2]; 5] =
-        std::array::from_fn(|i| [5.0 * (p[i + 1][0] - p[i][0]), 5.0 * (p[i + 1][1] - p[i][1])]);
-    let d2: [[f64; 2]; 4] = std::array::from_fn(|i| {
-        [
-            4.0 * (d1[i + 1][0] - d1[i][0]),
-            4.0 * (d1[i + 1][1] - d1[i][1]),
-        ]
-    });
-    let d3: [[f64; 2]; 3] = std::array::from_fn(|i| {
-        [
-            3.0 * (d2[i + 1][0] - d2[i][0]),
-            3.0 * (d2[i + 1][1] - d2[i][1]),
-        ]
-    });
-    let (mut kappa, mut rate) = (0.0f64, 0.0f64);
-    for i in 0..=SAMPLES {
-        let t = i as f64 / SAMPLES as f64;
-        let (e1, e2, e3) = (bezier(d1, t), bezier(d2, t), bezier(d3, t));
-        let sp = e1[0].hypot(e1[1]);
-        if sp <= 0.0 {
-            continue;
-        }
-        // Signed curvature of a plane curve, `x/s³`, and its rate `dκ/ds`.
-        let x = e1[0] * e2[1] - e1[1] * e2[0];
-        let dx = e1[0] * e3[1] - e1[1] * e3[0];
-        let ds = (e1[0] * e2[0] + e1[1] * e2[1]) / sp;
-        kappa = kappa.max((x / sp.powi(3)).abs());
-        rate = rate.max(((dx / sp.powi(3) - 3.0 * x * ds / sp.powi(4)) / sp).abs());
-    }
+    let (kappa, rate, _) = peaks_of(control(c1, c2, theta), SAMPLES);
     (kappa, rate)
 }
 
-/// A plane Bézier curve's point at `t` (de Casteljau).
-fn bezier<const N: usize>(mut b: [[f64; 2]; N], t: f64) -> [f64; 2] {
-    for k in (1..N).rev() {
-        for i in 0..k {
-            let next = b[i + 1];
-            for (x, n) in b[i].iter_mut().zip(next) {
-                *x += t * (n - *x);
-            }
-        }
-    }
-    b[0]
+/// The control points of the planar blend of trim length 1 through a turn of `theta`,
+/// its corner at the origin (see the module page of [`super`]).
+fn control(c1: f64, c2: f64, theta: f64) -> [[f64; 3]; 6] {
+    let (s, c) = theta.sin_cos();
+    let on1 = |k: f64| [-k, 0.0, 0.0];
+    let on2 = |k: f64| [c * k, s * k, 0.0];
+    [on1(1.0), on1(c1), on1(c2), on2(c2), on2(c1), on2(1.0)]
 }
 
 /// Shape `k` of [`CANDIDATES`] at a turn of `theta_deg`.
@@ -198,18 +153,10 @@ mod tests {
     /// Curvature of the plane quintic `(c1, c2)` of trim length 1 at `t`, from three
     /// points of the curve itself (the circle through them), not its derivatives.
     fn circle_curvature(c1: f64, c2: f64, theta: f64, t: f64) -> f64 {
-        let (s, c) = theta.sin_cos();
-        let p = [
-            [-1.0, 0.0],
-            [-c1, 0.0],
-            [-c2, 0.0],
-            [c2 * c, c2 * s],
-            [c1 * c, c1 * s],
-            [c, s],
-        ];
+        let p = control(c1, c2, theta);
         let h = 1e-4;
-        let [a, b, q] = [t - h, t, t + h].map(|x| bezier(p, x));
-        let d = |u: [f64; 2], v: [f64; 2]| (u[0] - v[0]).hypot(u[1] - v[1]);
+        let [a, b, q] = [t - h, t, t + h].map(|x| super::super::de_casteljau(p, x));
+        let d = |u: [f64; 3], v: [f64; 3]| (u[0] - v[0]).hypot(u[1] - v[1]);
         let area2 = ((b[0] - a[0]) * (q[1] - a[1]) - (b[1] - a[1]) * (q[0] - a[0])).abs();
         2.0 * area2 / (d(a, b) * d(b, q) * d(a, q))
     }
