@@ -1636,7 +1636,16 @@ impl Engine {
         let lead = 2.0 * self.t_s * v_max;
         // Where even the lowest jerk in hand sheds all of it, nothing further binds.
         let j_lo = own.jerk.min(self.window.lowest.jerk);
+        // Nor past a block planned to end at rest: the machine comes to rest there with
+        // no acceleration, whatever the blocks after it allow. (Walked past it, a blend's
+        // low limits 30 mm beyond an exact stop held the line before the stop to a
+        // fraction of its acceleration.)
+        let mut at_rest = self.block.end_feed_mm_per_min <= 0.0;
         for b in self.window.held().iter().take_while(|f| f.motion) {
+            if at_rest {
+                break;
+            }
+            at_rest = b.end_mm_per_s <= 0.0;
             let tau = (d - lead).max(0.0) / v_max;
             if j_lo * tau >= ceiling {
                 break;

@@ -1399,3 +1399,35 @@ fn a_block_taken_ahead_changes_no_tick_no_count_and_no_fault() {
     }
     assert!(staged_seen > 1000, "{staged_seen}");
 }
+
+/// A block planned to end at rest bounds what the acceleration before it must allow
+/// for: past it the machine starts again from rest with none. A weak block (30 mm/s²,
+/// jerk 1 250 mm/s³) beyond an exact stop once held the 20 mm line before the stop to
+/// two thirds of its acceleration (`Engine::acc_ceiling` walked past the stop). Here the
+/// line takes the same cycles, to the cycle, whatever comes after the line beyond its
+/// stop.
+#[test]
+fn a_block_beyond_a_stop_does_not_hold_the_acceleration_before_it() {
+    let (p0, p1, p2, p3) = (
+        [0.0; 3],
+        [20.0, 0.0, 0.0],
+        [20.0, 1.0, 0.0],
+        [20.0, 6.0, 0.0],
+    );
+    let cycles_of_first = |last: CommandBlock| {
+        let blocks = vec![
+            line(0, p0, p1, 3000.0, 0.0, 0.0),
+            line(1, p1, p2, 3000.0, 0.0, 600.0),
+            last,
+            CommandBlock::empty(BlockKind::ProgramEnd, 3, 4),
+        ];
+        let ticks = run(blocks);
+        assert_eq!(ticks.last().unwrap().state, TickState::Done);
+        ticks.iter().filter(|t| t.block_seq == 0).count()
+    };
+    let mut weak = line(2, p2, p3, 3000.0, 600.0, 0.0);
+    weak.acc_mm_per_s2 = 30.0;
+    weak.jerk_mm_per_s3 = 1250.0;
+    let plain = line(2, p2, p3, 3000.0, 600.0, 0.0);
+    assert_eq!(cycles_of_first(weak), cycles_of_first(plain));
+}
