@@ -1431,3 +1431,28 @@ fn a_block_beyond_a_stop_does_not_hold_the_acceleration_before_it() {
     let plain = line(2, p2, p3, 3000.0, 600.0, 0.0);
     assert_eq!(cycles_of_first(weak), cycles_of_first(plain));
 }
+
+/// A stop is braked for under the limits of the blocks before it, not under the lower
+/// jerk of a weak block beyond it: the braking ends at rest on the point (see
+/// `Ahead::easing`). The 20 mm line before the stop takes the same cycles whatever block
+/// follows the stop (696 against 464 when the stop was braked for under the weak
+/// block's jerk).
+#[test]
+fn a_stop_is_braked_for_under_the_limits_before_it() {
+    let (p0, p1, p2) = ([0.0; 3], [20.0, 0.0, 0.0], [20.0, 5.0, 0.0]);
+    let cycles_of_first = |after: CommandBlock| {
+        let blocks = vec![
+            line(0, p0, p1, 3000.0, 0.0, 0.0),
+            after,
+            CommandBlock::empty(BlockKind::ProgramEnd, 2, 3),
+        ];
+        let ticks = run(blocks);
+        assert_eq!(ticks.last().unwrap().state, TickState::Done);
+        ticks.iter().filter(|t| t.block_seq == 0).count()
+    };
+    let mut weak = line(1, p1, p2, 3000.0, 0.0, 0.0);
+    weak.acc_mm_per_s2 = 30.0;
+    weak.jerk_mm_per_s3 = 1250.0;
+    let plain = line(1, p1, p2, 3000.0, 0.0, 0.0);
+    assert_eq!(cycles_of_first(weak), cycles_of_first(plain));
+}
