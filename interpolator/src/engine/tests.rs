@@ -1400,6 +1400,31 @@ fn a_block_taken_ahead_changes_no_tick_no_count_and_no_fault() {
     assert!(staged_seen > 1000, "{staged_seen}");
 }
 
+/// The cycles of block 0 (a 20 mm line from the origin along X to a stop) with `after`
+/// following it, then the program's end; the run must finish.
+fn cycles_of_line_before_stop(after: Vec<CommandBlock>) -> usize {
+    let mut blocks = vec![line(0, [0.0; 3], [20.0, 0.0, 0.0], 3000.0, 0.0, 0.0)];
+    let n = after.len() as u64;
+    blocks.extend(after);
+    blocks.push(CommandBlock::empty(
+        BlockKind::ProgramEnd,
+        n + 1,
+        n as u32 + 2,
+    ));
+    let ticks = run(blocks);
+    assert_eq!(ticks.last().unwrap().state, TickState::Done);
+    ticks.iter().filter(|t| t.block_seq == 0).count()
+}
+
+/// A line block from `from` to `to` at F3000 with the acceleration and jerk of a weak
+/// block (30 mm/s², 1 250 mm/s³).
+fn weak_line(seq: u64, from: [f64; 3], to: [f64; 3], start: f64, end: f64) -> CommandBlock {
+    let mut weak = line(seq, from, to, 3000.0, start, end);
+    weak.acc_mm_per_s2 = 30.0;
+    weak.jerk_mm_per_s3 = 1250.0;
+    weak
+}
+
 /// A block planned to end at rest bounds what the acceleration before it must allow
 /// for: past it the machine starts again from rest with none. A weak block (30 mm/s²,
 /// jerk 1 250 mm/s³) beyond an exact stop once held the 20 mm line before the stop to
@@ -1408,28 +1433,11 @@ fn a_block_taken_ahead_changes_no_tick_no_count_and_no_fault() {
 /// stop.
 #[test]
 fn a_block_beyond_a_stop_does_not_hold_the_acceleration_before_it() {
-    let (p0, p1, p2, p3) = (
-        [0.0; 3],
-        [20.0, 0.0, 0.0],
-        [20.0, 1.0, 0.0],
-        [20.0, 6.0, 0.0],
-    );
-    let cycles_of_first = |last: CommandBlock| {
-        let blocks = vec![
-            line(0, p0, p1, 3000.0, 0.0, 0.0),
-            line(1, p1, p2, 3000.0, 0.0, 600.0),
-            last,
-            CommandBlock::empty(BlockKind::ProgramEnd, 3, 4),
-        ];
-        let ticks = run(blocks);
-        assert_eq!(ticks.last().unwrap().state, TickState::Done);
-        ticks.iter().filter(|t| t.block_seq == 0).count()
-    };
-    let mut weak = line(2, p2, p3, 3000.0, 600.0, 0.0);
-    weak.acc_mm_per_s2 = 30.0;
-    weak.jerk_mm_per_s3 = 1250.0;
-    let plain = line(2, p2, p3, 3000.0, 600.0, 0.0);
-    assert_eq!(cycles_of_first(weak), cycles_of_first(plain));
+    let (p1, p2, p3) = ([20.0, 0.0, 0.0], [20.0, 1.0, 0.0], [20.0, 6.0, 0.0]);
+    let beyond = line(1, p1, p2, 3000.0, 0.0, 600.0);
+    let weak = cycles_of_line_before_stop(vec![beyond, weak_line(2, p2, p3, 600.0, 0.0)]);
+    let plain = cycles_of_line_before_stop(vec![beyond, line(2, p2, p3, 3000.0, 600.0, 0.0)]);
+    assert_eq!(weak, plain);
 }
 
 /// A stop is braked for under the limits of the blocks before it, not under the lower
@@ -1439,20 +1447,8 @@ fn a_block_beyond_a_stop_does_not_hold_the_acceleration_before_it() {
 /// block's jerk).
 #[test]
 fn a_stop_is_braked_for_under_the_limits_before_it() {
-    let (p0, p1, p2) = ([0.0; 3], [20.0, 0.0, 0.0], [20.0, 5.0, 0.0]);
-    let cycles_of_first = |after: CommandBlock| {
-        let blocks = vec![
-            line(0, p0, p1, 3000.0, 0.0, 0.0),
-            after,
-            CommandBlock::empty(BlockKind::ProgramEnd, 2, 3),
-        ];
-        let ticks = run(blocks);
-        assert_eq!(ticks.last().unwrap().state, TickState::Done);
-        ticks.iter().filter(|t| t.block_seq == 0).count()
-    };
-    let mut weak = line(1, p1, p2, 3000.0, 0.0, 0.0);
-    weak.acc_mm_per_s2 = 30.0;
-    weak.jerk_mm_per_s3 = 1250.0;
-    let plain = line(1, p1, p2, 3000.0, 0.0, 0.0);
-    assert_eq!(cycles_of_first(weak), cycles_of_first(plain));
+    let (p1, p2) = ([20.0, 0.0, 0.0], [20.0, 5.0, 0.0]);
+    let weak = cycles_of_line_before_stop(vec![weak_line(1, p1, p2, 0.0, 0.0)]);
+    let plain = cycles_of_line_before_stop(vec![line(1, p1, p2, 3000.0, 0.0, 0.0)]);
+    assert_eq!(weak, plain);
 }
